@@ -1,0 +1,171 @@
+"""Mixels (masked photodetectors) and mincams (a few mixels with their own poses). Pure numpy.
+
+A mixel is a square photodetector of side ``detector_size_m`` centred at the origin of its local frame, facing
+local +z, with a mask of ``mask.width_m`` x ``mask.height_m`` centred on the local z axis at ``z = d_f_m``, and an
+opaque housing (a black tube from the detector plane to the mask) so that only light through the mask reaches
+the detector. Field-of-view offsets between mixels are never computed here: they follow from the poses when the
+rays are traced.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .geometry import Pose
+from .masks import Mask, constant, ramp
+
+DEFAULT_DETECTOR_SIZE_M = 1e-4  # [m] 0.1 mm: the paper's 48x48-pixel region of interest
+DEFAULT_D_F_M = 2e-3  # [m] mask-to-detector distance
+PAPER_SPACING_M = 0.033  # [m] distance between neighbouring mixels in the paper's prototype
+
+
+@dataclass(frozen=True, eq=False)
+class Mixel:
+    """One masked photodetector.
+
+    Parameters
+    ----------
+    mask : Mask
+        Transmission mask (its physical size is the aperture).
+    d_f_m : float
+        Distance from the detector to the mask [m] (> 0).
+    detector_size_m : float
+        Side of the square detector [m] (> 0).
+    pose : Pose
+        Detector centre and orientation; local +z looks at the scene, local +y is up.
+    name : str
+        Label used in outputs.
+    """
+
+    mask: Mask
+    d_f_m: float = DEFAULT_D_F_M
+    detector_size_m: float = DEFAULT_DETECTOR_SIZE_M
+    pose: Pose = field(default_factory=Pose)
+    name: str = "mixel"
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.mask, Mask):
+            raise TypeError(f"mixel {self.name!r}: mask must be a mincam_sim.masks.Mask, got {type(self.mask)}")
+        if not (np.isfinite(self.d_f_m) and self.d_f_m > 0):
+            raise ValueError(
+                f"mixel {self.name!r}: d_f_m (mask-to-detector distance) must be > 0 metres, got {self.d_f_m!r}"
+            )
+        if not (np.isfinite(self.detector_size_m) and self.detector_size_m > 0):
+            raise ValueError(
+                f"mixel {self.name!r}: detector_size_m must be a positive size in metres, got {self.detector_size_m!r}"
+            )
+        if self.detector_size_m > min(self.mask.width_m, self.mask.height_m):
+            raise ValueError(
+                f"mixel {self.name!r}: detector ({self.detector_size_m} m) is larger than its mask aperture "
+                f"({self.mask.width_m} x {self.mask.height_m} m); the housing tube has the mask's cross-section"
+            )
+
+    @property
+    def detector_area_m2(self) -> float:
+        """Detector area [m^2]."""
+        return self.detector_size_m**2
+
+    def with_pose(self, pose: Pose) -> Mixel:
+        return replace(self, pose=pose)
+
+    def with_mask(self, mask: Mask) -> Mixel:
+        return replace(self, mask=mask)
+
+    def half_fov_tan(self) -> tuple[float, float]:
+        """tan of the half field of view (x, y): widest ray from a detector edge through the far mask edge."""
+        return (
+            (self.mask.width_m + self.detector_size_m) / (2 * self.d_f_m),
+            (self.mask.height_m + self.detector_size_m) / (2 * self.d_f_m),
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class Mincam:
+    """A minimalist camera: several mixels, each with its own pose, mask and d_f."""
+
+    mixels: tuple[Mixel, ...]
+
+    def __post_init__(self) -> None:
+        mixels = tuple(self.mixels)
+        if not mixels:
+            raise ValueError("a mincam needs at least one mixel")
+        names = [m.name for m in mixels]
+        if len(set(names)) != len(names):
+            raise ValueError(f"mixel names must be unique, got {names}")
+        object.__setattr__(self, "mixels", mixels)
+
+    def __len__(self) -> int:
+        return len(self.mixels)
+
+    def __iter__(self):
+        return iter(self.mixels)
+
+    def __getitem__(self, i: int) -> Mixel:
+        return self.mixels[i]
+
+    @property
+    def names(self) -> list[str]:
+        return [m.name for m in self.mixels]
+
+
+def layout(
+    masks: Sequence[Mask],
+    offsets_m: Sequence[tuple[float, float]],
+    names: Sequence[str] | None = None,
+    center: Pose | None = None,
+    d_f_m: float = DEFAULT_D_F_M,
+    detector_size_m: float = DEFAULT_DETECTOR_SIZE_M,
+) -> Mincam:
+    """Mincam with mixels placed at in-plane offsets (right, up) [m] from a centre pose, all facing its way.
+
+    Offsets are in the viewer's frame: +right, +up, as seen looking along the centre pose's forward axis.
+    """
+    if len(masks) != len(offsets_m):
+        raise ValueError(f"{len(masks)} masks but {len(offsets_m)} offsets: give one offset per mask")
+    center = center or Pose()
+    left, up, _ = center.axes()
+    names = list(names) if names is not None else [f"m{i}_{m.name}" for i, m in enumerate(masks)]
+    mixels = []
+    for mask, (dx, dy), name in zip(masks, offsets_m, names, strict=True):
+        offset = -dx * left + dy * up
+        mixels.append(Mixel(mask, d_f_m, detector_size_m, center.translated(tuple(offset)), name))
+    return Mincam(tuple(mixels))
+
+
+def pair_layout(spacing_m: float = PAPER_SPACING_M, resolution: int = 256, **kw) -> Mincam:
+    """The paper's 1D intrusion mincam: masks x (left mixel) and 1 - x (right mixel), ``spacing_m`` apart."""
+    _check_spacing(spacing_m)
+    return layout(
+        [ramp("x", resolution), ramp("1-x", resolution)],
+        [(-spacing_m / 2, 0.0), (spacing_m / 2, 0.0)],
+        names=["x", "1-x"],
+        **kw,
+    )
+
+
+def cross_layout(spacing_m: float = PAPER_SPACING_M, resolution: int = 256, **kw) -> Mincam:
+    """The paper's tracking mincam: 4 outer mixels (x, 1 - x, y, 1 - y) around a centre camera.
+
+    The mixels sit ``spacing_m`` from the centre: x on the left, 1 - x on the right, y above, 1 - y below.
+    """
+    _check_spacing(spacing_m)
+    s = spacing_m
+    return layout(
+        [ramp("x", resolution), ramp("1-x", resolution), ramp("y", resolution), ramp("1-y", resolution)],
+        [(-s, 0.0), (s, 0.0), (0.0, s), (0.0, -s)],
+        names=["x", "1-x", "y", "1-y"],
+        **kw,
+    )
+
+
+def single(mask: Mask | None = None, pose: Pose | None = None, **kw) -> Mincam:
+    """A one-mixel mincam (default: open aperture at the origin looking along -z)."""
+    return Mincam((Mixel(mask or constant(1.0), pose=pose or Pose(), name="m0", **kw),))
+
+
+def _check_spacing(spacing_m: float) -> None:
+    if not (np.isfinite(spacing_m) and spacing_m >= 0):
+        raise ValueError(f"spacing_m must be >= 0 metres, got {spacing_m!r}")

@@ -1,0 +1,181 @@
+"""Choice of the Mitsuba / Dr.Jit variant, in one place.
+
+Order of preference: ``cuda_ad_mono`` when a CUDA device works, else ``llvm_ad_mono`` (vectorised CPU), else
+``scalar_rgb`` with a one-line warning. The environment variable ``MINCAM_VARIANT`` (or the CLI flag
+``--variant``) overrides the choice.
+
+Dr.Jit's LLVM backend loads a system ``libLLVM`` at run time and needs version >= 16 (Debian 12's LLVM 15
+loads, then aborts the process while compiling). The ``karellen-llvm-core`` wheel, a dependency of this
+package on Linux x86_64, ships ``libLLVM.so.23.1`` inside the environment; :func:`configure_libllvm` points
+``DRJIT_LIBLLVM_PATH`` at it before Dr.Jit is imported, unless the user already set that variable.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.metadata
+import os
+import sys
+import warnings
+from functools import cache
+from pathlib import Path
+from types import ModuleType
+
+ENV_VARIANT = "MINCAM_VARIANT"
+SUPPORTED_VARIANTS = ("cuda_ad_mono", "llvm_ad_mono", "scalar_rgb")
+JIT_VARIANTS = ("cuda_ad_mono", "llvm_ad_mono")
+
+_requested: str | None = None
+
+
+def bundled_libllvm() -> Path | None:
+    """Path of the libLLVM shipped by the ``karellen-llvm-core`` wheel, or None if it is not installed."""
+    try:
+        files = importlib.metadata.files("karellen-llvm-core") or []
+    except importlib.metadata.PackageNotFoundError:
+        return None
+    for f in files:
+        if f.name.startswith("libLLVM.so."):
+            path = Path(f.locate()).resolve()
+            if path.exists():
+                return path
+    return None
+
+
+def configure_libllvm() -> str | None:
+    """Set ``DRJIT_LIBLLVM_PATH`` to the bundled libLLVM if the user did not set it; return the path used."""
+    if "drjit" in sys.modules and "DRJIT_LIBLLVM_PATH" not in os.environ:
+        # Too late to steer Dr.Jit: it has already looked for libLLVM.
+        return None
+    if "DRJIT_LIBLLVM_PATH" not in os.environ:
+        lib = bundled_libllvm()
+        if lib is not None:
+            os.environ["DRJIT_LIBLLVM_PATH"] = str(lib)
+    return os.environ.get("DRJIT_LIBLLVM_PATH")
+
+
+def request_variant(variant: str | None) -> None:
+    """Ask for a variant before the first render (the CLI's ``--variant``). ``None`` means automatic."""
+    global _requested
+    if variant is not None and variant not in SUPPORTED_VARIANTS:
+        raise ValueError(f"unknown Mitsuba variant {variant!r}: choose one of {', '.join(SUPPORTED_VARIANTS)}")
+    if _requested != variant and _loaded_variant.cache_info().currsize:
+        current = _loaded_variant()
+        if variant is not None and current != variant:
+            raise RuntimeError(
+                f"Mitsuba variant is already {current!r} in this process; request {variant!r} before rendering"
+            )
+    _requested = variant
+
+
+def _wanted_variant() -> str | None:
+    wanted = _requested or os.environ.get(ENV_VARIANT) or None
+    if wanted is not None and wanted not in SUPPORTED_VARIANTS:
+        raise ValueError(
+            f"{ENV_VARIANT}={wanted!r} is not a supported variant: choose one of {', '.join(SUPPORTED_VARIANTS)}"
+        )
+    return wanted
+
+
+@cache
+def _loaded_variant() -> str:
+    configure_libllvm()
+    import drjit as dr
+    import mitsuba as mi
+
+    wanted = _wanted_variant()
+    if wanted is not None:
+        mi.set_variant(wanted)
+        return wanted
+    if dr.has_backend(dr.JitBackend.CUDA):
+        mi.set_variant("cuda_ad_mono")
+        return "cuda_ad_mono"
+    if dr.has_backend(dr.JitBackend.LLVM):
+        mi.set_variant("llvm_ad_mono")
+        return "llvm_ad_mono"
+    warnings.warn(
+        "mincam_sim: no CUDA device and no usable libLLVM (>= 16) found; falling back to the slow 'scalar_rgb' "
+        "variant (fast forms and response maps need llvm_ad_mono: pip install karellen-llvm-core)",
+        RuntimeWarning,
+        stacklevel=3,
+    )
+    mi.set_variant("scalar_rgb")
+    return "scalar_rgb"
+
+
+def mitsuba() -> ModuleType:
+    """The ``mitsuba`` module with this package's variant set (chosen on first call)."""
+    _loaded_variant()
+    import mitsuba as mi
+
+    return mi
+
+
+def variant() -> str:
+    """Name of the Mitsuba variant in use (chosen on first call)."""
+    return _loaded_variant()
+
+
+def is_jit() -> bool:
+    """True for vectorised (LLVM/CUDA) variants, which Python plugins and response maps need."""
+    return variant() in JIT_VARIANTS
+
+
+def require_jit(what: str) -> None:
+    """Raise a clear error when ``what`` needs a vectorised variant and the scalar fallback is active."""
+    if not is_jit():
+        raise RuntimeError(
+            f"{what} needs a vectorised Mitsuba variant (llvm_ad_mono or cuda_ad_mono), but the active one is "
+            f"{variant()!r}; install karellen-llvm-core (or a system libLLVM >= 16) or set {ENV_VARIANT}"
+        )
+
+
+def describe() -> dict[str, str]:
+    """Metadata recorded with every output: variant and library versions."""
+    import drjit as dr
+    import mitsuba as mi
+
+    return {
+        "variant": variant(),
+        "mitsuba": mi.__version__,
+        "drjit": dr.__version__,
+        "libllvm": os.environ.get("DRJIT_LIBLLVM_PATH", ""),
+    }
+
+
+def _main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description="Check that a Mitsuba variant loads and renders.")
+    parser.add_argument("--check", action="store_true", help="render a tiny scene and print the variant")
+    args = parser.parse_args(argv)
+    mi = mitsuba()
+    if args.check:
+        scene = mi.load_dict(
+            {
+                "type": "scene",
+                "integrator": {"type": "path"},
+                "emitter": {"type": "constant", "radiance": {"type": "spectrum", "value": 1.0}},
+                "shape": {
+                    "type": "rectangle",
+                    "sensor": {
+                        "type": "irradiancemeter",
+                        "sampler": {"type": "independent", "sample_count": 1024},
+                        "film": {
+                            "type": "hdrfilm",
+                            "width": 1,
+                            "height": 1,
+                            "pixel_format": "luminance",
+                            "rfilter": {"type": "box"},
+                        },
+                    },
+                },
+            }
+        )
+        value = float(mi.TensorXf(mi.render(scene)).numpy().mean())
+        print(f"mincam_sim backend OK: variant={variant()} E(constant sky, L=1)={value:.4f} W/m^2 (pi expected)")
+    else:
+        print(variant())
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(_main())
