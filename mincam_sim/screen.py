@@ -187,3 +187,32 @@ def grid_sweep(
     ys = np.linspace(*y_range_m, ny)[::-1]
     gx, gy = np.meshgrid(xs, ys)
     return Sweep(np.column_stack([gx.ravel(), gy.ravel()]), size_m, radiance)
+
+
+def check_visible(screen: Screen, mixels) -> None:
+    """Raise ``ValueError`` if a mixel is behind the screen or sees none of it through its aperture.
+
+    Visibility is tested on a 65 x 65 grid of screen points against the mixel's widest rays (detector edge to
+    the far mask edge); it is a sanity check of the set-up, the measurements themselves come from rays.
+    """
+    xs, ys = np.meshgrid(np.linspace(-0.5, 0.5, 65) * screen.width_m, np.linspace(-0.5, 0.5, 65) * screen.height_m)
+    points = screen.to_world(xs, ys).reshape(-1, 3)
+    normal = screen.pose.axes()[2]
+    for mixel in mixels:
+        offset = np.asarray(mixel.pose.position_m) - np.asarray(screen.pose.position_m)
+        if float(offset @ normal) <= 0:
+            raise ValueError(
+                f"mixel {mixel.name!r} at {mixel.pose.position_m} m is behind the screen or in its plane; "
+                "displays emit only from their front: move the mixel in front of the screen (along the screen's "
+                f"forward {screen.pose.forward}) or turn the screen round"
+            )
+        local = mixel.pose.to_local(points)
+        tx, ty = mixel.half_fov_tan()
+        z = local[:, 2]
+        seen = (z > mixel.d_f_m) & (np.abs(local[:, 0]) <= tx * z) & (np.abs(local[:, 1]) <= ty * z)
+        if not seen.any():
+            raise ValueError(
+                f"the screen lies entirely outside mixel {mixel.name!r}'s field of view "
+                f"(+/-{np.degrees(np.arctan(tx)):.1f} x +/-{np.degrees(np.arctan(ty)):.1f} deg about its forward "
+                f"{mixel.pose.forward}): point the mixel at the screen or move the screen in front of it"
+            )

@@ -1,0 +1,128 @@
+"""Mixel measurements with their Monte Carlo standard errors and metadata (pure numpy).
+
+Values are the irradiance averaged over each detector, in W/m^2 (multiply by the detector area for the
+radiant power in W: :meth:`Measurements.power_w`).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+
+@dataclass
+class Measurements:
+    """Per-frame, per-mixel measurements.
+
+    Attributes
+    ----------
+    irradiance_w_m2 : (n_frames, n_mixels) ndarray
+        Mean irradiance on each detector [W/m^2].
+    stderr_w_m2 : (n_frames, n_mixels) ndarray
+        Monte Carlo standard error of each value [W/m^2].
+    mixel_names : list of str
+    meta : dict
+        Variant, seed, samples, form, geometry ... (JSON-serialisable).
+    """
+
+    irradiance_w_m2: np.ndarray
+    stderr_w_m2: np.ndarray
+    mixel_names: list[str]
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.irradiance_w_m2 = np.atleast_2d(np.asarray(self.irradiance_w_m2, dtype=np.float64))
+        self.stderr_w_m2 = np.atleast_2d(np.asarray(self.stderr_w_m2, dtype=np.float64))
+        if self.irradiance_w_m2.shape != self.stderr_w_m2.shape:
+            raise ValueError("irradiance and stderr must have the same shape (n_frames, n_mixels)")
+        if self.irradiance_w_m2.shape[1] != len(self.mixel_names):
+            raise ValueError(f"{self.irradiance_w_m2.shape[1]} columns but {len(self.mixel_names)} mixel names")
+
+    @property
+    def n_frames(self) -> int:
+        return self.irradiance_w_m2.shape[0]
+
+    def relative_stderr(self) -> np.ndarray:
+        """stderr / |value| (inf where the value is 0)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return self.stderr_w_m2 / np.abs(self.irradiance_w_m2)
+
+    def power_w(self, detector_areas_m2) -> np.ndarray:
+        """Radiant power on each detector [W] = irradiance x detector area."""
+        return self.irradiance_w_m2 * np.asarray(detector_areas_m2, dtype=np.float64)[None, :]
+
+    def __sub__(self, other: Measurements) -> Measurements:
+        """Difference of two measurement sets assuming independent errors (use engine helpers for
+        correlated-seed differences, whose error is smaller)."""
+        return Measurements(
+            self.irradiance_w_m2 - other.irradiance_w_m2,
+            np.hypot(self.stderr_w_m2, other.stderr_w_m2),
+            list(self.mixel_names),
+            {"difference_of": [self.meta, other.meta]},
+        )
+
+    @staticmethod
+    def concatenate(parts: list[Measurements]) -> Measurements:
+        if not parts:
+            raise ValueError("nothing to concatenate")
+        return Measurements(
+            np.concatenate([p.irradiance_w_m2 for p in parts]),
+            np.concatenate([p.stderr_w_m2 for p in parts]),
+            list(parts[0].mixel_names),
+            dict(parts[0].meta),
+        )
+
+    def save_npz(self, path: str | Path) -> Path:
+        """Write arrays + JSON metadata to an ``.npz`` file."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(
+            path,
+            irradiance_w_m2=self.irradiance_w_m2,
+            stderr_w_m2=self.stderr_w_m2,
+            mixel_names=np.array(self.mixel_names),
+            meta_json=np.array(json.dumps(self.meta, default=_json_default)),
+        )
+        return path
+
+    @classmethod
+    def load_npz(cls, path: str | Path) -> Measurements:
+        with np.load(path, allow_pickle=False) as data:
+            return cls(
+                data["irradiance_w_m2"],
+                data["stderr_w_m2"],
+                [str(s) for s in data["mixel_names"]],
+                json.loads(str(data["meta_json"])),
+            )
+
+    def save_csv(self, path: str | Path) -> Path:
+        """Write one row per frame: frame, <mixel>_w_m2, <mixel>_stderr_w_m2 ...; metadata in a ``#`` header."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with path.open("w", newline="") as fh:
+            fh.write("# " + json.dumps(self.meta, default=_json_default) + "\n")
+            writer = csv.writer(fh)
+            header = ["frame"]
+            for name in self.mixel_names:
+                header += [f"{name}_w_m2", f"{name}_stderr_w_m2"]
+            writer.writerow(header)
+            for i in range(self.n_frames):
+                row: list = [i]
+                for k in range(len(self.mixel_names)):
+                    row += [repr(self.irradiance_w_m2[i, k]), repr(self.stderr_w_m2[i, k])]
+                writer.writerow(row)
+        return path
+
+
+def _json_default(obj):
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, Path):
+        return str(obj)
+    raise TypeError(f"not JSON serialisable: {type(obj)}")

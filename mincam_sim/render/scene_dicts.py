@@ -1,0 +1,145 @@
+"""Mitsuba scene dictionaries built by small pure functions (the style of ``mitsuba.util.cornell_box``).
+
+Conventions (see :mod:`mincam_sim.geometry`, :mod:`mincam_sim.masks`, :mod:`mincam_sim.screen`):
+
+* Mitsuba's ``rectangle`` spans [-1, 1]^2 in its local xy plane, normal +z, with ``uv = (x + 1, y + 1) / 2``;
+  ``bitmap`` row 0 is at ``v = 0``.
+* A mask rectangle is placed with ``scale(-w/2, -h/2, 1)`` in the mixel frame (whose +x is the viewer's left),
+  so ``u`` grows to the viewer's right and ``v = 0`` is the top: the mask array maps onto it unflipped.
+* A screen rectangle uses ``scale(w/2, h/2, 1)`` in the screen frame (+x is the viewer's right, +y up), so its
+  ``v = 0`` is the bottom: frames (row 0 at the top) are flipped vertically when uploaded.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..masks import Mask
+from ..optics import Mixel
+from ..screen import Screen
+from . import backend
+
+
+def _transform(matrix: np.ndarray):
+    mi = backend.mitsuba()
+    return mi.ScalarTransform4f(np.asarray(matrix, dtype=np.float64).tolist())
+
+
+def black_bsdf() -> dict:
+    """A perfectly absorbing surface (housings, detectors, screen surface)."""
+    return {"type": "diffuse", "reflectance": {"type": "spectrum", "value": 0.0}}
+
+
+def texture_tensor(array: np.ndarray):
+    """A (H, W) array as a one-channel ``mi.TensorXf`` (float32) for ``bitmap`` textures."""
+    mi = backend.mitsuba()
+    return mi.TensorXf(np.ascontiguousarray(np.asarray(array, dtype=np.float32)[..., None]))
+
+
+def bitmap_dict(array: np.ndarray, filter_type: str = "bilinear") -> dict:
+    """A raw (linear, no sRGB conversion), clamped bitmap texture of ``array`` (H, W)."""
+    return {
+        "type": "bitmap",
+        "data": texture_tensor(array),
+        "raw": True,
+        "filter_type": filter_type,
+        "wrap_mode": "clamp",
+    }
+
+
+def mask_surface_matrix(mixel: Mixel) -> np.ndarray:
+    """World matrix of a mixel's mask rectangle (see module docstring for the orientation)."""
+    w, h = mixel.mask.width_m, mixel.mask.height_m
+    local = np.diag([-w / 2, -h / 2, 1.0, 1.0])
+    local[2, 3] = mixel.d_f_m
+    return mixel.pose.matrix() @ local
+
+
+def mask_transmission_texture(mask: Mask) -> dict:
+    """The transmission texture of a mask (bilinear between texel centres, clamped at the edges)."""
+    return bitmap_dict(mask.transmission)
+
+
+def housing_matrices(mixel: Mixel) -> list[np.ndarray]:
+    """World matrices of the 4 walls of the black tube between detector plane (z = 0) and mask (z = d_f)."""
+    w, h, d = mixel.mask.width_m, mixel.mask.height_m, mixel.d_f_m
+    walls = []
+    for axis, half, other_half in ((0, w / 2, h / 2), (1, h / 2, w / 2)):
+        for sign in (-1.0, 1.0):
+            m = np.eye(4)
+            normal = np.zeros(3)
+            normal[axis] = sign
+            along = np.zeros(3)
+            along[1 - axis] = other_half
+            depth = np.array([0.0, 0.0, d / 2])
+            m[:3, 0] = along
+            m[:3, 1] = depth
+            m[:3, 2] = normal
+            m[:3, 3] = normal * half + np.array([0.0, 0.0, d / 2])
+            walls.append(mixel.pose.matrix() @ m)
+    return walls
+
+
+def mixel_reference_shapes(mixel: Mixel, key: str, spp: int, max_bounce_depth: int = 1) -> dict:
+    """The literal mixel: detector with an ``irradiancemeter``, textured transmissive mask, black housing.
+
+    The mask is Mitsuba's ``mask`` BSDF (stochastic null pass-through with probability = transmission) over a
+    black BSDF, so transmitted light continues unchanged and the rest is absorbed.
+    """
+    s = mixel.detector_size_m
+    detector = mixel.pose.matrix() @ np.diag([s / 2, s / 2, 1.0, 1.0])
+    shapes = {
+        f"{key}_detector": {
+            "type": "rectangle",
+            "to_world": _transform(detector),
+            "bsdf": black_bsdf(),
+            "sensor": {
+                "type": "irradiancemeter",
+                "sampler": {"type": "independent", "sample_count": int(spp)},
+                "film": {
+                    "type": "hdrfilm",
+                    "width": 1,
+                    "height": 1,
+                    "pixel_format": "luminance",
+                    "rfilter": {"type": "box"},
+                },
+            },
+        },
+        f"{key}_mask": {
+            "type": "rectangle",
+            "to_world": _transform(mask_surface_matrix(mixel)),
+            "bsdf": {
+                "type": "mask",
+                "opacity": bitmap_dict(1.0 - mixel.mask.transmission),
+                "bsdf": black_bsdf(),
+            },
+        },
+    }
+    for i, wall in enumerate(housing_matrices(mixel)):
+        shapes[f"{key}_housing{i}"] = {"type": "rectangle", "to_world": _transform(wall), "bsdf": black_bsdf()}
+    return shapes
+
+
+def screen_matrix(screen: Screen) -> np.ndarray:
+    return screen.pose.matrix() @ np.diag([screen.width_m / 2, screen.height_m / 2, 1.0, 1.0])
+
+
+def frame_tensor(frame: np.ndarray):
+    """A frame (row 0 at the top) as the screen emitter's texture data (row 0 at the bottom)."""
+    return texture_tensor(np.asarray(frame)[::-1])
+
+
+def screen_shape(screen: Screen, frame: np.ndarray | None = None) -> dict:
+    """An emissive display: black surface, area emitter whose radiance is the frame (nearest texel)."""
+    frame = screen.blank() if frame is None else screen.check_frame(frame)
+    radiance = bitmap_dict(frame[::-1], filter_type="nearest")
+    return {
+        "type": "rectangle",
+        "to_world": _transform(screen_matrix(screen)),
+        "bsdf": black_bsdf(),
+        "emitter": {"type": "area", "radiance": radiance},
+    }
+
+
+SCREEN_KEY = "screen"
+SCREEN_RADIANCE_PARAM = f"{SCREEN_KEY}.emitter.radiance.data"
