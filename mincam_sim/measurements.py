@@ -113,7 +113,7 @@ class Measurements:
             for i in range(self.n_frames):
                 row: list = [i]
                 for k in range(len(self.mixel_names)):
-                    row += [repr(self.irradiance_w_m2[i, k]), repr(self.stderr_w_m2[i, k])]
+                    row += [repr(float(self.irradiance_w_m2[i, k])), repr(float(self.stderr_w_m2[i, k]))]
                 writer.writerow(row)
         return path
 

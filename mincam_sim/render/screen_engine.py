@@ -13,6 +13,7 @@ All return irradiance averaged over each detector [W/m^2] with its Monte Carlo s
 
 from __future__ import annotations
 
+import hashlib
 import zlib
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -24,6 +25,7 @@ from ..measurements import Measurements
 from ..optics import Mincam
 from ..progress import progress
 from ..screen import Screen, check_visible
+from ..store import ResultStore
 from . import backend
 from .mixel_sensor import sensor_dict
 from .scene_dicts import (
@@ -292,6 +294,7 @@ def response_maps(
     seed: int = 0,
     mixel_indices: Sequence[int] | None = None,
     max_lanes: int = 1 << 23,
+    replicates: int = 4,
 ) -> ResponseMaps:
     """Trace each mixel's response map over the display's texels.
 
@@ -299,21 +302,30 @@ def response_maps(
 
         W[k, t] = 1/A_d int_det int_texel T(x_m) cos(t_d) cos(t_s) / r^2 V(x_m, x_s) dA_s dA_d
 
-    estimated with ``samples_per_texel`` pairs (x_d uniform on the detector, x_s uniform in the texel); x_m is
-    where the segment crosses the mask plane (outside the aperture the housing blocks it), ``t_s`` is measured
-    at the screen (emission only from its front), and V is a shadow ray in the Mitsuba scene.
+    estimated from pairs (x_d on the detector, x_s in the texel); x_m is where the segment crosses the mask
+    plane (outside the aperture the housing blocks it), ``t_s`` is measured at the screen (emission only from
+    its front), and V is a shadow ray in the Mitsuba scene.
+
+    Sampling: the samples of a texel form ``replicates`` independent blocks of ``k x k`` jittered strata on
+    the detector and, in another stratum order, on the texel (``samples_per_texel`` is rounded to
+    ``replicates * k^2``). Stratification removes most of the noise of the smooth integrand; the variance of
+    each weight is estimated from the spread of the independent blocks, so it stays honest.
     """
     backend.require_jit("Response maps")
     check_visible(screen, mincam)
     if int(samples_per_texel) != samples_per_texel or samples_per_texel < 2:
         raise ValueError(f"samples_per_texel must be an integer >= 2, got {samples_per_texel!r}")
+    if int(replicates) != replicates or not 2 <= replicates <= samples_per_texel:
+        raise ValueError(f"replicates must be an integer in [2, samples_per_texel], got {replicates!r}")
+    strata = max(1, int(np.sqrt(samples_per_texel / replicates)))  # k: strata per axis within a block
     mi = backend.mitsuba()
     import drjit as dr
 
     scene = mi.load_dict({"type": "scene", SCREEN_KEY: screen_shape(screen)})
     rows, cols = screen.shape
     n_tex = rows * cols
-    spt = int(samples_per_texel)
+    block = strata * strata
+    spt = replicates * block
     texels_per_chunk = max(1, min(n_tex, max_lanes // spt))
     right, up, normal = (np.asarray(a).tolist() for a in screen.pose.axes())
     center = [float(c) for c in screen.pose.position_m]
@@ -339,8 +351,13 @@ def response_maps(
             texel = lane // spt + start
             col = mi.Float(texel % cols)
             row = mi.Float(texel // cols)
-            s_screen = sampler.next_2d()
-            s_det = sampler.next_2d()
+            j = lane % block  # stratum index within the block
+            jx, jy = mi.Float(j % strata), mi.Float(j // strata)
+            jitter_screen = sampler.next_2d()
+            jitter_det = sampler.next_2d()
+            # detector strata in row order, texel strata in transposed, reversed order: both cover their domain
+            s_det = mi.Point2f((jx + jitter_det.x) / strata, (jy + jitter_det.y) / strata)
+            s_screen = mi.Point2f((strata - 1 - jy + jitter_screen.x) / strata, (jx + jitter_screen.y) / strata)
             xs = ((col + s_screen.x) / cols - 0.5) * screen.width_m
             ys = (0.5 - (row + s_screen.y) / rows) * screen.height_m
             p_screen = mi.Point3f(
@@ -370,18 +387,16 @@ def response_maps(
             shadow = mi.Ray3f(p_mask, direction, dist_after * (1 - 1e-5), 0.0, [])
             valid &= ~scene.ray_test(shadow, valid)
             g = dr.select(valid, transmission * cos_d * cos_s / r2 * texel_area, 0.0)
-            s1 = dr.block_sum(g, spt)
-            s2 = dr.block_sum(g * g, spt)
-            s1_np = np.asarray(s1, dtype=np.float64)
-            s2_np = np.asarray(s2, dtype=np.float64)
-            mean = s1_np / spt
-            weights[out_k, start : start + count] = mean
-            variance[out_k, start : start + count] = np.maximum(s2_np - spt * mean**2, 0.0) / (spt - 1) / spt
+            blocks = np.asarray(dr.block_sum(g, block), dtype=np.float64).reshape(count, replicates) / block
+            weights[out_k, start : start + count] = blocks.mean(axis=1)
+            variance[out_k, start : start + count] = blocks.var(axis=1, ddof=1) / replicates
     names = [mincam[k].name for k in indices]
     meta = {
         "form": "response_map",
         "estimator": "texel_area_sampling_with_shadow_rays",
         "samples_per_texel": spt,
+        "replicate_blocks": replicates,
+        "strata_per_block": f"{strata}x{strata}",
         "seed": seed,
         "units": "sr (W/m^2 on the detector per W m^-2 sr^-1 of texel radiance)",
         **backend.describe(),
@@ -389,3 +404,122 @@ def response_maps(
     }
     return ResponseMaps(weights.reshape(len(indices), rows, cols), variance.reshape(len(indices), rows, cols),
                         names, meta)
+
+
+MAX_SAMPLES_PER_TEXEL = 1 << 14
+MAX_SPP = 1 << 28
+
+
+def _required(pilot: int, measured_rel: float, target: float, cap: int) -> int:
+    if not np.isfinite(measured_rel) or measured_rel <= 0:
+        return pilot
+    return int(min(cap, max(pilot, np.ceil(pilot * (measured_rel / target) ** 2 * 1.1))))
+
+
+def worst_relative_stderr(m: Measurements) -> float:
+    """Largest stderr/value over non-zero measurements (NaN if all are zero)."""
+    live = m.irradiance_w_m2 > 0
+    return float(np.max(m.relative_stderr()[live])) if live.any() else float("nan")
+
+
+def render_frames(
+    mincam: Mincam,
+    screen: Screen,
+    frames: np.ndarray,
+    form: str = "response_map",
+    spp: int = 1 << 16,
+    samples_per_texel: int = 64,
+    target_rel_stderr: float = 0.0,
+    seed: int = 0,
+    replicates: int = 8,
+    out_dir: str | Path | None = None,
+    show_progress: bool = False,
+    chunk: int = 64,
+) -> tuple[Measurements, ResponseMaps | None]:
+    """Measure a stack of frames with any form, optionally to a target noise, resumably.
+
+    Parameters
+    ----------
+    frames : (n, rows, cols) ndarray
+        Display radiance [W m^-2 sr^-1].
+    form : {"response_map", "fast", "reference"}
+    spp, samples_per_texel : int
+        Sample counts when ``target_rel_stderr`` is 0.
+    target_rel_stderr : float
+        If > 0, a pilot run measures the noise and the sample count is extrapolated (variance ~ 1/samples) so
+        that the worst non-zero measurement reaches this relative standard error; the reached value is in
+        ``meta["reached_rel_stderr"]``.
+    out_dir : path, optional
+        If given, per-frame results are written as they are computed and an interrupted run resumes there.
+
+    Returns
+    -------
+    (Measurements, ResponseMaps or None)
+    """
+    frames = np.asarray(frames, dtype=np.float64)
+    if frames.ndim == 2:
+        frames = frames[None]
+    if form not in ("response_map", "fast", "reference"):
+        raise ValueError(f"form must be 'response_map', 'fast' or 'reference', got {form!r}")
+    if not (np.isfinite(target_rel_stderr) and target_rel_stderr >= 0):
+        raise ValueError(f"target_rel_stderr must be >= 0 (0 = use the given sample counts), got {target_rel_stderr}")
+    for i, f in enumerate(frames):
+        screen.check_frame(f, f"frame {i}")
+    budget: dict = {"target_rel_stderr": target_rel_stderr}
+    maps = None
+    renderer = None
+    if form == "response_map":
+        maps_path = Path(out_dir) / "response_maps.npz" if out_dir else None
+        if maps_path is not None and maps_path.exists():
+            maps = ResponseMaps.load_npz(maps_path)
+        else:
+            if target_rel_stderr > 0:
+                pilot = response_maps(mincam, screen, 8, derive_seed(seed, "pilot"))
+                rel = worst_relative_stderr(pilot.measure(frames))
+                samples_per_texel = _required(8, rel, target_rel_stderr, MAX_SAMPLES_PER_TEXEL)
+                budget.update(pilot_samples_per_texel=8, pilot_rel_stderr=rel)
+            maps = response_maps(mincam, screen, samples_per_texel, seed)
+            if maps_path is not None:
+                maps.save_npz(maps_path)
+        measure = maps.measure
+        meta = dict(maps.meta)
+    else:
+        renderer = ScreenRenderer(mincam, screen, form, replicates)
+        if target_rel_stderr > 0:
+            pilot_spp = replicates * 2048
+            pilot = renderer.render(frames[: min(len(frames), 4)], spp=pilot_spp, seed=derive_seed(seed, "pilot"))
+            rel = worst_relative_stderr(pilot)
+            spp = _required(pilot_spp, rel, target_rel_stderr, MAX_SPP)
+            budget.update(pilot_spp=pilot_spp, pilot_rel_stderr=rel)
+
+        def measure(stack):
+            return renderer.render(stack, spp=spp, seed=seed)
+
+        meta = {"form": form, "seed": seed, "replicates": replicates, **backend.describe(),
+                **geometry_meta(mincam, screen)}
+    budget.update(spp=spp if form != "response_map" else None,
+                  samples_per_texel=samples_per_texel if form == "response_map" else None)
+    store = None
+    if out_dir is not None:
+        identity = {"form": form, "seed": seed, "replicates": replicates, "budget": budget,
+                    "frames_sha256": hashlib.sha256(np.ascontiguousarray(frames).tobytes()).hexdigest()[:16],
+                    "geometry": geometry_meta(mincam, screen)}
+        store = ResultStore(out_dir, len(frames), mincam.names, identity)
+        todo = store.pending()
+    else:
+        todo = np.arange(len(frames))
+    values = np.full((len(frames), len(mincam)), np.nan)
+    errors = np.full_like(values, np.nan)
+    if store is not None:
+        values[:] = store.values
+        errors[:] = store.stderr
+    step = chunk if form == "response_map" else 1
+    batches = [todo[i : i + step] for i in range(0, len(todo), step)]
+    for idx in progress(batches, desc=f"{form}: frames", disable=not show_progress, total=len(batches)):
+        m = measure(frames[idx])
+        values[idx], errors[idx] = m.irradiance_w_m2, m.stderr_w_m2
+        if store is not None:
+            store.write(idx, m.irradiance_w_m2, m.stderr_w_m2)
+    result = Measurements(values, errors, mincam.names, {**meta, **budget})
+    result.meta["reached_rel_stderr"] = worst_relative_stderr(result)
+    return result, maps
