@@ -1,8 +1,8 @@
 """The fast form of a mincam: one Mitsuba sensor that starts every ray on a mixel's mask aperture.
 
-Film layout: column ``k`` is mixel ``k``; the ``R`` rows are independent replicates (each row's pixel is a
-complete estimate from its own samples), so the spread across rows gives the Monte Carlo standard error and the
-mean is accumulated in float64 outside the film.
+Position sample: ``x`` in [k/n, (k+1)/n) selects mixel ``k`` of ``n`` and its fractional part the detector
+point's x; ``y`` is the detector point's y. With ``mi.render`` a film of ``n x 1`` pixels therefore holds one
+mixel per pixel; :func:`mixel_position_sample` builds the same samples for :mod:`.tracing`.
 
 Estimator (irradiance averaged over the detector, W/m^2)::
 
@@ -57,9 +57,7 @@ def _make_class():
             px = sample2.x * n
             index = dr.clip(mi.UInt32(dr.floor(px)), 0, n - 1)
             frac_x = px - mi.Float(index)
-            rows = self.film().size().y
-            py = sample2.y * rows
-            frac_y = py - dr.floor(py)
+            frac_y = sample2.y
 
             origin = dr.zeros(mi.Point3f)
             direction = dr.zeros(mi.Vector3f)
@@ -110,8 +108,20 @@ def register() -> None:
     _registered = True
 
 
-def sensor_dict(n_mixels: int, replicates: int, spp: int) -> dict:
-    """Scene-dict entry for the sensor; film = n_mixels x replicates pixels, ``spp`` samples per pixel."""
+def mixel_position_sample(n_mixels: int, replicates: int):
+    """Position-sample map for :func:`.tracing.trace_groups`: group ``g = k * replicates + r`` -> mixel ``k``."""
+    mi = backend.mitsuba()
+
+    def position(group, u):
+        k = mi.Float(group // replicates)
+        # keep x strictly inside [k/n, (k+1)/n) despite float32 rounding (shrinks the detector by 2e-6)
+        return mi.Point2f((k + 0.5 + (u.x - 0.5) * (1 - 2e-6)) / n_mixels, u.y)
+
+    return position
+
+
+def sensor_dict(n_mixels: int, spp: int = 1) -> dict:
+    """Scene-dict entry for the sensor; film = one pixel per mixel, ``spp`` samples per pixel."""
     register()
     return {
         "type": PLUGIN_NAME,
@@ -119,7 +129,7 @@ def sensor_dict(n_mixels: int, replicates: int, spp: int) -> dict:
         "film": {
             "type": "hdrfilm",
             "width": int(n_mixels),
-            "height": int(replicates),
+            "height": 1,
             "pixel_format": "luminance",
             "rfilter": {"type": "box"},
             "sample_border": False,

@@ -27,7 +27,7 @@ from ..progress import progress
 from ..screen import Screen, check_visible
 from ..store import ResultStore
 from . import backend
-from .mixel_sensor import sensor_dict
+from .mixel_sensor import mixel_position_sample, sensor_dict
 from .scene_dicts import (
     SCREEN_KEY,
     SCREEN_RADIANCE_PARAM,
@@ -36,8 +36,8 @@ from .scene_dicts import (
     mixel_reference_shapes,
     screen_shape,
 )
+from .tracing import trace_groups
 
-MAX_SPP_PER_PASS = 1 << 20  # a film pixel accumulates in float32: keep each pass well below ~2^22 samples
 REFERENCE_MAX_DEPTH = 3  # camera ray -> mask pass-through (one bounce) -> screen emission, plus margin
 
 
@@ -124,7 +124,7 @@ class ScreenRenderer:
             self._sensors = self._reference_sensors()
         else:
             scene["integrator"] = {"type": "path", "max_depth": 2}
-            scene["sensor"] = sensor_dict(len(mincam), replicates=self.replicates, spp=1)
+            scene["sensor"] = sensor_dict(len(mincam))
             self.scene = self.mi.load_dict(scene)
             self.scene.sensors()[0].set_mixels(list(mincam))
         self.params = self.mi.traverse(self.scene)
@@ -142,32 +142,19 @@ class ScreenRenderer:
         self.params[SCREEN_RADIANCE_PARAM] = frame_tensor(self.screen.check_frame(frame))
         self.params.update()
 
-    def _render_fast(self, spp: int, replicates: int, seed: int) -> np.ndarray:
-        """(replicates, n_mixels) independent estimates."""
-        mi = self.mi
-        n = len(self.mincam)
-        per_pixel = max(1, -(-spp // replicates))
-        passes = -(-per_pixel // MAX_SPP_PER_PASS)
-        acc = np.zeros((replicates, n))
-        for p in range(passes):
-            spp_pass = min(MAX_SPP_PER_PASS, per_pixel - p * MAX_SPP_PER_PASS)
-            img = mi.render(self.scene, spp=spp_pass, seed=derive_seed(seed, "fast", p))
-            acc += np.asarray(img, dtype=np.float64).reshape(replicates, n) * spp_pass
-        return acc / per_pixel
-
-    def _render_reference(self, spp: int, replicates: int, seed: int) -> np.ndarray:
-        mi = self.mi
+    def _estimates(self, spp: int, replicates: int, seed: int) -> np.ndarray:
+        """(replicates, n_mixels) independent estimates, each from ``spp / replicates`` rays."""
         per_rep = max(1, -(-spp // replicates))
-        out = np.zeros((replicates, len(self.mincam)))
+        n = len(self.mincam)
+        if self.form == "fast":
+            sensor = self.scene.sensors()[0]
+            means = trace_groups(self.scene, sensor, n * replicates, per_rep, derive_seed(seed, "fast"),
+                                 position_sample=mixel_position_sample(n, replicates))
+            return means.reshape(n, replicates).T
+        out = np.zeros((replicates, n))
         for k, sensor in enumerate(self._sensors):
-            for r in range(replicates):
-                done = 0
-                while done < per_rep:
-                    n = min(MAX_SPP_PER_PASS, per_rep - done)
-                    img = mi.render(self.scene, sensor=sensor, spp=n, seed=derive_seed(seed, "ref", k, r, done))
-                    out[r, k] += float(np.asarray(img, dtype=np.float64).mean()) * n
-                    done += n
-        return out / per_rep
+            out[:, k] = trace_groups(self.scene, sensor, replicates, per_rep, derive_seed(seed, "ref", k))
+        return out
 
     def render(
         self,
@@ -196,11 +183,7 @@ class ScreenRenderer:
         values, errors = [], []
         for frame in progress(frames, desc=f"{self.form} render", disable=not show_progress):
             self.set_frame(frame)
-            if self.form == "fast":
-                est = self._render_fast(spp, replicates, seed)
-            else:
-                est = self._render_reference(spp, replicates, seed)
-            mean, err = _mean_and_stderr(est)
+            mean, err = _mean_and_stderr(self._estimates(spp, replicates, seed))
             values.append(mean)
             errors.append(err)
         meta = {

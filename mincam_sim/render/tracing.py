@@ -1,0 +1,69 @@
+"""Monte Carlo estimates straight from a sensor and the scene's integrator, accumulated in float64.
+
+``mi.render`` pours samples into a float32 film with parallel atomic adds: the order (and so the last bits)
+changes from run to run, and millions of samples in one pixel drift by ~1e-4. Here every lane's
+``weight x L`` comes back as an array and is summed in float64 in a fixed order, so the same seed gives the
+same numbers and no film precision is involved.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from . import backend
+
+MAX_LANES = 1 << 22  # rays traced per kernel launch
+
+
+def trace_groups(
+    scene,
+    sensor,
+    n_groups: int,
+    samples_per_group: int,
+    seed: int,
+    position_sample: Callable | None = None,
+) -> np.ndarray:
+    """Mean of ``weight x L`` over ``samples_per_group`` rays for each of ``n_groups`` groups.
+
+    Parameters
+    ----------
+    scene : mi.Scene
+        Scene whose integrator (``path``) computes the radiance L along each ray.
+    sensor : mi.Sensor
+        Generates rays and their weights from (position, aperture) samples in [0, 1]^2.
+    position_sample : callable, optional
+        ``f(group_index: mi.UInt32, u: mi.Point2f) -> mi.Point2f`` maps a uniform sample to the sensor's
+        position sample for a group (e.g. to pick a mixel); default: ``u`` itself.
+    seed : int
+        Seed of the independent sampler; each kernel launch derives its own.
+    """
+    mi = backend.mitsuba()
+    import drjit as dr
+
+    integrator = scene.integrator()
+    totals = np.zeros(n_groups, dtype=np.float64)
+    groups_per_launch = max(1, MAX_LANES // samples_per_group)
+    per_launch = min(samples_per_group, MAX_LANES)
+    launch = 0
+    for g0 in range(0, n_groups, groups_per_launch):
+        ng = min(groups_per_launch, n_groups - g0)
+        for s0 in range(0, samples_per_group, per_launch):
+            ns = min(per_launch, samples_per_group - s0)
+            sampler = mi.load_dict({"type": "independent"})
+            sampler.seed((seed * 1_000_003 + launch) & 0x7FFFFFFF, ng * ns)
+            launch += 1
+            group = dr.arange(mi.UInt32, ng * ns) // ns + g0
+            u = sampler.next_2d()
+            if position_sample is not None:
+                u = position_sample(group, u)
+            aperture = sampler.next_2d()
+            wavelength = sampler.next_1d()
+            ray, weight = sensor.sample_ray_differential(0.0, wavelength, u, aperture)
+            radiance, _, _ = integrator.sample(scene, sampler, ray, None, True)
+            value = np.asarray(weight * radiance, dtype=np.float64).reshape(-1)
+            if value.size != ng * ns:  # RGB variants: gray scenes, average the channels
+                value = value.reshape(ng * ns, -1).mean(axis=1)
+            totals[g0 : g0 + ng] += value.reshape(ng, ns).sum(axis=1)
+    return totals / samples_per_group
