@@ -143,3 +143,70 @@ def screen_shape(screen: Screen, frame: np.ndarray | None = None) -> dict:
 
 SCREEN_KEY = "screen"
 SCREEN_RADIANCE_PARAM = f"{SCREEN_KEY}.emitter.radiance.data"
+
+
+def mesh_object(name: str, vertices_m: np.ndarray, faces: np.ndarray, albedo: float = 0.8):
+    """An in-memory triangle mesh (``mi.Mesh``) with a diffuse gray albedo in [0, 1]."""
+    mi = backend.mitsuba()
+    vertices_m = np.asarray(vertices_m, dtype=np.float32)
+    faces = np.asarray(faces, dtype=np.uint32)
+    if vertices_m.ndim != 2 or vertices_m.shape[1] != 3 or len(vertices_m) == 0:
+        raise ValueError(f"object {name!r}: vertices must be a non-empty (n, 3) array [m], got {vertices_m.shape}")
+    if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0 or faces.max() >= len(vertices_m):
+        raise ValueError(f"object {name!r}: faces must be a non-empty (m, 3) array of vertex indices")
+    if not 0.0 <= albedo <= 1.0:
+        raise ValueError(f"object {name!r}: albedo must lie in [0, 1], got {albedo}")
+    props = mi.Properties()
+    props["bsdf"] = mi.load_dict({"type": "diffuse", "reflectance": {"type": "spectrum", "value": float(albedo)}})
+    mesh = mi.Mesh(name, len(vertices_m), len(faces), props=props)
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = mi.Float(vertices_m.ravel())
+    params["faces"] = mi.UInt32(faces.ravel())
+    params.update()
+    return mesh
+
+
+def textured_plane(albedo: np.ndarray, width_m: float, height_m: float, matrix: np.ndarray) -> dict:
+    """A diffuse rectangle whose albedo texture (row 0 at the local +y edge) spans ``width_m x height_m``.
+
+    ``matrix`` places the plane (local +z is its normal); the texture is flipped so that row 0 lies at +y.
+    """
+    albedo = np.asarray(albedo, dtype=float)
+    if albedo.ndim != 2 or albedo.size == 0 or albedo.min() < 0 or albedo.max() > 1 or not np.isfinite(albedo).all():
+        raise ValueError("plane albedo must be a non-empty 2D array of finite values in [0, 1]")
+    return {
+        "type": "rectangle",
+        "to_world": _transform(np.asarray(matrix) @ np.diag([width_m / 2, height_m / 2, 1.0, 1.0])),
+        "bsdf": {"type": "diffuse", "reflectance": bitmap_dict(albedo[::-1])},
+    }
+
+
+def area_light(width_m: float, height_m: float, matrix: np.ndarray, radiance_w_m2_sr: float) -> dict:
+    """A rectangular area light emitting ``radiance_w_m2_sr`` along its local +z."""
+    return {
+        "type": "rectangle",
+        "to_world": _transform(np.asarray(matrix) @ np.diag([width_m / 2, height_m / 2, 1.0, 1.0])),
+        "bsdf": black_bsdf(),
+        "emitter": {"type": "area", "radiance": {"type": "spectrum", "value": float(radiance_w_m2_sr)}},
+    }
+
+
+def sky(radiance_w_m2_sr: float) -> dict:
+    """A uniform environment (overcast sky) of the given radiance."""
+    return {"type": "constant", "radiance": {"type": "spectrum", "value": float(radiance_w_m2_sr)}}
+
+
+def pinhole_camera(matrix: np.ndarray, fov_deg: float, width_px: int, height_px: int, spp: int = 64) -> dict:
+    """A perspective (pinhole) camera; ``matrix`` is a pose matrix (local +z forward, +y up)."""
+    mi = backend.mitsuba()
+    m = np.asarray(matrix, dtype=float).copy()
+    # Mitsuba's perspective camera looks along local +z with +x to the left: the pose convention already.
+    return {
+        "type": "perspective",
+        "to_world": mi.ScalarTransform4f(m.tolist()),
+        "fov": float(fov_deg),
+        "fov_axis": "x",
+        "sampler": {"type": "independent", "sample_count": int(spp)},
+        "film": {"type": "hdrfilm", "width": int(width_px), "height": int(height_px), "pixel_format": "luminance",
+                 "rfilter": {"type": "box"}},
+    }
