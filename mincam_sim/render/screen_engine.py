@@ -399,6 +399,39 @@ def _required(pilot: int, measured_rel: float, target: float, cap: int) -> int:
     return int(min(cap, max(pilot, np.ceil(pilot * (measured_rel / target) ** 2 * 1.1))))
 
 
+def response_maps_to_target(
+    mincam: Mincam, screen: Screen, frames: np.ndarray, target_rel_stderr: float, seed: int = 0,
+    max_samples_per_texel: int = MAX_SAMPLES_PER_TEXEL,
+) -> tuple[ResponseMaps, list[dict]]:
+    """Response maps whose measurements of ``frames`` all reach ``target_rel_stderr`` (if the cap allows).
+
+    Two pilots (16 and 64 samples per texel) give the empirical convergence rate ``rel ~ n^-a`` (stratified
+    sampling converges faster than ``n^-1/2``); the sample count is extrapolated with it, then checked and, if
+    needed, raised again assuming the plain Monte Carlo rate. Returns the maps and the trail of
+    (samples_per_texel, worst relative stderr) tried.
+    """
+    trail: list[dict] = []
+
+    def attempt(n: int) -> tuple[ResponseMaps, float]:
+        maps = response_maps(mincam, screen, n, seed)
+        rel = worst_relative_stderr(maps.measure(frames))
+        trail.append({"samples_per_texel": int(maps.meta["samples_per_texel"]), "worst_rel_stderr": rel})
+        return maps, rel
+
+    n1, n2 = 16, 64
+    maps, rel1 = attempt(n1)
+    if not rel1 > target_rel_stderr:
+        return maps, trail
+    maps, rel2 = attempt(n2)
+    rate = float(np.clip(np.log(rel1 / rel2) / np.log(n2 / n1), 0.5, 1.5)) if rel2 > 0 else 0.5
+    n, rel = n2, rel2
+    while rel > target_rel_stderr and n < max_samples_per_texel:
+        exponent = rate if len(trail) == 2 else 0.5
+        n = int(min(max_samples_per_texel, max(2 * n, np.ceil(n * 1.2 * (rel / target_rel_stderr) ** (1 / exponent)))))
+        maps, rel = attempt(n)
+    return maps, trail
+
+
 def worst_relative_stderr(m: Measurements) -> float:
     """Largest stderr/value over non-zero measurements (NaN if all are zero)."""
     live = m.irradiance_w_m2 > 0
@@ -457,11 +490,11 @@ def render_frames(
             maps = ResponseMaps.load_npz(maps_path)
         else:
             if target_rel_stderr > 0:
-                pilot = response_maps(mincam, screen, 8, derive_seed(seed, "pilot"))
-                rel = worst_relative_stderr(pilot.measure(frames))
-                samples_per_texel = _required(8, rel, target_rel_stderr, MAX_SAMPLES_PER_TEXEL)
-                budget.update(pilot_samples_per_texel=8, pilot_rel_stderr=rel)
-            maps = response_maps(mincam, screen, samples_per_texel, seed)
+                maps, trail = response_maps_to_target(mincam, screen, frames, target_rel_stderr, seed)
+                samples_per_texel = int(maps.meta["samples_per_texel"])
+                budget.update(budget_trail=trail)
+            else:
+                maps = response_maps(mincam, screen, samples_per_texel, seed)
             if maps_path is not None:
                 maps.save_npz(maps_path)
         measure = maps.measure

@@ -1,0 +1,251 @@
+"""mincam_sim benchmarks: ``python benchmarks/run.py [--out benchmarks/results.json] [--only NAME ...]``.
+
+Each benchmark runs in its own subprocess (so its peak memory, ``ru_maxrss``, is its own), warms up first (Dr.Jit
+compiles kernels on first use), and reports numbers, never strings, for its figures. Compared quantities are
+measured side by side in the same run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent))
+
+TARGET_REL = 1e-3  # 0.1 % relative standard error per sweep measurement
+
+
+def _peak_mib() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def _sweep_setup():
+    from mincam_sim import Screen, cross_layout
+    from mincam_sim.screen import grid_sweep
+
+    cam = cross_layout()
+    screen = Screen()
+    half_fov = cam[0].half_fov_tan()[0] * abs(screen.pose.position_m[2])  # ~0.26 m at 0.5 m
+    square = 2 * half_fov / 16  # 1/256 of the field of view's area
+    reach = half_fov - 0.033 - square / 2  # squares seen whole by all four mixels
+    sweep = grid_sweep((-reach, reach), (-reach, reach), 40, 25, square)
+    return cam, screen, sweep, square
+
+
+def bench_baseline() -> dict:
+    """Issue 2 baseline: samples/s and relative noise of one measurement of a small white square through a
+    ramp mask, for the reference form (literal scene) and the fast form (mixel sensor), same spp."""
+    from mincam_sim import Screen, masks, single
+    from mincam_sim.render.screen_engine import ScreenRenderer
+    from mincam_sim.screen import white_square
+
+    screen = Screen()
+    cam = single(masks.ramp("x"))
+    frame = white_square(screen, (0.05, 0.02), 4 * screen.texel_size_m[0])  # 4x4 texels
+    out = {}
+    spp = 1 << 22
+    for form in ("reference", "fast"):
+        r = ScreenRenderer(cam, screen, form, replicates=16)
+        r.render(frame, spp=1 << 16, seed=99)  # warm-up (kernel compilation)
+        t = time.perf_counter()
+        m = r.render(frame, spp=spp, seed=1)
+        dt = time.perf_counter() - t
+        rel = float(m.relative_stderr()[0, 0])
+        out[form] = {
+            "samples_per_s": spp / dt,
+            "seconds": dt,
+            "spp": spp,
+            "value_w_m2": float(m.irradiance_w_m2[0, 0]),
+            "rel_stderr": rel,
+            "seconds_to_0p1pct": dt * (rel / TARGET_REL) ** 2,
+        }
+    out["fast_over_reference_time_to_equal_noise"] = (
+        out["reference"]["seconds_to_0p1pct"] / out["fast"]["seconds_to_0p1pct"]
+    )
+    return out
+
+
+def bench_sweep() -> dict:
+    """Issue 3: 1,000-position sweep x 4 mixels, each measurement <= 0.1 % relative standard error, wall time
+    including building the response maps (target-noise mode: pilot + extrapolation)."""
+    from mincam_sim.render.screen_engine import render_frames
+
+    cam, screen, sweep, square = _sweep_setup()
+    warm = sweep.frame_stack(screen)[:8]
+    render_frames(cam, screen, warm, "response_map", samples_per_texel=8, seed=123)  # warm-up
+    t = time.perf_counter()
+    frames = sweep.frame_stack(screen)
+    m, maps = render_frames(cam, screen, frames, "response_map", target_rel_stderr=TARGET_REL, seed=1)
+    dt = time.perf_counter() - t
+    rel = m.relative_stderr()
+    return {
+        "sweep_seconds": dt,
+        "positions": len(sweep),
+        "mixels": len(cam),
+        "square_side_m": square,
+        "samples_per_texel": int(m.meta["samples_per_texel"]),
+        "worst_rel_stderr": float(rel.max()),
+        "median_rel_stderr": float(np.median(rel)),
+        "goal_seconds": 5.0,
+    }
+
+
+def bench_bruteforce() -> dict:
+    """Out-of-the-box irradiance-meter path tracing (the literal reference scene) on a subset of the same
+    sweep's positions: seconds to reach 0.1 % per measurement, scaled to the whole sweep."""
+    from mincam_sim.render.screen_engine import ScreenRenderer
+
+    cam, screen, sweep, _ = _sweep_setup()
+    subset = np.linspace(0, len(sweep) - 1, 5).astype(int)
+    frames = sweep.frame_stack(screen)[subset]
+    r = ScreenRenderer(cam, screen, "reference", replicates=8)
+    r.render(frames[:1], spp=1 << 14, seed=5)  # warm-up
+    spp = 1 << 21
+    t = time.perf_counter()
+    m = r.render(frames, spp=spp, seed=2)
+    dt = time.perf_counter() - t
+    per_measurement_s = dt / m.irradiance_w_m2.size
+    rel = m.relative_stderr()
+    needed = per_measurement_s * (rel / TARGET_REL) ** 2  # time to reach 0.1 % for each measured value
+    total = float(needed.mean()) * len(sweep) * len(cam)
+    return {
+        "subset_positions": len(subset),
+        "spp_per_measurement": spp,
+        "seconds_per_measurement": per_measurement_s,
+        "rel_stderr_median": float(np.median(rel)),
+        "bruteforce_sweep_seconds_estimated": total,
+        "method": "time per measurement at spp x (rel_stderr / 0.001)^2, averaged over the subset, x 4000",
+    }
+
+
+def _tabletop(n_frames: int):
+    import trimesh
+
+    from mincam_sim import cross_layout
+    from mincam_sim.geometry import Pose
+    from mincam_sim.render import scene_dicts as sd
+    from mincam_sim.render.world import WorldRenderer, vertex_update
+
+    height = 0.5
+    cam = cross_layout(center=Pose((0.0, 0.0, height), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)))
+    rng = np.random.default_rng(0)
+    table = np.clip(0.4 + 0.1 * rng.standard_normal((64, 64)), 0, 1)
+    toy = trimesh.creation.box((0.04, 0.02, 0.02))
+    toy.apply_translation((0, 0, 0.01))
+    elements = {
+        "table": sd.textured_plane(table, 1.0, 1.0, Pose((0, 0, 0), (0, 0, 1)).matrix()),
+        "light": sd.area_light(0.4, 0.4, Pose((0, 0, 1.2), (0, 0, -1)).matrix(), 10.0),
+        "toy": sd.mesh_object("toy", toy.vertices + [5.0, 5.0, 0.0], toy.faces, 0.9),
+    }
+    world = WorldRenderer(cam, elements, replicates=8)
+    xs = np.linspace(-0.12, 0.12, n_frames)
+    frames = [vertex_update("toy", toy.vertices + [x, 0.03 * np.sin(20 * x), 0.0]) for x in xs]
+    background = vertex_update("toy", toy.vertices + [5.0, 5.0, 0.0])
+    return world, frames, background
+
+
+def bench_moving_object() -> dict:
+    """Issue 3: dP of a small moving object (4 x 2 cm box on a 1 m table, 4 mixels at 0.5 m): variance with
+    correlated seeds vs independent seeds at equal samples (equal time), and frames/s at <= 1 % on dP."""
+    world, frames, background = _tabletop(9)
+    world.measure_changes(frames[:1], background, spp=1 << 12, seed=9)  # warm-up
+    spp = 1 << 16
+    res = {}
+    for correlated in (True, False):
+        t = time.perf_counter()
+        dp, _ = world.measure_changes(frames, background, spp=spp, seed=3, correlated=correlated)
+        res[correlated] = (time.perf_counter() - t, dp)
+    var_c = res[True][1].stderr_w_m2 ** 2
+    var_i = res[False][1].stderr_w_m2 ** 2
+    ratio = float(np.mean(var_i) / np.mean(var_c))
+    # frames/s at <= 1 % relative error on dP (mixel-wise, over all frames): extrapolate spp from this run
+    dp = res[True][1]
+    rel = np.abs(dp.stderr_w_m2 / dp.irradiance_w_m2)
+    spp_needed = int(np.ceil(1.5 * spp * max(1.0, (np.max(rel) / 0.01) ** 2)))  # 1.5: margin for the worst of 36
+    world.measure_changes(frames[:1], background, spp=spp_needed, seed=8)  # warm-up at that size
+    t = time.perf_counter()
+    dp2, _ = world.measure_changes(frames, background, spp=spp_needed, seed=4)
+    dt = time.perf_counter() - t
+    rel2 = np.abs(dp2.stderr_w_m2 / dp2.irradiance_w_m2)
+    return {
+        "moving_object_variance_reduction": ratio,
+        "seconds_correlated": res[True][0],
+        "seconds_independent": res[False][0],
+        "spp_per_mixel_per_frame": spp,
+        "frames_per_second": len(frames) / dt,
+        "fps_spp_per_mixel_per_frame": spp_needed,
+        "fps_worst_rel_stderr_dP": float(np.max(rel2)),
+        "fps_includes": "background + frames, 4 mixels in one kernel per frame",
+    }
+
+
+BENCHMARKS = {
+    "baseline": bench_baseline,
+    "sweep": bench_sweep,
+    "bruteforce": bench_bruteforce,
+    "moving_object": bench_moving_object,
+}
+
+
+def _run_one(name: str) -> None:
+    from mincam_sim.render import backend
+
+    t = time.perf_counter()
+    result = BENCHMARKS[name]()
+    result["wall_seconds"] = time.perf_counter() - t
+    result["peak_memory_mib"] = _peak_mib()
+    result["variant"] = backend.variant()
+    print(json.dumps(result))
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--out", type=Path, default=HERE / "results.json")
+    parser.add_argument("--only", nargs="*", choices=sorted(BENCHMARKS), default=None)
+    parser.add_argument("--one", choices=sorted(BENCHMARKS), help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.one:
+        _run_one(args.one)
+        return 0
+    results: dict = {}
+    if args.out.exists():
+        results = json.loads(args.out.read_text())
+    for name in args.only or list(BENCHMARKS):
+        print(f"[bench] {name} ...", file=sys.stderr, flush=True)
+        proc = subprocess.run([sys.executable, __file__, "--one", name], capture_output=True, text=True,
+                              env={**os.environ, "PYTHONWARNINGS": "ignore"})
+        if proc.returncode != 0:
+            print(proc.stderr, file=sys.stderr)
+            raise SystemExit(f"benchmark {name} failed")
+        results[name] = json.loads(proc.stdout.strip().splitlines()[-1])
+    sweep, brute, moving = results.get("sweep"), results.get("bruteforce"), results.get("moving_object")
+    summary = {}
+    if sweep:
+        summary["sweep_seconds"] = sweep["sweep_seconds"]
+    if sweep and brute:
+        summary["sweep_speedup_vs_bruteforce"] = brute["bruteforce_sweep_seconds_estimated"] / sweep["sweep_seconds"]
+    if moving:
+        summary["moving_object_variance_reduction"] = moving["moving_object_variance_reduction"]
+        summary["frames_per_second"] = moving["frames_per_second"]
+    summary["memory_peak_mib"] = {k: v["peak_memory_mib"] for k, v in results.items() if isinstance(v, dict)
+                                  and "peak_memory_mib" in v}
+    results.update(summary)
+    results["machine"] = {"cpus": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version(),
+                          "date": time.strftime("%Y-%m-%d")}
+    args.out.write_text(json.dumps(results, indent=1))
+    print(json.dumps(summary, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
