@@ -1,14 +1,14 @@
-"""Estimators that turn mixel measurements into intrusion positions, 2D positions, speeds and paths. Pure numpy.
+"""Estimators turning mixel measurements into intrusion positions, 2D positions, speeds and paths. Pure numpy.
 
-They work on any array of measurements, simulated or recorded from hardware. Equation numbers refer to the paper
-(Sec. 4). Mask coordinates are the normalised ``x``, ``y`` in [0, 1] of :mod:`mincam_sim.masks`.
+They work on any array of measurements, simulated or recorded from hardware. Equation numbers refer to the
+paper (Sec. 4). Mask coordinates are the normalised ``x``, ``y`` in [0, 1] of :mod:`mincam_sim.masks`.
 
 * 1D intrusion (Eq. 2-4): masks ``x`` and ``1 - x``; ``x_obs = dP1 / (dP1 + dP2)`` is the centroid of the
   change D caused by the intruder, :func:`intrusion_position`.
 * 2D tracking (Eq. 5-8): masks ``(x, 1 - x, y, 1 - y)`` (:func:`track_4`) or ``(x, y, 1)`` (:func:`track_3`).
-* Speed (Eq. 9-14): a mask ``A0 + A1 cos(omega_df x + phi)`` at ``d_f`` from the detector is seen at depth ``d``
-  with angular frequency ``omega_d = omega_df d_f / d`` [rad/m]; moving at speed ``v`` the mixel signal is a
-  sinusoid of angular frequency ``omega_p = omega_d v`` [rad/s], so ``v = omega_p / omega_d``.
+* Speed (Eq. 9-14): a mask ``A0 + A1 cos(omega_df x + phi)`` at ``d_f`` from the detector is seen at depth
+  ``d`` with angular frequency ``omega_d = omega_df d_f / d`` [rad/m]; moving at speed ``v`` the mixel signal
+  is a sinusoid of angular frequency ``omega_p = omega_d v`` [rad/s], so ``v = omega_p / omega_d``.
 * Two speed mixels on both sides of a vehicle give its planar path (differential-drive kinematics),
   :func:`trajectory_from_speeds`.
 
@@ -30,7 +30,7 @@ WindowName = Literal["hann", "hamming", "blackman", "rect"]
 _CANCELLATION_EPS = 64 * np.finfo(np.float64).eps
 
 
-# ------------------------------------------------------------------------------------------------ change / ratios
+# -------------------------------------------------------------------------------------------- change / ratios
 def change_statistic(measurements: ArrayLike, background: ArrayLike, norm: ChangeNorm = "sum") -> np.ndarray:
     """Size of the change of each frame from the background, in the units of the measurements.
 
@@ -42,9 +42,9 @@ def change_statistic(measurements: ArrayLike, background: ArrayLike, norm: Chang
         Background value of each mixel (e.g. the mean of frames without intruder).
     norm : {"sum", "l1", "l2", "max"}
         ``"sum"``: ``|sum_i dP_i|``, the paper's total change: with complementary masks (x, 1 - x) it is
-        ``|integral of D|``; it can cancel when an intruder brightens some parts of the view and darkens others.
-        ``"l1"``: ``sum_i |dP_i|`` (no cancellation between mixels); ``"l2"``: Euclidean norm; ``"max"``: largest
-        ``|dP_i|``.
+        ``|integral of D|``; it can cancel when an intruder brightens some parts of the view and darkens
+        others. ``"l1"``: ``sum_i |dP_i|`` (no cancellation between mixels); ``"l2"``: Euclidean norm;
+        ``"max"``: largest ``|dP_i|``.
 
     Returns
     -------
@@ -54,7 +54,7 @@ def change_statistic(measurements: ArrayLike, background: ArrayLike, norm: Chang
     if delta.ndim == 1:
         delta = delta[:, np.newaxis]
     if delta.ndim != 2:
-        raise ValueError(f"measurements must have shape (n_frames, n_mixels) or (n_frames,), got {delta.shape}")
+        raise ValueError(f"measurements need shape (n_frames, n_mixels) or (n_frames,), got {delta.shape}")
     if norm == "sum":
         return np.abs(delta.sum(axis=1))
     if norm == "l1":
@@ -106,7 +106,7 @@ def _safe_ratio(numerator: np.ndarray, denominator: np.ndarray, scale: np.ndarra
     return out
 
 
-def intrusion_position(dP_x: ArrayLike, dP_1mx: ArrayLike, min_total: float = 0.0) -> np.ndarray:  # noqa: N803
+def intrusion_position(dP_x: ArrayLike, dP_1mx: ArrayLike, min_total: float = 0.0) -> np.ndarray:
     """Relative intrusion position ``x_obs = dP_x / (dP_x + dP_1mx)`` (paper Eq. 4), vectorised over frames.
 
     Parameters
@@ -128,14 +128,14 @@ def intrusion_position(dP_x: ArrayLike, dP_1mx: ArrayLike, min_total: float = 0.
     return _safe_ratio(a, a + b, np.abs(a) + np.abs(b), min_total)
 
 
-def _as_frames(dP: ArrayLike, n_mixels: int, name: str) -> np.ndarray:  # noqa: N803
+def _as_frames(dP: ArrayLike, n_mixels: int, name: str) -> np.ndarray:
     d = np.asarray(dP, dtype=np.float64)
     if d.shape[-1:] != (n_mixels,):
-        raise ValueError(f"{name} needs dP of shape (n_frames, {n_mixels}) (last axis = mixels), got {d.shape}")
+        raise ValueError(f"{name} needs dP of shape (n_frames, {n_mixels}) (last axis: mixels), got {d.shape}")
     return d
 
 
-def track_4(dP: ArrayLike, min_total: float = 0.0) -> np.ndarray:  # noqa: N803
+def track_4(dP: ArrayLike, min_total: float = 0.0) -> np.ndarray:
     """2D relative position from four mixels with masks ``(x, 1 - x, y, 1 - y)`` (paper Eq. 7).
 
     Parameters
@@ -156,7 +156,7 @@ def track_4(dP: ArrayLike, min_total: float = 0.0) -> np.ndarray:  # noqa: N803
     return np.stack([x, y], axis=-1)
 
 
-def track_3(dP: ArrayLike, min_total: float = 0.0) -> np.ndarray:  # noqa: N803
+def track_3(dP: ArrayLike, min_total: float = 0.0) -> np.ndarray:
     """2D relative position from three mixels with masks ``(x, y, 1)`` (paper Eq. 8): ``(dP1/dP3, dP2/dP3)``.
 
     Same shapes and NaN rule as :func:`track_4`. Unlike :func:`track_4`, a gain mismatch between mixels biases
@@ -179,8 +179,8 @@ def centroid(
     disturbance : array_like, shape (*batch, *grid)
         Change D of the scene, one grid per frame.
     coords : array_like of shape grid, or tuple/list of such arrays
-        Coordinate(s) of the grid samples (e.g. ``x`` for 1D, ``(X, Y)`` from ``np.meshgrid`` for 2D); each must
-        broadcast to ``grid``, which is taken as the trailing ``ndim`` axes of ``disturbance``.
+        Coordinate(s) of the grid samples (e.g. ``x`` for 1D, ``(X, Y)`` from ``np.meshgrid`` for 2D); each
+        must broadcast to ``grid``, which is taken as the trailing ``ndim`` axes of ``disturbance``.
     cell_weights : array_like of shape grid, optional
         Quadrature weights (cell sizes); uniform by default (they cancel on a uniform grid).
 
@@ -271,7 +271,7 @@ def spectrum(
     sinusoid's negative-frequency image (negligible a few bins away from DC and Nyquist) and its standard
     deviation is ``sqrt(2 sigma^2 sum(n^2 w_n^2) / (A^2 (sum n^2 w_n)^2))`` rad/sample, n centred; for the
     rectangular window that is the Cramer-Rao bound ``sqrt(12 / (SNR N^3))`` with ``SNR = A^2 / (2 sigma^2)``,
-    and the Hann window costs a factor of about 1.3 in standard deviation.
+    and the Hann window costs a factor of about 1.5 in standard deviation.
 
     Parameters
     ----------
@@ -284,8 +284,8 @@ def spectrum(
     zero_pad_factor : int
         FFT length / signal length (>= 1); finer bins make the coarse search robust, not the refinement exact.
     min_frequency_hz : float, optional
-        Lowest accepted peak [Hz]; default ``2 sample_rate_hz / n_samples`` (two bins, outside the DC main lobe:
-        a record must hold at least ~2 cycles).
+        Lowest accepted peak [Hz]; default ``2 sample_rate_hz / n_samples`` (two bins, outside the DC main
+        lobe: a record must hold at least ~2 cycles).
     max_frequency_hz : float, optional
         Highest accepted peak [Hz]; default Nyquist.
     """
@@ -293,7 +293,7 @@ def spectrum(
     if x.ndim != 1 or x.size < 8:
         raise ValueError(f"signal must be 1D with at least 8 samples, got shape {x.shape}")
     if not np.all(np.isfinite(x)):
-        raise ValueError("signal has NaN or inf values; drop or interpolate them first (sampling must be uniform)")
+        raise ValueError("signal has NaN or inf values; interpolate them first (sampling must stay uniform)")
     if not np.isfinite(sample_rate_hz) or sample_rate_hz <= 0:
         raise ValueError(f"sample_rate_hz must be a finite number > 0, got {sample_rate_hz!r}")
     if int(zero_pad_factor) < 1:
@@ -313,8 +313,8 @@ def spectrum(
     candidates = np.flatnonzero(is_local_max & (freqs >= f_lo) & (freqs <= f_hi))
     if candidates.size == 0 or magnitude[candidates].max() == 0:
         raise ValueError(
-            f"no spectral peak between {f_lo:.6g} Hz and {f_hi:.6g} Hz; the signal may be constant or too short "
-            "(it needs a few cycles of the sinusoid), or the frequency limits exclude the peak"
+            f"no spectral peak between {f_lo:.6g} Hz and {f_hi:.6g} Hz; the signal may be constant or too "
+            "short (it needs a few cycles of the sinusoid), or the frequency limits exclude the peak"
         )
     k = int(candidates[np.argmax(magnitude[candidates])])
 
@@ -342,18 +342,19 @@ def spectrum(
 
 
 def dominant_frequency(signal: ArrayLike, sample_rate_hz: float, window: WindowName = "hann", **kwargs) -> float:
-    """Angular frequency ``omega_p`` [rad/s] of the strongest non-DC peak (see :func:`spectrum` for kwargs)."""
+    """Angular frequency ``omega_p`` [rad/s] of the strongest non-DC peak (kwargs: see :func:`spectrum`)."""
     return spectrum(signal, sample_rate_hz, window, **kwargs).peak_omega_rad_s
 
 
 def frequency_error_std(
     amplitude: float, noise_std: float, n_samples: int, sample_rate_hz: float, window: WindowName = "hann"
 ) -> float:
-    """High-SNR standard deviation [rad/s] of :func:`dominant_frequency` for ``A cos(w t + phi)`` + white noise.
+    """High-SNR standard deviation [rad/s] of :func:`dominant_frequency` for ``A cos(w t + phi)`` + noise.
 
     Small-error linearisation of the windowed-periodogram maximiser (n centred on the record):
-    ``var(w) = 2 sigma^2 sum(n^2 w_n^2) / (A^2 (sum n^2 w_n)^2)`` [rad/sample]^2, scaled by ``sample_rate_hz``.
-    With ``window="rect"`` it equals the Cramer-Rao bound ``12 / (SNR N (N^2 - 1))``, SNR = A^2 / (2 sigma^2).
+    ``var(w) = 2 sigma^2 sum(n^2 w_n^2) / (A^2 (sum n^2 w_n)^2)`` [rad/sample]^2, scaled by
+    ``sample_rate_hz``. With ``window="rect"`` it equals the Cramer-Rao bound ``12 / (SNR N (N^2 - 1))``,
+    SNR = A^2 / (2 sigma^2), for white Gaussian noise of standard deviation sigma.
     """
     w = window_weights(window, n_samples)
     n = np.arange(n_samples) - (n_samples - 1) / 2.0
@@ -369,7 +370,7 @@ def scene_frequency(omega_df_rad_per_m: float, d_f_m: float, depth_m: ArrayLike)
     """
     depth = np.asarray(depth_m, dtype=np.float64)
     if np.any(~np.isfinite(depth) | (depth <= 0)) or not d_f_m > 0:
-        raise ValueError(f"depth_m and d_f_m must be finite and > 0, got depth_m={depth_m!r}, d_f_m={d_f_m!r}")
+        raise ValueError(f"depth_m and d_f_m must be finite and > 0, got depth_m={depth_m!r}, d_f_m={d_f_m}")
     result = omega_df_rad_per_m * d_f_m / depth
     return float(result) if result.ndim == 0 else result
 
@@ -387,10 +388,13 @@ def speed_from_signal(
 ) -> float:
     """Speed [m/s] of a mixel with a sinusoidal mask from its signal: ``dominant_frequency / omega_d``.
 
-    The sign of the motion is not observable from one sinusoid (the result is a speed, >= 0). The Nyquist limit
-    gives the highest measurable speed: ``pi sample_rate_hz / omega_d``.
+    The sign of the motion is not observable from one sinusoid (the result is a speed, >= 0). The Nyquist
+    limit gives the highest measurable speed: ``pi sample_rate_hz / omega_d``. The mask's constant term A0
+    passes the scene's slow brightness variations, which can outweigh the sinusoid on real textures: pass
+    ``min_frequency_hz = omega_d v_min / (2 pi)`` for the lowest speed ``v_min`` of interest.
     """
-    return float(speed_from_frequency(dominant_frequency(signal, sample_rate_hz, window, **kwargs), omega_d_rad_per_m))
+    omega_p = dominant_frequency(signal, sample_rate_hz, window, **kwargs)
+    return float(speed_from_frequency(omega_p, omega_d_rad_per_m))
 
 
 def speed_track(
@@ -456,12 +460,12 @@ def trajectory_from_speeds(
 ) -> Trajectory:
     """Path of a rigid vehicle from the forward speeds of its left and right sides (differential drive).
 
-    Conventions: world frame x, y [m], heading counter-clockwise from +x [rad]; vehicle frame +x forward, +y to
-    the left. ``v_left`` / ``v_right`` are the forward speeds [m/s] measured by the mixels on the left / right
-    side during each step (held constant over the step), ``width_m`` the lateral distance between the two mixels.
-    The midpoint moves at ``v = (v_l + v_r) / 2`` and turns at ``omega = (v_r - v_l) / W``; each step is
-    integrated exactly as a circular arc (straight line when ``omega = 0``). A speed mixel measures ``|v|``, so
-    reversing has to be signalled to this function by negative speeds.
+    Conventions: world frame x, y [m], heading counter-clockwise from +x [rad]; vehicle frame +x forward, +y
+    to the left. ``v_left`` / ``v_right`` are the forward speeds [m/s] measured by the mixels on the left /
+    right side during each step (held constant over the step), ``width_m`` the lateral distance between the
+    two mixels. The midpoint moves at ``v = (v_l + v_r) / 2`` and turns at ``omega = (v_r - v_l) / W``; each
+    step is integrated exactly as a circular arc (straight line when ``omega = 0``). A speed mixel measures
+    ``|v|``, so reversing has to be signalled to this function by negative speeds.
 
     Parameters
     ----------
@@ -477,9 +481,9 @@ def trajectory_from_speeds(
     vl = np.atleast_1d(np.asarray(v_left, dtype=np.float64))
     vr = np.atleast_1d(np.asarray(v_right, dtype=np.float64))
     if vl.shape != vr.shape or vl.ndim != 1:
-        raise ValueError(f"v_left and v_right must be 1D arrays of equal length, got {vl.shape} and {vr.shape}")
+        raise ValueError(f"v_left and v_right must be 1D arrays of one length, got {vl.shape} and {vr.shape}")
     if not np.all(np.isfinite(vl)) or not np.all(np.isfinite(vr)):
-        raise ValueError("v_left / v_right contain NaN or inf; fill gaps (e.g. interpolate) before integrating")
+        raise ValueError("v_left / v_right contain NaN or inf; fill gaps (interpolate) before integrating")
     if not np.isfinite(width_m) or width_m <= 0:
         raise ValueError(f"width_m must be a finite number > 0 (mixel separation in metres), got {width_m!r}")
     dt = np.broadcast_to(np.asarray(dt_s, dtype=np.float64), vl.shape)

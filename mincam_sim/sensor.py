@@ -10,14 +10,15 @@ Pipeline of :meth:`SensorModel.measure`, per pixel and per exposure::
     + Normal(0, read noise)                                     -> read noise
     / gain [e-/DN], round, clip to [0, 2^bit_depth - 1]         -> ADC
 
-and, when ``pixels_averaged = N > 1``, the detector is split into N pixels of area ``detector_area_m2 / N`` whose
-digital values are averaged (the paper's prototype averaged a 48 x 48-pixel region of interest into one 12-bit
-value, Sec. 3.1).
+and, when ``pixels_averaged = N > 1``, the detector is split into N pixels of area ``detector_area_m2 / N``
+whose digital values are averaged (the paper's prototype averaged a 48 x 48-pixel region of interest into one
+12-bit value, Sec. 3.1).
 
 Monochromatic assumption: all light is taken to be at ``wavelength_m`` (550 nm, the peak of photopic
 sensitivity and close to the peak QE of silicon CMOS sensors). A broadband simulation should pass the
-irradiance-weighted mean of QE / photon energy instead, i.e. choose ``quantum_efficiency`` and ``wavelength_m``
-so that ``quantum_efficiency * wavelength_m`` equals the spectral average of ``QE(lambda) * lambda``.
+irradiance-weighted mean of QE / photon energy instead, i.e. choose ``quantum_efficiency`` and
+``wavelength_m`` so that ``quantum_efficiency * wavelength_m`` equals the spectral average of
+``QE(lambda) * lambda``.
 
 The model is deliberately generic (no fixed-pattern noise, no PRNU, no black-level offset, no non-linearity);
 its defaults are those of a typical small (~2 um) CMOS pixel, not values measured on the paper's hardware.
@@ -58,8 +59,8 @@ class SensorModel:
     Parameters
     ----------
     exposure_s : float
-        Exposure (integration) time [s]. Default 10 ms (a usual video-rate exposure; arbitrary). For simulations
-        whose irradiance scale is arbitrary, use :meth:`exposure_for` / :meth:`auto_exposed`.
+        Exposure (integration) time [s]. Default 10 ms (a usual video-rate exposure; arbitrary). For
+        simulations whose irradiance scale is arbitrary, use :meth:`exposure_for` / :meth:`auto_exposed`.
     quantum_efficiency : float
         Photoelectrons per incident photon, in (0, 1]. Default 0.6: typical peak QE of monochrome CMOS sensors
         near 550 nm (EMVA 1288 datasheets of small-pixel sensors report roughly 0.5-0.8).
@@ -115,12 +116,12 @@ class SensorModel:
         if isinstance(self.bit_depth, bool) or not isinstance(self.bit_depth, int | np.integer):
             raise ValueError(f"SensorModel.bit_depth must be an integer, got {self.bit_depth!r}")
         if not 1 <= self.bit_depth <= 32:
-            raise ValueError(f"SensorModel.bit_depth must be in 1..32, got {self.bit_depth}; the paper uses 12")
+            raise ValueError(f"SensorModel.bit_depth must be in 1..32, got {self.bit_depth} (the paper: 12)")
         if isinstance(self.pixels_averaged, bool) or not isinstance(self.pixels_averaged, int | np.integer):
             raise ValueError(f"SensorModel.pixels_averaged must be an integer, got {self.pixels_averaged!r}")
         if self.pixels_averaged < 1:
             raise ValueError(
-                f"SensorModel.pixels_averaged must be >= 1, got {self.pixels_averaged}; use 1 for a single pixel"
+                f"SensorModel.pixels_averaged must be >= 1, got {self.pixels_averaged}; 1 is a single pixel"
             )
         _check_positive_finite("detector_area_m2", self.detector_area_m2, "give the area in m^2, e.g. 1e-8")
 
@@ -144,6 +145,12 @@ class SensorModel:
         """Conversion gain in use [e-/DN]: ``gain_e_per_dn`` or, when None, ``full_well_e / max_dn``."""
         return self.full_well_e / self.max_dn if self.gain_e_per_dn is None else float(self.gain_e_per_dn)
 
+    def _to_dn(self, electrons: np.ndarray) -> np.ndarray:
+        """Electrons -> DN; with the default gain, exactly ``max_dn`` at full well (no rounding residue)."""
+        if self.gain_e_per_dn is None:
+            return electrons / self.full_well_e * self.max_dn
+        return electrons / float(self.gain_e_per_dn)
+
     @property
     def max_dn(self) -> float:
         """Largest ADC output [DN]: ``2**bit_depth - 1``."""
@@ -161,7 +168,7 @@ class SensorModel:
 
     @property
     def electrons_per_irradiance(self) -> float:
-        """Mean signal photoelectrons per pixel per exposure for 1 W/m^2 [e- m^2 / W] (dark current excluded)."""
+        """Mean signal photoelectrons per pixel per exposure for 1 W/m^2 [e- m^2 / W] (no dark current)."""
         return self.pixel_area_m2 * self.exposure_s / self.photon_energy_j * self.quantum_efficiency
 
     # ----------------------------------------------------------------------------------------------- model
@@ -178,18 +185,18 @@ class SensorModel:
     def expected(self, irradiance_w_m2: ArrayLike) -> np.ndarray:
         """Noiseless digital value [DN]: ``min(electrons, full_well) / gain`` clipped to ``[0, max_dn]``.
 
-        No noise and no rounding. It is the mean of :meth:`measure` up to quantisation and to the effect of noise
-        near the clipping limits (where the mean of a clipped noisy value differs from the clipped mean).
+        No noise and no rounding. It is the mean of :meth:`measure` up to quantisation and to the effect of
+        noise near the clipping limits (where the mean of a clipped noisy value is not the clipped mean).
         """
         electrons = np.minimum(self.electrons(irradiance_w_m2), self.full_well_e)
-        return np.clip(electrons / self.gain, 0.0, self.max_dn)
+        return np.clip(self._to_dn(electrons), 0.0, self.max_dn)
 
     def expected_std_dn(self, irradiance_w_m2: ArrayLike, include_quantization: bool = True) -> np.ndarray:
         """Theoretical temporal noise of one mixel value [DN rms], valid below saturation and above zero.
 
-        ``sqrt((electrons + read_noise^2) / N) / gain``, plus, if ``include_quantization``, the rounding noise of
-        the N pixel values (1/12 DN^2 each, so 1/(12 N) DN^2 for their average; exact when the per-pixel noise is
-        well above 1 DN).
+        ``sqrt((electrons + read_noise^2) / N) / gain``, plus, if ``include_quantization``, the rounding noise
+        of the N pixel values (1/12 DN^2 each, so 1/(12 N) DN^2 for their average; exact when the per-pixel
+        noise is well above 1 DN).
         """
         n = self.pixels_averaged
         variance = (self.electrons(irradiance_w_m2) + self.read_noise_e**2) / n / self.gain**2
@@ -212,10 +219,11 @@ class SensorModel:
             ``"per_pixel"`` simulates each of the N pixels (memory and time ~ N x size) and averages their
             digital values. ``"aggregate"`` (default) draws the sum over the N pixels directly: the sum of N
             Poisson draws is Poisson(N mean) and the sum of N Gaussian read noises is Gaussian with variance
-            N sigma^2, both exact; the N per-pixel roundings are replaced by one Gaussian of variance N/12 DN^2
-            (exact in mean and variance when the per-pixel noise exceeds ~0.5 DN), and saturation and clipping
-            are applied to the sum rather than per pixel (identical for a uniformly lit detector except within a
-            few noise sigmas of full well). With N = 1 both methods follow the same distribution.
+            N sigma^2, both exact; the N per-pixel roundings are replaced by one Gaussian of variance N/12
+            DN^2 (exact in mean and variance when the per-pixel noise exceeds ~0.5 DN), and saturation and
+            clipping are applied to the sum rather than per pixel (identical for a uniformly lit detector
+            except within a few noise sigmas of full well). With N = 1 both methods follow the same
+            distribution.
 
         Returns
         -------
@@ -239,7 +247,7 @@ class SensorModel:
         lam = np.broadcast_to(mean_electrons[..., np.newaxis], (*mean_electrons.shape, n))
         electrons = np.minimum(rng.poisson(lam).astype(np.float64), self.full_well_e)
         electrons += rng.normal(0.0, self.read_noise_e, size=lam.shape) if self.read_noise_e > 0 else 0.0
-        digital = np.clip(np.rint(electrons / self.gain), 0.0, self.max_dn)
+        digital = np.clip(np.rint(self._to_dn(electrons)), 0.0, self.max_dn)
         return digital.mean(axis=-1)
 
     def _measure_aggregate(self, mean_electrons: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -247,7 +255,7 @@ class SensorModel:
         electrons_sum = np.minimum(rng.poisson(n * mean_electrons).astype(np.float64), n * self.full_well_e)
         if self.read_noise_e > 0:
             electrons_sum += rng.normal(0.0, self.read_noise_e * np.sqrt(n), size=mean_electrons.shape)
-        digital_sum = electrons_sum / self.gain
+        digital_sum = self._to_dn(electrons_sum)
         if n > 1:
             digital_sum += rng.normal(0.0, np.sqrt(n / 12.0), size=mean_electrons.shape)
         return np.clip(np.rint(digital_sum) / n, 0.0, self.max_dn)
@@ -287,7 +295,7 @@ def _validated_irradiance(irradiance_w_m2: ArrayLike) -> np.ndarray:
         )
     if np.any(irradiance < 0):
         raise ValueError(
-            f"irradiance_w_m2 must be >= 0 (minimum given: {irradiance.min():.6g}); irradiance is a power per "
-            "area and cannot be negative: check signs or subtract backgrounds after measuring, not before"
+            f"irradiance_w_m2 must be >= 0 (minimum given: {irradiance.min():.6g}); irradiance is a power "
+            "per area and cannot be negative: check signs or subtract backgrounds after measuring, not before"
         )
     return irradiance
