@@ -197,7 +197,9 @@ def read_exr(path: str | Path) -> tuple[np.ndarray, dict[str, Any]]:
             header = dict(f.header())
             chans = {name: np.array(ch.pixels) for name, ch in f.channels().items()}
     except Exception as exc:  # the bindings raise RuntimeError for truncated/corrupt files
-        raise ValueError(f"EXR file {str(p)!r} could not be decoded ({exc}); is it truncated or corrupt?") from exc
+        raise ValueError(
+            f"EXR file {str(p)!r} could not be decoded ({exc}); is it truncated or corrupt?"
+        ) from exc
     if not chans:
         raise ValueError(f"EXR file {str(p)!r} has no channels; give an image with at least one channel")
 
@@ -245,7 +247,8 @@ def write_png(
     path : str or Path
         Output file; parent directories are created.
     array : (H, W) array_like of float
-        Values in [0, 1] (0 = black, 1 = white), row 0 at the top. Stored as ``round(v * (2**bit_depth - 1))``.
+        Values in [0, 1] (0 = black, 1 = white), row 0 at the top; stored as
+        ``round(v * (2**bit_depth - 1))``.
     bit_depth : {8, 16}
         Bits per pixel.
     dpi : float, optional
@@ -325,20 +328,24 @@ def read_png(path: str | Path) -> tuple[np.ndarray, dict[str, Any]]:
             a = np.array(im)
             out_mode = im.mode
     except (UnidentifiedImageError, OSError, SyntaxError) as exc:
-        raise ValueError(f"PNG file {str(p)!r} could not be decoded ({exc}); is it truncated or corrupt?") from exc
+        raise ValueError(
+            f"PNG file {str(p)!r} could not be decoded ({exc}); is it truncated or corrupt?"
+        ) from exc
     if out_mode in ("I;16", "I;16B", "I;16L", "I"):
         bit_depth, scale = 16, 65535.0
     elif a.dtype == np.uint8:
         bit_depth, scale = 8, 255.0
     else:
-        raise ValueError(f"PNG file {str(p)!r} has unsupported pixel mode {mode!r}; give 8/16-bit gray or RGB")
+        raise ValueError(
+            f"PNG file {str(p)!r} has unsupported pixel mode {mode!r}; give 8/16-bit gray or RGB"
+        )
     arr = a.astype(np.float64) / scale
     if arr.size == 0:
         raise ValueError(f"PNG file {str(p)!r} has no pixels; give a non-empty image")
     chans = {"LA": ["L", "A"], "RGB": ["R", "G", "B"], "RGBA": ["R", "G", "B", "A"]}.get(out_mode, ["L"])
     meta: dict[str, Any] = {"bit_depth": bit_depth, "mode": mode, "channels": chans}
     if "dpi" in info:
-        meta["dpi"] = tuple(float(round(d, 3)) for d in info["dpi"])
+        meta["dpi"] = tuple(float(round(d, 2)) for d in info["dpi"])  # pHYs is integer px/m
     return arr, meta
 
 
