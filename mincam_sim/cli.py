@@ -122,24 +122,29 @@ def masks_generate(
 @masks_app.command("export")
 def masks_export(
     spec: Annotated[str, typer.Argument(help="'ramp:x', 'constant:0.5', 'file:path.png' ...")],
-    out: Annotated[Path, typer.Option("--out", help="PNG to write")],
+    out: Annotated[Path, typer.Option("--out", help="PNG to send to the printer")],
     size_m: Annotated[float, typer.Option(help="physical mask side [m]")] = 2e-3,
     dpi: Annotated[int, typer.Option(help="printer resolution [dots per inch]")] = 600,
-    film_t_min: Annotated[float | None, typer.Option(help="printed-film minimum transmission (simulate film)")] = None,
-    film_t_max: Annotated[float | None, typer.Option(help="printed-film maximum transmission (simulate film)")] = None,
+    levels: Annotated[int, typer.Option(help="grey levels the printer reproduces per dot")] = 256,
+    halftone: Annotated[bool, typer.Option(help="print with an ordered (Bayer) halftone")] = False,
+    film_t_min: Annotated[float, typer.Option(help="transmission of fully inked film")] = 0.02,
+    film_t_max: Annotated[float, typer.Option(help="transmission of clear film")] = 0.9,
+    preview: Annotated[Path | None, typer.Option(help="also write what the film will transmit (OpenEXR)")] = None,
 ) -> None:
-    """Export a mask as a print-ready PNG at DPI and physical size (optionally through a printed-film model)."""
+    """Export a mask as a print-ready PNG at DPI and physical size; optionally preview the printed film."""
     from .config import ConfigError, parse_mask
-    from .masks import PrintedFilm, export_print_png
+    from .masks import PrintedFilm, export_print_png, save_exr
 
     try:
         mask = parse_mask(spec, size_m, 512, "mask")
-        film = None
-        if film_t_min is not None or film_t_max is not None:
-            defaults = PrintedFilm()
-            film = PrintedFilm(t_min=film_t_min if film_t_min is not None else defaults.t_min,
-                               t_max=film_t_max if film_t_max is not None else defaults.t_max, dpi=dpi)
+        film = PrintedFilm(t_min=film_t_min, t_max=film_t_max, dpi=dpi, levels=levels,
+                           halftone="ordered" if halftone else None)
         path = export_print_png(mask, out, dpi=dpi, film=film)
+        if preview is not None:
+            printed = film.print(mask)
+            save_exr(printed, preview)
+            typer.echo(f"{preview}: printed film transmits {printed.transmission.min():.3f}.."
+                       f"{printed.transmission.max():.3f} on a {printed.shape[1]}x{printed.shape[0]} dot grid")
     except (ConfigError, ValueError, OSError) as err:
         _fail(err)
     typer.echo(str(path))

@@ -94,9 +94,14 @@ def test_cli_masks_generate_and_export(tmp_path):
     assert result.exit_code == 0, result.output
     assert list((tmp_path / "lib").glob("*.exr"))
     png = tmp_path / "ramp.png"
+    preview = tmp_path / "printed.exr"
     result = CliRunner().invoke(app, ["masks", "export", "ramp:x", "--out", str(png), "--dpi", "1200",
-                                      "--film-t-min", "0.05"])
+                                      "--film-t-min", "0.05", "--preview", str(preview)])
     assert result.exit_code == 0, result.output
+    from mincam_sim.masks import load
+
+    printed = load(preview)
+    assert abs(printed.transmission.min() - 0.05) < 0.01 and printed.transmission.max() <= 0.9 + 1e-6
     from PIL import Image
 
     with Image.open(png) as im:
