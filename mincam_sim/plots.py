@@ -93,3 +93,126 @@ def plot_mixel_geometry(mixel, distance_m: float, path: str | Path, n_rays: int 
                   f"{distance_m / d_f:.0f}", fontsize=9)
     ax2.grid(alpha=0.3)
     return _save(fig, path)
+
+
+def plot_calibration_1d(true_m, change_dn, observed, calibration, path, names=("1", "2")):
+    """Like the paper's Fig. 4b/c: mixel changes along the sweep, and observed position vs truth with f."""
+    true_cm = 100 * np.asarray(true_m)
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 3.6))
+    a.plot(true_cm, change_dn[:, 0], "o-", ms=3, label=f"dP ({names[0]})")
+    a.plot(true_cm, change_dn[:, 1], "s-", ms=3, label=f"dP ({names[1]})")
+    a.plot(true_cm, change_dn[:, 0] + change_dn[:, 1], "k--", lw=1, label="sum")
+    a.set_xlabel("white square position [cm]")
+    a.set_ylabel("change [DN]")
+    a.set_title("calibration sweep on the screen")
+    a.legend(fontsize=8)
+    a.grid(alpha=0.3)
+    b.plot(observed, true_cm, "o", ms=4, label="calibration points")
+    grid = np.linspace(np.nanmin(observed), np.nanmax(observed), 200)
+    b.plot(grid, 100 * calibration.apply(grid), "r-", label="3rd-degree fit f")
+    b.set_xlabel("observed relative position (Eq. 4)")
+    b.set_ylabel("true position [cm]")
+    b.set_title(f"f: rms residual {100 * calibration.rms_residual_m:.2f} cm")
+    b.legend(fontsize=8)
+    b.grid(alpha=0.3)
+    return _save(fig, path)
+
+
+def plot_calibration_2d(true_m, observed, calibration, path):
+    """Observed (Eq. 7) grid vs truth, and the calibrated prediction of the grid points."""
+    fig, (a, b) = plt.subplots(1, 2, figsize=(9, 4))
+    a.plot(observed[:, 0], observed[:, 1], "o", ms=3)
+    a.set_title("observed relative positions (Eq. 7)")
+    a.set_xlabel("x_obs")
+    a.set_ylabel("y_obs")
+    a.set_aspect("equal")
+    pred = calibration.apply(observed)
+    b.plot(100 * true_m[:, 0], 100 * true_m[:, 1], "k+", label="true")
+    b.plot(100 * pred[:, 0], 100 * pred[:, 1], "r.", label="calibrated")
+    b.set_title("grid on the screen [cm]")
+    b.set_aspect("equal")
+    b.legend(fontsize=8)
+    return _save(fig, path)
+
+
+def plot_overlays(images, points, setup, path, boundary_x_m=None, title=""):
+    """Ground-truth camera frames with the mincam's prediction (red dot) and the ground-truth centroid (cyan +),
+    like the paper's Fig. 5/7. ``points[i] = (predicted (2,), truth (2,))`` in table metres."""
+    from .experiments.common import camera_fov_deg
+
+    n = max(1, len(images))
+    fig, axes = plt.subplots(1, n, figsize=(3.6 * n, 3.6), squeeze=False)
+    half = setup.depth_m * np.tan(np.radians(camera_fov_deg(setup)) / 2) * 100
+    for ax, image, (pred, truth) in zip(axes[0], images, points, strict=False):
+        ax.imshow(image, cmap="gray", extent=[-half, half, -half, half])
+        if boundary_x_m is not None:
+            ax.axvline(100 * boundary_x_m, color="lime", lw=1)
+        ax.plot(100 * truth[0], 100 * truth[1], "c+", ms=12, mew=2, label="ground truth")
+        ax.plot(100 * pred[0], 100 * pred[1], "o", color="red", ms=6, label="mincam")
+        ax.set_xlabel("x [cm]")
+        ax.set_ylabel("y [cm]")
+    if len(images):
+        axes[0][0].legend(fontsize=7, loc="lower left")
+    fig.suptitle(title)
+    return _save(fig, path)
+
+
+def plot_tracks(predicted, truth, sequence_ids, path):
+    """Predicted (calibrated mincam) and ground-truth paths on the table [cm]."""
+    fig, ax = plt.subplots(figsize=(4.8, 4.8))
+    for sid in np.unique(sequence_ids):
+        sel = sequence_ids == sid
+        line, = ax.plot(100 * truth[sel, 0], 100 * truth[sel, 1], "-", lw=1, label=f"{sid}: ground truth")
+        ax.plot(100 * predicted[sel, 0], 100 * predicted[sel, 1], "o", ms=3, color=line.get_color(),
+                label=f"{sid}: mincam")
+    ax.set_xlabel("x [cm]")
+    ax.set_ylabel("y [cm]")
+    ax.set_aspect("equal")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    return _save(fig, path)
+
+
+def plot_spectrum(spec, true_omega, path, title="mixel signal spectrum"):
+    """Like the paper's Fig. 9a: the measurement's amplitude spectrum and its peak."""
+    fig, ax = plt.subplots(figsize=(5.5, 3.4))
+    ax.plot(2 * np.pi * spec.freqs_hz, spec.magnitude, lw=1)
+    ax.axvline(spec.peak_omega_rad_s, color="r", ls="--", label=f"peak {spec.peak_omega_rad_s:.2f} rad/s")
+    ax.axvline(true_omega, color="k", ls=":", label=f"expected {true_omega:.2f} rad/s")
+    ax.set_xlabel("omega [rad/s]")
+    ax.set_ylabel("amplitude")
+    ax.set_title(title)
+    ax.legend(fontsize=8)
+    return _save(fig, path)
+
+
+def plot_speed(true_v, pred_v, path, unit="px/s"):
+    """Like the paper's Fig. 9b: predicted vs true speed."""
+    fig, ax = plt.subplots(figsize=(4.5, 4.2))
+    ax.plot(true_v, pred_v, "o", label="mincam")
+    lim = [0, 1.1 * max(np.max(true_v), np.nanmax(pred_v))]
+    ax.plot(lim, lim, "k--", lw=1, label="ideal")
+    ax.set_xlabel(f"true speed [{unit}]")
+    ax.set_ylabel(f"predicted speed [{unit}]")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    return _save(fig, path)
+
+
+def plot_spacing(study: dict, path):
+    """Error against mixel spacing, before and after calibration, one line per depth."""
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), sharey=False)
+    spacing_cm = 100 * np.asarray(study["spacing_m"])
+    for depth, rows in study["by_depth"].items():
+        axes[0].plot(spacing_cm, rows["avg_before_pct"], "o--", label=f"before, d = {depth} m")
+        axes[0].plot(spacing_cm, rows["avg_after_pct"], "o-", label=f"after, d = {depth} m")
+        axes[1].plot(spacing_cm, rows["max_before_pct"], "o--", label=f"before, d = {depth} m")
+        axes[1].plot(spacing_cm, rows["max_after_pct"], "o-", label=f"after, d = {depth} m")
+    for ax, what in zip(axes, ("average", "maximum"), strict=True):
+        ax.set_xlabel("mixel spacing [cm]")
+        ax.set_ylabel(f"{what} position error [% of range]")
+        ax.set_yscale("log")
+        ax.grid(alpha=0.3, which="both")
+    axes[0].legend(fontsize=7)
+    fig.suptitle(f"1D intrusion: calibration at {study['calibration_depth_m']} m")
+    return _save(fig, path)

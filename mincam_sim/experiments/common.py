@@ -1,0 +1,289 @@
+"""Shared pieces of the paper's experiments: the set-up, the tabletop world, calibration on the screen, the
+sensor read-out and the ground truth from a pinhole camera.
+
+Coordinates: the mincam looks straight down at a table (or straight at a screen) from ``depth_m``; scene
+positions are metres in the plane it looks at, ``x`` to the viewer's right and ``y`` up in its view. On the
+table (z = 0, seen from above with +y up) that is world (x, y); on the screen it is screen (x, y).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, replace
+
+import numpy as np
+
+from .. import masks as masks_mod
+from .. import objects
+from ..calibration import Calibration1D, Calibration2D
+from ..estimators import noise_threshold
+from ..geometry import Pose
+from ..masks import Mask
+from ..optics import Mincam, layout
+from ..screen import Screen, Sweep, grid_sweep, line_sweep
+from ..sensor import SensorModel
+
+PAPER = {
+    "intrusion": {"max_error_pct": 11.42, "avg_error_pct": 4.83},
+    "tracking": {"max_error_pct": 6.78, "avg_error_pct": 2.82},
+    "speed": {"max_error_pct": 7.55, "avg_error_pct": 2.85},
+}
+
+
+@dataclass
+class Setup:
+    """Built-in defaults resembling the paper's prototype (Sec. 3.1, 4.1.1, 4.2.1, 4.3.1).
+
+    Attributes
+    ----------
+    depth_m : float
+        Distance from the mincam to the table / screen [m] (a 50 cm field of view at 0.5 m).
+    spacing_m : float
+        Distance between neighbouring mixels [m] (paper: 3.3 cm).
+    d_f_m, detector_size_m, mask_size_m : float
+        Mixel geometry [m]: mask 2 mm at 2 mm gives a ~53 deg field of view, detector 0.1 mm.
+    field_m : float
+        Calibrated range [m]: the paper's 50 cm boundary / field of view; error rates are % of it.
+    bit_depth : int
+        ADC bits (paper: 12); the sensor is :meth:`SensorModel.paper_prototype` (48 x 48 pixels averaged).
+    quick : bool
+        Fewer frames and samples (for ``make demo`` and the tests).
+    """
+
+    depth_m: float = 0.5
+    spacing_m: float = 0.033
+    d_f_m: float = 2e-3
+    detector_size_m: float = 1e-4
+    mask_size_m: float = 2e-3
+    mask_resolution: int = 256
+    field_m: float = 0.5
+    bit_depth: int = 12
+    exposure_fill: float = 0.7
+    screen_resolution: tuple[int, int] = (256, 144)
+    table_light_radiance_w_m2_sr: float = 20.0
+    spp: int = 1 << 21
+    camera_px: int = 160
+    seed: int = 0
+    quick: bool = False
+    extra: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for key in ("depth_m", "d_f_m", "detector_size_m", "mask_size_m", "field_m"):
+            v = getattr(self, key)
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"Setup.{key} must be > 0 (metres), got {v!r}")
+        if not (np.isfinite(self.spacing_m) and self.spacing_m >= 0):
+            raise ValueError(f"Setup.spacing_m must be >= 0 metres, got {self.spacing_m!r}")
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+    def with_(self, **kw) -> Setup:
+        return replace(self, **kw)
+
+    @property
+    def center(self) -> Pose:
+        """Pose of the mincam centre above the table (looking down, +y up in its view)."""
+        return Pose((0.0, 0.0, self.depth_m), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0))
+
+    def screen(self, depth_m: float | None = None) -> Screen:
+        """The paper's 50" 16:9 display at ``depth_m`` (default: the set-up's depth), facing the mincam."""
+        d = self.depth_m if depth_m is None else depth_m
+        return Screen(resolution=self.screen_resolution, pose=Pose((0.0, 0.0, -d), (0.0, 0.0, 1.0)))
+
+    def sensor(self) -> SensorModel:
+        return SensorModel.paper_prototype(bit_depth=self.bit_depth)
+
+    def scene_to_mask(self, value_m: float, depth_m: float | None = None) -> float:
+        """Normalised mask coordinate (0..1) seen, from the mincam centre, at scene coordinate ``value_m``."""
+        d = self.depth_m if depth_m is None else depth_m
+        return 0.5 + value_m * self.d_f_m / d / self.mask_size_m
+
+
+def band_ramp(setup: Setup, kind: str, boundary_x_m: float, band_m: float) -> Mask:
+    """The 1D intrusion mask (paper Fig. 3a): a ramp along the boundary ``x = boundary_x_m``, ``kind`` "y" or
+    "1-y", transparent only in a band ``band_m`` wide around the boundary's image on the mask."""
+    if kind not in ("y", "1-y"):
+        raise ValueError(f"band ramp kind must be 'y' or '1-y', got {kind!r}")
+    u0 = setup.scene_to_mask(boundary_x_m)
+    half = band_m * setup.d_f_m / setup.depth_m / setup.mask_size_m / 2
+
+    def func(x, y):
+        ramp = y if kind == "y" else 1.0 - y
+        return np.where(np.abs(x - u0) <= half, ramp, 0.0)
+
+    return masks_mod.from_function(func, f"band_ramp_{kind}", setup.mask_resolution, setup.mask_size_m,
+                                   kind="band_ramp", ramp=kind, boundary_x_m=boundary_x_m, band_m=band_m)
+
+
+def intrusion_mincam(setup: Setup, boundary_x_m: float, band_m: float) -> Mincam:
+    """Two mixels ``spacing_m`` apart along the boundary, masks y and 1 - y restricted to the boundary band."""
+    s = setup.spacing_m
+    return layout(
+        [band_ramp(setup, "y", boundary_x_m, band_m), band_ramp(setup, "1-y", boundary_x_m, band_m)],
+        [(0.0, s / 2), (0.0, -s / 2)],
+        ["y", "1-y"],
+        center=setup.center,
+        d_f_m=setup.d_f_m,
+        detector_size_m=setup.detector_size_m,
+    )
+
+
+def tracking_mincam(setup: Setup) -> Mincam:
+    """Four mixels (x, 1 - x, y, 1 - y) ``spacing_m`` from the centre camera (paper Eq. 5, Fig. 2)."""
+    s = setup.spacing_m
+    res, size = setup.mask_resolution, setup.mask_size_m
+    return layout(
+        [masks_mod.ramp(k, res, size) for k in ("x", "1-x", "y", "1-y")],
+        [(-s, 0.0), (s, 0.0), (0.0, s), (0.0, -s)],
+        ["x", "1-x", "y", "1-y"],
+        center=setup.center,
+        d_f_m=setup.d_f_m,
+        detector_size_m=setup.detector_size_m,
+    )
+
+
+def mincam_on_screen(mincam: Mincam, setup: Setup) -> Mincam:
+    """The same mincam turned to face the calibration screen (looking along -z from the origin)."""
+    mixels = []
+    for m in mincam:
+        local = setup.center.to_local(np.asarray(m.pose.position_m))
+        world = Pose().to_world(local)
+        mixels.append(m.with_pose(Pose(tuple(world), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0))))
+    return Mincam(tuple(mixels))
+
+
+@dataclass
+class Readout:
+    """Digital read-out (DN) of mixel irradiances with the sensor model: frames, background and threshold."""
+
+    frames_dn: np.ndarray
+    background_dn: np.ndarray
+    threshold_dn: float
+    sensor: SensorModel
+
+    @property
+    def change_dn(self) -> np.ndarray:
+        return self.frames_dn - self.background_dn
+
+
+def read_out(
+    frame_irradiance: np.ndarray,
+    background_irradiance: np.ndarray,
+    setup: Setup,
+    rng: np.random.Generator,
+    n_background_frames: int = 16,
+    n_sigma: float = 5.0,
+) -> Readout:
+    """Expose (the brightest value fills ``exposure_fill`` of the range), add noise and quantise with the
+    12-bit sensor; estimate the background and the detection threshold from background-only frames."""
+    peak = float(max(np.max(frame_irradiance), np.max(background_irradiance)))
+    sensor = setup.sensor().auto_exposed(peak, setup.exposure_fill)
+    bg_frames = sensor.measure(np.broadcast_to(background_irradiance, (n_background_frames,
+                                                                        *np.shape(background_irradiance))), rng)
+    background, threshold = noise_threshold(bg_frames, n_sigma=n_sigma)
+    frames = sensor.measure(frame_irradiance, rng)
+    return Readout(frames, background, float(threshold), sensor)
+
+
+def screen_sweep_1d(setup: Setup, boundary_x_m: float, n: int, square_m: float) -> Sweep:
+    """White squares along the boundary line ``x = boundary_x_m`` over the calibrated range (paper Fig. 4a)."""
+    half = setup.field_m / 2
+    return line_sweep((boundary_x_m, -half), (boundary_x_m, half), n, square_m)
+
+
+def screen_sweep_2d(setup: Setup, n_per_axis: int, square_m: float) -> Sweep:
+    """White squares on a grid clipped to the 50 cm diameter field (paper Sec. 4.2.1)."""
+    half = setup.field_m / 2
+    sweep = grid_sweep((-half, half), (-half, half), n_per_axis, n_per_axis, square_m)
+    keep = np.hypot(*sweep.positions_m.T) <= half + 1e-9
+    return Sweep(sweep.positions_m[keep], square_m)
+
+
+def fit_calibration_1d(observed: np.ndarray, true_m: np.ndarray, meta: dict) -> Calibration1D:
+    ok = np.isfinite(observed)
+    return Calibration1D.fit(observed[ok], true_m[ok], degree=3, metadata=meta)
+
+
+def fit_calibration_2d(observed: np.ndarray, true_m: np.ndarray, meta: dict) -> Calibration2D:
+    ok = np.all(np.isfinite(observed), axis=1)
+    return Calibration2D.fit(observed[ok], true_m[ok], degree=3, metadata=meta)
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Tabletop world and ground truth
+
+
+@dataclass
+class Tabletop:
+    """A printed background on a table, an area light above, toys that move (pure description)."""
+
+    background: np.ndarray
+    size_m: float
+    toys: dict  # name -> trimesh.Trimesh (object frame)
+    light_radiance_w_m2_sr: float
+    light_size_m: float = 0.6
+    light_height_m: float = 1.5
+    park_m: tuple[float, float] = (20.0, 20.0)  # where toys wait, far outside every field of view
+
+
+def make_tabletop(setup: Setup, toys: dict, rng: np.random.Generator) -> Tabletop:
+    background = objects.printed_background((256, 256), rng, kind="paper")
+    return Tabletop(background, 1.2, toys, setup.table_light_radiance_w_m2_sr)
+
+
+def world_elements(table: Tabletop) -> dict:
+    """Mitsuba elements of a tabletop (render layer)."""
+    from ..render import scene_dicts as sd
+
+    elements = {
+        "table": sd.textured_plane(table.background, table.size_m, table.size_m,
+                                   Pose((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)).matrix()),
+        "light": sd.area_light(table.light_size_m, table.light_size_m,
+                               Pose((0.0, 0.0, table.light_height_m), (0.0, 0.0, -1.0)).matrix(),
+                               table.light_radiance_w_m2_sr),
+    }
+    for name, mesh in table.toys.items():
+        vertices = objects.mesh_at(mesh, table.park_m, 0.0)
+        elements[name] = sd.mesh_object(name, vertices, mesh.faces, float(mesh.metadata.get("albedo", 0.8)))
+    return elements
+
+
+def toy_updates(table: Tabletop, placements: dict) -> dict:
+    """Parameter updates placing toys: ``placements[name] = (position (2,), heading)`` or None (parked)."""
+    from ..render.world import vertex_update
+
+    updates = {}
+    for name, mesh in table.toys.items():
+        where = placements.get(name)
+        pos, heading = (table.park_m, 0.0) if where is None else where
+        updates.update(vertex_update(name, objects.mesh_at(mesh, pos, heading)))
+    return updates
+
+
+def camera_fov_deg(setup: Setup) -> float:
+    """Horizontal field of view of the ground-truth camera: the calibrated field plus a margin."""
+    return float(np.degrees(2 * np.arctan(0.6 * setup.field_m / setup.depth_m)))
+
+
+def camera_pixel_to_table(setup: Setup, rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """Table coordinates [m] of pixel centres of the centre camera looking straight down (image row 0 = +y)."""
+    h, w = shape
+    pitch = 2 * setup.depth_m * np.tan(np.radians(camera_fov_deg(setup)) / 2) / w
+    x = (np.asarray(cols) + 0.5 - w / 2) * pitch
+    y = (h / 2 - np.asarray(rows) - 0.5) * pitch
+    return np.stack([x, y], axis=-1)
+
+
+def change_centroid(
+    image: np.ndarray, background: np.ndarray, setup: Setup, threshold: float, region: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Ground truth as in the paper: background subtraction, binary detection (|change| > threshold), the
+    centroid of the detected pixels in table coordinates [m] (NaN if none). Returns (centroid, binary mask)."""
+    detected = np.abs(image - background) > threshold
+    if region is not None:
+        detected &= region
+    if not detected.any():
+        return np.full(2, np.nan), detected
+    rows, cols = np.nonzero(detected)
+    points = camera_pixel_to_table(setup, rows, cols, image.shape)
+    return points.mean(axis=0), detected
