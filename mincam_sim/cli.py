@@ -150,33 +150,95 @@ def masks_export(
     typer.echo(str(path))
 
 
+def _render_demo(out_dir: Path) -> None:
+    from .config import load_config
+    from .plots import plot_response_maps, plot_sweep
+
+    cfg = load_config({"run": {"out_dir": str(out_dir), "target_rel_stderr": 1e-3}})
+    m, maps = run_render_config(cfg, show_progress=_state["verbose"])
+    plot_sweep(np.asarray(cfg.frame_positions_m)[:, 0], m, out_dir / "sweep.png")
+    if maps is not None:
+        plot_response_maps(maps, cfg.screen, out_dir / "response_maps.png")
+    typer.echo(f"render: {m.n_frames} sweep positions x {len(m.mixel_names)} mixels (variant {m.meta.get('variant')}, "
+               f"worst relative stderr {m.meta['reached_rel_stderr']:.1e}) -> {out_dir}")
+
+
+def _print_table(results: dict) -> None:
+    typer.echo("experiment   simulated max / avg error [%]   paper max / avg error [%]   n")
+    for name in ("intrusion", "tracking", "speed"):
+        if name in results:
+            r = results[name]
+            p = r["paper"]
+            typer.echo(f"{name:<12} {r['max_error_pct']:>10.2f} / {r['avg_error_pct']:<10.2f}        "
+                       f"{p['max_error_pct']:>8.2f} / {p['avg_error_pct']:<8.2f}        {r['n']}")
+    if "speed" in results and "vehicle" in results["speed"]:
+        v = results["speed"]["vehicle"]
+        typer.echo(f"{'(vehicle)':<12} {v['max_error_pct']:>10.2f} / {v['avg_error_pct']:<10.2f}        "
+                   f"{'-':>8} / {'-':<8}        {v['n']}")
+
+
+@app.command()
+def reproduce(
+    experiment: Annotated[str, typer.Argument(help="intrusion, tracking, speed or all")] = "all",
+    out_dir: Annotated[Path, typer.Option("--out", help="output folder (results.json + plots)")] = Path("out/repro"),
+    quick: Annotated[bool, typer.Option("--quick", help="fewer frames and samples (minutes)")] = False,
+    seed: Annotated[int, typer.Option(help="seed of every random choice")] = 0,
+    spacing_m: Annotated[float, typer.Option(help="mixel spacing [m] (paper: 0.033)")] = 0.033,
+    depth_m: Annotated[float, typer.Option(help="mincam to table/screen distance [m]")] = 0.5,
+    bit_depth: Annotated[int, typer.Option(help="ADC bits (paper: 12)")] = 12,
+) -> None:
+    """Reproduce the paper's experiments in simulation; print the error table beside the paper's."""
+    from .experiments import EXPERIMENTS, Setup
+    from .experiments import reproduce as run
+
+    names = list(EXPERIMENTS) if experiment == "all" else [experiment]
+    try:
+        setup = Setup(quick=quick, seed=seed, spacing_m=spacing_m, depth_m=depth_m, bit_depth=bit_depth)
+        _announce_variant()
+        results = run(names, setup, out_dir, show_progress=_state["verbose"])
+    except ValueError as err:
+        _fail(err)
+    _print_table(results)
+    typer.echo(f"# results.json and plots in {out_dir}")
+
+
+@app.command()
+def study(
+    what: Annotated[str, typer.Argument(help="spacing")] = "spacing",
+    out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out/study"),
+    quick: Annotated[bool, typer.Option("--quick", help="fewer spacings and depths")] = False,
+) -> None:
+    """Studies: `spacing` = intrusion error against mixel spacing (0-10 cm) and depth, before/after calibration."""
+    from .experiments import Setup
+    from .experiments import spacing as spacing_study
+
+    if what != "spacing":
+        _fail(ValueError(f"unknown study {what!r}: the available study is 'spacing'"))
+    _announce_variant()
+    result = spacing_study.run(Setup(quick=quick), out_dir, show_progress=_state["verbose"])
+    typer.echo("spacing [cm]  " + "  ".join(f"{100 * s:6.1f}" for s in result["spacing_m"]))
+    for depth, rows in result["by_depth"].items():
+        typer.echo(f"d={depth} m avg error before [%] " + " ".join(f"{v:6.2f}" for v in rows["avg_before_pct"]))
+        typer.echo(f"d={depth} m avg error after  [%] " + " ".join(f"{v:6.2f}" for v in rows["avg_after_pct"]))
+    typer.echo(f"# spacing_study.json and spacing_study.png in {out_dir}")
+
+
 @app.command()
 def demo(
     out_dir: Annotated[Path, typer.Option("--out", help="output directory")] = Path("out/demo"),
 ) -> None:
-    """Built-in default job: a 2-mixel (x | 1-x) mincam 0.5 m from a 50" screen, a white square swept along
-    the boundary; measurements, response maps (EXR) and a plot."""
-    from .config import load_config
+    """Built-in default job: a 2-mixel (x | 1-x) mincam 0.5 m from a 50" screen with a white square swept along
+    the boundary (measurements, response maps as EXR, plots), then `reproduce all --quick` and the spacing study."""
+    from .experiments import EXPERIMENTS, Setup
+    from .experiments import reproduce as run
+    from .experiments import spacing as spacing_study
 
-    cfg = load_config({"run": {"out_dir": str(out_dir), "target_rel_stderr": 1e-3}})
     _announce_variant()
-    m, maps = run_render_config(cfg, show_progress=True)
-    from .plots import plot_response_maps, plot_sweep
-
-    x = np.asarray(cfg.frame_positions_m)[:, 0]
-    plot_sweep(x, m, out_dir / "sweep.png")
-    if maps is not None:
-        plot_response_maps(maps, cfg.screen, out_dir / "response_maps.png")
-    summary = {
-        "variant": m.meta.get("variant"),
-        "worst_rel_stderr": m.meta["reached_rel_stderr"],
-        "samples_per_texel": m.meta.get("samples_per_texel"),
-        "files": sorted(str(p.relative_to(out_dir)) for p in out_dir.rglob("*") if p.is_file()),
-    }
-    (out_dir / "summary.json").write_text(json.dumps(summary, indent=1))
-    typer.echo(f"demo: {m.n_frames} sweep positions x {len(m.mixel_names)} mixels rendered "
-               f"(variant {summary['variant']}, worst relative stderr {summary['worst_rel_stderr']:.1e})")
-    typer.echo(f"demo: wrote {out_dir}/sweep.png, response_maps.png, measurements.csv, response_maps/*.exr")
+    _render_demo(out_dir / "render")
+    results = run(list(EXPERIMENTS), Setup(quick=True), out_dir / "repro", show_progress=_state["verbose"])
+    _print_table(results)
+    spacing_study.run(Setup(quick=True), out_dir / "study")
+    typer.echo(f"demo: wrote {out_dir}/render, {out_dir}/repro (results.json, plots), {out_dir}/study")
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -60,7 +60,7 @@ class Setup:
     exposure_fill: float = 0.7
     screen_resolution: tuple[int, int] = (256, 144)
     table_light_radiance_w_m2_sr: float = 20.0
-    spp: int = 1 << 21
+    spp: int = 1 << 23  # samples per mixel per frame on the tabletop (quick mode: half)
     camera_px: int = 160
     seed: int = 0
     quick: bool = False

@@ -68,7 +68,7 @@ def run(setup: Setup, out_dir: Path, show_progress: bool = False) -> dict:
     background = toy_updates(table, {})
     camera = sd.pinhole_camera(setup.center.matrix(), _fov(setup), setup.camera_px, setup.camera_px, spp=32)
     world = WorldRenderer(cam, world_elements(table), replicates=8, camera=camera)
-    spp = setup.spp // 4 if setup.quick else setup.spp
+    spp = setup.spp // 2 if setup.quick else setup.spp
     dp, _ = world.measure_changes(frames, background, spp=spp, seed=setup.seed, show_progress=show_progress)
     bg_irr = np.asarray(dp.meta["background_w_m2"])
     readout = read_out(bg_irr + dp.irradiance_w_m2, bg_irr, setup, rng)

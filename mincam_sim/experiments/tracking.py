@@ -57,7 +57,7 @@ def run(setup: Setup, out_dir: Path, show_progress: bool = False) -> dict:
 
     kinds = TOYS[:2] if setup.quick else TOYS
     n_per_toy = 8 if setup.quick else 24
-    toys = {kind: objects.windup_toy(kind, size_m=0.05) for kind in kinds}
+    toys = {kind: objects.windup_toy(kind, size_m=0.07) for kind in kinds}
     table = make_tabletop(setup, toys, rng)
     frames, sequence = [], []
     reach = 0.4 * setup.field_m
@@ -72,7 +72,7 @@ def run(setup: Setup, out_dir: Path, show_progress: bool = False) -> dict:
     camera = sd.pinhole_camera(setup.center.matrix(), camera_fov_deg(setup), setup.camera_px, setup.camera_px,
                                spp=32)
     world = WorldRenderer(cam, world_elements(table), replicates=8, camera=camera)
-    spp = setup.spp // 4 if setup.quick else setup.spp
+    spp = setup.spp // 2 if setup.quick else setup.spp
     dp, _ = world.measure_changes(frames, background, spp=spp, seed=setup.seed, show_progress=show_progress)
     bg_irr = np.asarray(dp.meta["background_w_m2"])
     readout = read_out(bg_irr + dp.irradiance_w_m2, bg_irr, setup, rng)
