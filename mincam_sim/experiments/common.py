@@ -160,10 +160,39 @@ class Readout:
     background_dn: np.ndarray
     threshold_dn: float
     sensor: SensorModel
+    n_background_frames: int = 16
 
     @property
     def change_dn(self) -> np.ndarray:
         return self.frames_dn - self.background_dn
+
+    def ideal_change_dn(self, frame_irradiance: np.ndarray, background_irradiance: np.ndarray) -> np.ndarray:
+        """The noiseless change (no shot/read noise, no quantisation) for the same exposure."""
+        return self.sensor.expected(frame_irradiance) - self.sensor.expected(background_irradiance)
+
+    def change_sigma_dn(self, frame_irradiance, background_irradiance, mc_stderr_w_m2=None) -> np.ndarray:
+        """Standard deviation of the change [DN]: sensor noise of the frame and of the averaged background,
+        plus the Monte Carlo standard error of the rendered change converted to DN."""
+        var = self.sensor.expected_std_dn(frame_irradiance) ** 2
+        var = var + self.sensor.expected_std_dn(background_irradiance) ** 2 / self.n_background_frames
+        if mc_stderr_w_m2 is not None:
+            gain = self.sensor.expected(1.0) - self.sensor.expected(0.0)  # DN per W/m^2 (linear model)
+            var = var + (gain * np.asarray(mc_stderr_w_m2)) ** 2
+        return np.sqrt(var)
+
+
+def propagate_sigma(predict, change: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """Standard deviation of ``predict(change)`` (rows = frames) from independent per-value sigmas, by a
+    finite-difference Jacobian (first-order propagation). Returns the shape of ``predict``'s output."""
+    base = np.asarray(predict(change), dtype=float)
+    var = np.zeros_like(base)
+    for j in range(change.shape[1]):
+        h = np.maximum(1e-3 * sigma[:, j], 1e-9)
+        bumped = change.copy()
+        bumped[:, j] += h
+        jac = (np.asarray(predict(bumped), dtype=float) - base) / (h if base.ndim == 1 else h[:, None])
+        var += (jac * (sigma[:, j] if base.ndim == 1 else sigma[:, j][:, None])) ** 2
+    return np.sqrt(var)
 
 
 def read_out(
@@ -182,7 +211,7 @@ def read_out(
                                                                         *np.shape(background_irradiance))), rng)
     background, threshold = noise_threshold(bg_frames, n_sigma=n_sigma)
     frames = sensor.measure(frame_irradiance, rng)
-    return Readout(frames, background, float(threshold), sensor)
+    return Readout(frames, background, float(threshold), sensor, n_background_frames)
 
 
 def screen_sweep_1d(setup: Setup, boundary_x_m: float, n: int, square_m: float) -> Sweep:

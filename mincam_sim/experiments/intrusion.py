@@ -18,6 +18,7 @@ from .common import (
     intrusion_mincam,
     make_tabletop,
     mincam_on_screen,
+    propagate_sigma,
     read_out,
     screen_sweep_1d,
     toy_updates,
@@ -74,7 +75,16 @@ def run(setup: Setup, out_dir: Path, show_progress: bool = False) -> dict:
     readout = read_out(bg_irr + dp.irradiance_w_m2, bg_irr, setup, rng)
     detected = detect_change(readout.frames_dn, readout.background_dn, readout.threshold_dn)
     change = readout.change_dn
-    predicted = cal["calibration"].apply(intrusion_position(change[:, 0], change[:, 1]))
+    calibration = cal["calibration"]
+
+    def predict(c):
+        return calibration.apply(intrusion_position(c[:, 0], c[:, 1]))
+
+    predicted = predict(change)
+    frame_irr = bg_irr + dp.irradiance_w_m2
+    predicted_ideal = predict(readout.ideal_change_dn(frame_irr, bg_irr))
+    sigma = propagate_sigma(predict, change, readout.change_sigma_dn(frame_irr, bg_irr, dp.stderr_w_m2))
+    sigma_sensor = propagate_sigma(predict, change, readout.change_sigma_dn(frame_irr, bg_irr))
 
     # ground truth: centroid of the change along the boundary in the centre camera
     world.update(background)
@@ -106,9 +116,14 @@ def run(setup: Setup, out_dir: Path, show_progress: bool = False) -> dict:
         if evaluated.any() else float("nan"),
         "spp_per_mixel_per_frame": spp,
         "exposure_s": readout.sensor.exposure_s,
+        "noiseless": error_rates(predicted_ideal[evaluated], truth[evaluated], setup.field_m),
+        "noise_sigma_median_pct": float(100 * np.median(sigma[evaluated]) / setup.field_m) if evaluated.any()
+        else float("nan"),
     }
     _plots(setup, cal, images, bg_image, predicted, truth, detected, out_dir)
     np.savez(out_dir / "intrusion_data.npz", predicted_m=predicted, truth_m=truth, detected=detected,
+             predicted_noiseless_m=predicted_ideal, predicted_sigma_m=sigma, sensor_sigma_m=sigma_sensor,
+             evaluated=evaluated,
              change_dn=change, dP_w_m2=dp.irradiance_w_m2, dP_stderr_w_m2=dp.stderr_w_m2)
     return result
 

@@ -19,6 +19,7 @@ from .common import (
     fit_calibration_2d,
     make_tabletop,
     mincam_on_screen,
+    propagate_sigma,
     read_out,
     screen_sweep_2d,
     toy_updates,
@@ -77,7 +78,16 @@ def run(setup: Setup, out_dir: Path, show_progress: bool = False) -> dict:
     bg_irr = np.asarray(dp.meta["background_w_m2"])
     readout = read_out(bg_irr + dp.irradiance_w_m2, bg_irr, setup, rng)
     detected = detect_change(readout.frames_dn, readout.background_dn, readout.threshold_dn)
-    predicted = cal["calibration"].apply(track_4(readout.change_dn))
+    calibration = cal["calibration"]
+
+    def predict(c):
+        return calibration.apply(track_4(c))
+
+    predicted = predict(readout.change_dn)
+    frame_irr = bg_irr + dp.irradiance_w_m2
+    predicted_ideal = predict(readout.ideal_change_dn(frame_irr, bg_irr))
+    sigma = propagate_sigma(predict, readout.change_dn, readout.change_sigma_dn(frame_irr, bg_irr, dp.stderr_w_m2))
+    sigma_sensor = propagate_sigma(predict, readout.change_dn, readout.change_sigma_dn(frame_irr, bg_irr))
 
     world.update(background)
     bg_image = world.camera_image(spp=32, seed=setup.seed)
@@ -103,6 +113,9 @@ def run(setup: Setup, out_dir: Path, show_progress: bool = False) -> dict:
         if evaluated.any() else float("nan"),
         "spp_per_mixel_per_frame": spp,
         "exposure_s": readout.sensor.exposure_s,
+        "noiseless": error_rates(predicted_ideal[evaluated], truth[evaluated], setup.field_m),
+        "noise_sigma_median_pct": float(100 * np.median(np.hypot(*sigma[evaluated].T)) / setup.field_m)
+        if evaluated.any() else float("nan"),
     }
     plot_calibration_2d(cal["true_m"], cal["observed"], cal["calibration"], out_dir / "tracking_calibration.png")
     plot_tracks(predicted, truth, sequence, out_dir / "tracking_paths.png")
@@ -110,5 +123,7 @@ def run(setup: Setup, out_dir: Path, show_progress: bool = False) -> dict:
     plot_overlays([images[i] for i in chosen], [(predicted[i], truth[i]) for i in chosen], setup,
                   out_dir / "tracking_frames.png", title="tracking wind-up toys")
     np.savez(out_dir / "tracking_data.npz", predicted_m=predicted, truth_m=truth, detected=detected,
+             predicted_noiseless_m=predicted_ideal, predicted_sigma_m=sigma, sensor_sigma_m=sigma_sensor,
+             evaluated=evaluated,
              change_dn=readout.change_dn, dP_w_m2=dp.irradiance_w_m2, dP_stderr_w_m2=dp.stderr_w_m2)
     return result

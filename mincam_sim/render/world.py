@@ -125,8 +125,8 @@ class WorldRenderer:
         todo = np.arange(len(frames))
         if out_dir is not None:
             identity = {"spp": spp, "seed": seed, "correlated": correlated, "replicates": self.replicates,
-                        "n_frames": len(frames), "frames": _fingerprint(frames), "background": _fingerprint([background]),
-                        "geometry": geometry_meta(self.mincam)}
+                        "n_frames": len(frames), "frames": _fingerprint(frames),
+                        "background": _fingerprint([background]), "geometry": geometry_meta(self.mincam)}
             store = ResultStore(out_dir, len(frames), columns, identity)
             values[:], errors[:] = store.values, store.stderr
             todo = store.pending()

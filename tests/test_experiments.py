@@ -1,0 +1,79 @@
+"""The paper's experiments end to end in their quick configuration (one shared run, ~30 s on 2 cores)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import Z
+
+from mincam_sim.experiments import EXPERIMENTS, Setup, reproduce
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("repro")
+    results = reproduce(list(EXPERIMENTS), Setup(quick=True), out)
+    return out, results
+
+
+def test_results_json_has_the_table(run):
+    out, results = run
+    saved = json.loads((out / "results.json").read_text())
+    for name in EXPERIMENTS:
+        entry = saved[name]
+        for key in ("max_error_pct", "avg_error_pct", "n"):
+            assert isinstance(entry[key], int | float), (name, key)
+        assert entry["n"] >= 3
+        assert entry["paper"]["max_error_pct"] > 0
+    assert saved["meta"]["variant"] in ("llvm_ad_mono", "cuda_ad_mono", "scalar_rgb")
+    assert saved["meta"]["setup"]["spacing_m"] == 0.033
+    for png in ("intrusion_calibration.png", "intrusion_frames.png", "tracking_frames.png", "tracking_paths.png",
+                "speed_road_video_spectrum.png", "speed_road_video_prediction.png"):
+        assert (out / png).stat().st_size > 1000, png
+
+
+@pytest.mark.parametrize("name", ["intrusion", "tracking"])
+def test_sensor_noise_moves_predictions_as_its_statistics_say(run, name):
+    """Noisy vs noiseless read-out of the same rendered frames: the position difference stays within Z
+    standard deviations of the sensor noise propagated through Eq. 4 / Eq. 7 and the calibration."""
+    out, _ = run
+    data = np.load(out / f"{name}_data.npz")
+    ok = data["evaluated"]
+    diff = (data["predicted_m"] - data["predicted_noiseless_m"])[ok]
+    sigma = data["sensor_sigma_m"][ok]
+    assert np.all(sigma > 0)
+    assert np.all(np.abs(diff) <= Z * sigma), f"max {np.max(np.abs(diff) / sigma):.2f} sigma"
+
+
+@pytest.mark.parametrize("name", ["intrusion", "tracking"])
+def test_position_errors_stay_within_noise_plus_object_extent(run, name):
+    """|prediction - ground truth| <= Z sigma_total (sensor + Monte Carlo noise) + the object's half extent
+    (the binary ground-truth centroid and the intensity-weighted mixel centroid can differ by at most that
+    much) + 3 calibration rms residuals + the parallax of the object's height (calibrated at table depth)."""
+    out, results = run
+    data = np.load(out / f"{name}_data.npz")
+    ok = data["evaluated"]
+    err = data["predicted_m"][ok] - data["truth_m"][ok]
+    err = np.abs(err) if err.ndim == 1 else np.hypot(*err.T)
+    sigma = data["predicted_sigma_m"][ok]
+    sigma = sigma if sigma.ndim == 1 else np.hypot(*sigma.T)
+    setup = Setup(quick=True)
+    half_extent = 0.04 if name == "intrusion" else 0.035  # car half-length; toy half-size [m]
+    height = 0.035 if name == "intrusion" else 0.07
+    parallax = height / setup.depth_m * (setup.field_m / 2)  # worst case at the field's edge
+    cal_rms = results[name].get("calibration_rms_residual_m", 0.005)
+    bound = Z * sigma + half_extent + 3 * cal_rms + parallax
+    assert np.all(err <= bound), f"worst {np.max(err - bound):.3f} m over the bound"
+
+
+def test_speed_errors_within_frequency_resolution(run):
+    """A frequency cannot be resolved better than ~1 cycle over the observation: the relative speed error is
+    bounded by 1 / (number of mask periods the scene travels across), for the road video."""
+    _, results = run
+    r = results["speed"]
+    true_v = np.array(r["true_speed_px_s"])
+    pred_v = np.array(r["predicted_speed_px_s"])
+    periods = r["omega_d_rad_per_px"] * true_v / r["frame_rate_hz"] * r["frames_per_speed"] / (2 * np.pi)
+    assert np.all(np.abs(pred_v / true_v - 1) <= 1 / periods)
