@@ -240,6 +240,17 @@ def demo(
     typer.echo(f"demo: wrote {out_dir}/render, {out_dir}/repro (results.json, plots), {out_dir}/study")
 
 
+@app.command()
+def figures(
+    out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("scenes/figures"),
+) -> None:
+    """Write the README's figures (mixel geometry, masks, response maps)."""
+    from .figures import make_figures
+
+    for path in make_figures(out_dir):
+        typer.echo(str(path))
+
+
 def main(argv: list[str] | None = None) -> None:
     """Console-script entry point."""
     app(args=argv if argv is not None else sys.argv[1:], prog_name="mincam-sim")
