@@ -158,7 +158,10 @@ class Sweep:
 
     def frame_stack(self, screen: Screen) -> np.ndarray:
         """All frames as one (n, rows, cols) array."""
-        return np.stack(list(self.frames(screen))) if len(self) else np.zeros((0, *screen.shape))
+        stack = np.empty((len(self), *screen.shape))
+        for i, frame in enumerate(self.frames(screen)):
+            stack[i] = frame
+        return stack
 
 
 def line_sweep(
