@@ -197,3 +197,18 @@ def test_open_aperture_high_precision(form):
     expected = closed_form(screen, cam[0])
     m = ScreenRenderer(cam, screen, form, replicates=REPLICATES).render(frame, spp=1 << 24, seed=21)
     assert_close_mc(m.irradiance_w_m2[0, 0], expected, m.stderr_w_m2[0, 0], what=f"{form} high precision")
+
+
+def test_response_maps_match_reference_on_unseen_frames():
+    """Maps built once predict the literal scene's measurement of new frames (texture + squares) within the
+    combined standard error."""
+    screen = Screen()
+    cam = single(masks.ramp("x", 64))
+    maps = response_maps(cam, screen, samples_per_texel=64, seed=8)
+    rng = np.random.default_rng(4)
+    frames = [rng.uniform(0, 1, screen.shape), white_square(screen, (0.08, -0.1), 0.12, 2.0)]
+    ref = ScreenRenderer(cam, screen, "reference", replicates=REPLICATES).render(frames, spp=4 * SPP, seed=9)
+    pred = maps.measure(np.stack(frames))
+    sigma = np.hypot(ref.stderr_w_m2, pred.stderr_w_m2)
+    assert np.all(sigma / ref.irradiance_w_m2 < 0.02)
+    assert_close_mc(pred.irradiance_w_m2, ref.irradiance_w_m2, sigma, what="response map vs reference")

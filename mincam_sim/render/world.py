@@ -23,6 +23,7 @@ from .mixel_sensor import mixel_position_sample, sensor_dict
 from .screen_engine import derive_seed, geometry_meta
 from .tracing import trace_groups
 
+MAX_SPP = 1 << 26  # cap of the target-noise budget, samples per mixel per frame
 SENSOR_KEY = "mincam"
 CAMERA_KEY = "ground_truth_camera"
 Updates = Mapping[str, np.ndarray]
@@ -96,6 +97,7 @@ class WorldRenderer:
         correlated: bool = True,
         out_dir: str | Path | None = None,
         show_progress: bool = False,
+        target_rel_stderr: float = 0.0,
     ) -> tuple[Measurements, Measurements]:
         """Measure each frame's change from the background: ``dP = P(frame) - P(background)``.
 
@@ -109,6 +111,12 @@ class WorldRenderer:
             True: each frame uses the background's seed (noise cancels in dP). False: independent seeds.
         out_dir : path, optional
             Write results per frame as they come; a rerun resumes there.
+        target_rel_stderr : float
+            If > 0, ``spp`` is only the pilot: up to 4 frames spread over the sequence are measured with it,
+            and the sample count is extrapolated (variance ~ 1/samples, x 1.5 margin, at most ``MAX_SPP``)
+            so that every significant change (|dP| > 3 sigma in the pilot) reaches this relative standard
+            error; ``meta["spp_per_mixel_per_frame"]`` is what was used and ``meta["reached_rel_stderr"]``
+            what was reached over the significant changes.
 
         Returns
         -------
@@ -116,6 +124,17 @@ class WorldRenderer:
             Changes and absolute frame measurements, each (n_frames, n_mixels) with standard errors.
         """
         n = len(self.mincam)
+        if not (np.isfinite(target_rel_stderr) and target_rel_stderr >= 0):
+            raise ValueError(f"target_rel_stderr must be >= 0 (0 = use spp as given), got {target_rel_stderr!r}")
+        budget: dict = {}
+        if target_rel_stderr > 0 and len(frames):
+            pilot_idx = np.unique(np.linspace(0, len(frames) - 1, min(4, len(frames))).astype(int))
+            pilot, _ = self.measure_changes([frames[i] for i in pilot_idx], background, spp, seed, correlated)
+            significant = np.abs(pilot.irradiance_w_m2) > 3 * pilot.stderr_w_m2
+            rel = np.abs(pilot.stderr_w_m2 / np.where(significant, pilot.irradiance_w_m2, np.nan))
+            worst = float(np.nanmax(rel)) if significant.any() else 0.0
+            budget = {"pilot_spp": int(spp), "pilot_worst_rel_stderr": worst, "target_rel_stderr": target_rel_stderr}
+            spp = int(min(MAX_SPP, max(spp, np.ceil(1.5 * spp * (worst / target_rel_stderr) ** 2))))
         self.update(background)
         bg = self.estimates(spp, seed)
         columns = [f"dP_{m}" for m in self.mincam.names] + [f"P_{m}" for m in self.mincam.names]
@@ -147,6 +166,10 @@ class WorldRenderer:
                 "replicates": self.replicates, "background_w_m2": bg.mean(0).tolist(),
                 "background_stderr_w_m2": (bg.std(0, ddof=1) / np.sqrt(self.replicates)).tolist(),
                 **backend.describe(), **geometry_meta(self.mincam)}
+        meta.update(budget)
+        significant = np.abs(values[:, :n]) > 3 * errors[:, :n]
+        rel = np.abs(errors[:, :n] / np.where(significant, values[:, :n], np.nan))
+        meta["reached_rel_stderr"] = float(np.nanmax(rel)) if significant.any() else None
         names = self.mincam.names
         dp = Measurements(values[:, :n], errors[:, :n], names, {**meta, "quantity": "dP = P(frame) - P(background)"})
         p = Measurements(values[:, n:], errors[:, n:], names, {**meta, "quantity": "P(frame)"})
