@@ -316,3 +316,18 @@ def change_centroid(
     rows, cols = np.nonzero(detected)
     points = camera_pixel_to_table(setup, rows, cols, image.shape)
     return points.mean(axis=0), detected
+
+
+def signed_change_centroid(image: np.ndarray, background: np.ndarray, setup: Setup,
+                           region: np.ndarray | None = None) -> np.ndarray:
+    """Intensity-weighted centroid of the *signed* change (what Eq. 4/7 estimate: brightening of the object
+    minus darkening of its shadow), in table coordinates [m]; NaN if the net change is zero."""
+    change = image - background
+    if region is not None:
+        change = np.where(region, change, 0.0)
+    total = change.sum()
+    if total == 0:
+        return np.full(2, np.nan)
+    rows, cols = np.indices(image.shape)
+    points = camera_pixel_to_table(setup, rows, cols, image.shape)
+    return (points * change[..., None]).sum(axis=(0, 1)) / total

@@ -17,6 +17,7 @@ from .common import (
     fit_calibration_1d,
     intrusion_mincam,
     make_tabletop,
+    signed_change_centroid,
     mincam_on_screen,
     propagate_sigma,
     read_out,
@@ -91,6 +92,7 @@ def run(setup: Setup, out_dir: Path, show_progress: bool = False) -> dict:
     bg_image = world.camera_image(spp=32, seed=setup.seed)
     region = _band_region(setup, bg_image.shape)
     truth = np.full(len(frames), np.nan)
+    signed = np.full(len(frames), np.nan)
     images = []
     for i in progress(range(len(frames)), desc="ground truth", disable=not show_progress):
         world.update(frames[i])
@@ -98,6 +100,7 @@ def run(setup: Setup, out_dir: Path, show_progress: bool = False) -> dict:
         centroid, mask = change_centroid(image, bg_image, setup, threshold=0.02 * float(bg_image.max()),
                                          region=region)
         truth[i] = centroid[1] if mask.sum() >= 3 else np.nan
+        signed[i] = signed_change_centroid(image, bg_image, setup, region)[1]
         images.append(image)
     world.update(background)
     evaluated = detected & np.isfinite(truth) & np.isfinite(predicted)
@@ -117,6 +120,8 @@ def run(setup: Setup, out_dir: Path, show_progress: bool = False) -> dict:
         "spp_per_mixel_per_frame": spp,
         "exposure_s": readout.sensor.exposure_s,
         "noiseless": error_rates(predicted_ideal[evaluated], truth[evaluated], setup.field_m),
+        "signed_centroid_vs_ground_truth": error_rates(signed[evaluated], truth[evaluated], setup.field_m),
+        "vs_signed_centroid": error_rates(predicted[evaluated], signed[evaluated], setup.field_m),
         "noise_sigma_median_pct": float(100 * np.median(sigma[evaluated]) / setup.field_m) if evaluated.any()
         else float("nan"),
     }

@@ -18,6 +18,7 @@ from .common import (
     change_centroid,
     fit_calibration_2d,
     make_tabletop,
+    signed_change_centroid,
     mincam_on_screen,
     propagate_sigma,
     read_out,
@@ -92,11 +93,13 @@ def run(setup: Setup, out_dir: Path, show_progress: bool = False) -> dict:
     world.update(background)
     bg_image = world.camera_image(spp=32, seed=setup.seed)
     truth = np.full((len(frames), 2), np.nan)
+    signed = np.full((len(frames), 2), np.nan)
     images = []
     for i in progress(range(len(frames)), desc="ground truth", disable=not show_progress):
         world.update(frames[i])
         image = world.camera_image(spp=32, seed=setup.seed)
         truth[i], _ = change_centroid(image, bg_image, setup, threshold=0.02 * float(bg_image.max()))
+        signed[i] = signed_change_centroid(image, bg_image, setup)
         images.append(image)
     world.update(background)
     evaluated = detected & np.all(np.isfinite(truth), axis=1) & np.all(np.isfinite(predicted), axis=1)
@@ -114,6 +117,8 @@ def run(setup: Setup, out_dir: Path, show_progress: bool = False) -> dict:
         "spp_per_mixel_per_frame": spp,
         "exposure_s": readout.sensor.exposure_s,
         "noiseless": error_rates(predicted_ideal[evaluated], truth[evaluated], setup.field_m),
+        "signed_centroid_vs_ground_truth": error_rates(signed[evaluated], truth[evaluated], setup.field_m),
+        "vs_signed_centroid": error_rates(predicted[evaluated], signed[evaluated], setup.field_m),
         "noise_sigma_median_pct": float(100 * np.median(np.hypot(*sigma[evaluated].T)) / setup.field_m)
         if evaluated.any() else float("nan"),
     }
