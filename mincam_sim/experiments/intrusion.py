@@ -7,19 +7,15 @@ from pathlib import Path
 import numpy as np
 
 from .. import objects
-from ..calibration import error_rates
-from ..estimators import detect_change, intrusion_position
-from ..progress import progress
+from ..estimators import intrusion_position
 from .common import (
     PAPER,
     Setup,
-    change_centroid,
     fit_calibration_1d,
     intrusion_mincam,
+    locate_in_world,
     make_tabletop,
-    signed_change_centroid,
     mincam_on_screen,
-    propagate_sigma,
     read_out,
     screen_sweep_1d,
     toy_updates,
@@ -71,65 +67,22 @@ def run(setup: Setup, out_dir: Path, show_progress: bool = False) -> dict:
     camera = sd.pinhole_camera(setup.center.matrix(), _fov(setup), setup.camera_px, setup.camera_px, spp=32)
     world = WorldRenderer(cam, world_elements(table), replicates=8, camera=camera)
     spp = setup.spp // 2 if setup.quick else setup.spp
-    dp, _ = world.measure_changes(frames, background, spp=spp, seed=setup.seed, show_progress=show_progress)
-    bg_irr = np.asarray(dp.meta["background_w_m2"])
-    readout = read_out(bg_irr + dp.irradiance_w_m2, bg_irr, setup, rng)
-    detected = detect_change(readout.frames_dn, readout.background_dn, readout.threshold_dn)
-    change = readout.change_dn
     calibration = cal["calibration"]
 
     def predict(c):
         return calibration.apply(intrusion_position(c[:, 0], c[:, 1]))
 
-    predicted = predict(change)
-    frame_irr = bg_irr + dp.irradiance_w_m2
-    predicted_ideal = predict(readout.ideal_change_dn(frame_irr, bg_irr))
-    sigma = propagate_sigma(predict, change, readout.change_sigma_dn(frame_irr, bg_irr, dp.stderr_w_m2))
-    sigma_sensor = propagate_sigma(predict, change, readout.change_sigma_dn(frame_irr, bg_irr))
-
-    # ground truth: centroid of the change along the boundary in the centre camera
-    world.update(background)
-    bg_image = world.camera_image(spp=32, seed=setup.seed)
-    region = _band_region(setup, bg_image.shape)
-    truth = np.full(len(frames), np.nan)
-    signed = np.full(len(frames), np.nan)
-    images = []
-    for i in progress(range(len(frames)), desc="ground truth", disable=not show_progress):
-        world.update(frames[i])
-        image = world.camera_image(spp=32, seed=setup.seed)
-        centroid, mask = change_centroid(image, bg_image, setup, threshold=0.02 * float(bg_image.max()),
-                                         region=region)
-        truth[i] = centroid[1] if mask.sum() >= 3 else np.nan
-        signed[i] = signed_change_centroid(image, bg_image, setup, region)[1]
-        images.append(image)
-    world.update(background)
-    evaluated = detected & np.isfinite(truth) & np.isfinite(predicted)
-    errors = error_rates(predicted[evaluated], truth[evaluated], setup.field_m)
+    region = _band_region(setup, (setup.camera_px, setup.camera_px))
+    summary, arrays, images, _ = locate_in_world(world, frames, background, setup, rng, predict, spp, region=region,
+                                                 axis=1, show_progress=show_progress)
     result = {
-        **errors,
+        **summary,
         "paper": PAPER["intrusion"],
-        "frames": len(frames),
-        "detected_frames": int(detected.sum()),
-        "ground_truth_frames": int(np.isfinite(truth).sum()),
-        "missed_frames": int((np.isfinite(truth) & ~detected).sum()),
-        "false_alarm_frames": int((~np.isfinite(truth) & detected).sum()),
-        "calibration_rms_residual_m": cal["calibration"].rms_residual_m,
+        "calibration_rms_residual_m": calibration.rms_residual_m,
         "calibration_mc_worst_rel_stderr": cal["mc_rel_stderr"],
-        "dP_worst_rel_stderr": float(np.nanmax(np.abs(dp.stderr_w_m2 / dp.irradiance_w_m2)[evaluated]))
-        if evaluated.any() else float("nan"),
-        "spp_per_mixel_per_frame": spp,
-        "exposure_s": readout.sensor.exposure_s,
-        "noiseless": error_rates(predicted_ideal[evaluated], truth[evaluated], setup.field_m),
-        "signed_centroid_vs_ground_truth": error_rates(signed[evaluated], truth[evaluated], setup.field_m),
-        "vs_signed_centroid": error_rates(predicted[evaluated], signed[evaluated], setup.field_m),
-        "noise_sigma_median_pct": float(100 * np.median(sigma[evaluated]) / setup.field_m) if evaluated.any()
-        else float("nan"),
     }
-    _plots(setup, cal, images, bg_image, predicted, truth, detected, out_dir)
-    np.savez(out_dir / "intrusion_data.npz", predicted_m=predicted, truth_m=truth, detected=detected,
-             predicted_noiseless_m=predicted_ideal, predicted_sigma_m=sigma, sensor_sigma_m=sigma_sensor,
-             evaluated=evaluated,
-             change_dn=change, dP_w_m2=dp.irradiance_w_m2, dP_stderr_w_m2=dp.stderr_w_m2)
+    _plots(setup, cal, images, arrays["predicted_m"], arrays["truth_m"], arrays["evaluated"], out_dir)
+    np.savez(out_dir / "intrusion_data.npz", **arrays)
     return result
 
 
@@ -147,12 +100,12 @@ def _band_region(setup: Setup, shape) -> np.ndarray:
     return np.abs(xy[..., 0] - BOUNDARY_X_M) <= BAND_M / 2
 
 
-def _plots(setup, cal, images, bg_image, predicted, truth, detected, out_dir: Path) -> None:
+def _plots(setup, cal, images, predicted, truth, evaluated, out_dir: Path) -> None:
     from ..plots import plot_calibration_1d, plot_overlays
 
     plot_calibration_1d(cal["true_m"], cal["change_dn"], cal["observed"], cal["calibration"],
                         out_dir / "intrusion_calibration.png", names=("y", "1-y"))
-    chosen = [i for i in np.flatnonzero(detected & np.isfinite(truth))][:: max(1, int(detected.sum()) // 3)][:3]
+    chosen = np.flatnonzero(evaluated)[:: max(1, int(evaluated.sum()) // 3)][:3]
     points = [(np.array([BOUNDARY_X_M, predicted[i]]), np.array([BOUNDARY_X_M, truth[i]])) for i in chosen]
     plot_overlays([images[i] for i in chosen], points, setup, out_dir / "intrusion_frames.png",
                   boundary_x_m=BOUNDARY_X_M, title="intrusion at the finish line")

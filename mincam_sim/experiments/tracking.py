@@ -8,19 +8,15 @@ from pathlib import Path
 import numpy as np
 
 from .. import objects
-from ..calibration import error_rates
-from ..estimators import detect_change, track_4
-from ..progress import progress
+from ..estimators import track_4
 from .common import (
     PAPER,
     Setup,
     camera_fov_deg,
-    change_centroid,
     fit_calibration_2d,
+    locate_in_world,
     make_tabletop,
-    signed_change_centroid,
     mincam_on_screen,
-    propagate_sigma,
     read_out,
     screen_sweep_2d,
     toy_updates,
@@ -75,60 +71,26 @@ def run(setup: Setup, out_dir: Path, show_progress: bool = False) -> dict:
                                spp=32)
     world = WorldRenderer(cam, world_elements(table), replicates=8, camera=camera)
     spp = setup.spp // 2 if setup.quick else setup.spp
-    dp, _ = world.measure_changes(frames, background, spp=spp, seed=setup.seed, show_progress=show_progress)
-    bg_irr = np.asarray(dp.meta["background_w_m2"])
-    readout = read_out(bg_irr + dp.irradiance_w_m2, bg_irr, setup, rng)
-    detected = detect_change(readout.frames_dn, readout.background_dn, readout.threshold_dn)
     calibration = cal["calibration"]
 
     def predict(c):
         return calibration.apply(track_4(c))
 
-    predicted = predict(readout.change_dn)
-    frame_irr = bg_irr + dp.irradiance_w_m2
-    predicted_ideal = predict(readout.ideal_change_dn(frame_irr, bg_irr))
-    sigma = propagate_sigma(predict, readout.change_dn, readout.change_sigma_dn(frame_irr, bg_irr, dp.stderr_w_m2))
-    sigma_sensor = propagate_sigma(predict, readout.change_dn, readout.change_sigma_dn(frame_irr, bg_irr))
-
-    world.update(background)
-    bg_image = world.camera_image(spp=32, seed=setup.seed)
-    truth = np.full((len(frames), 2), np.nan)
-    signed = np.full((len(frames), 2), np.nan)
-    images = []
-    for i in progress(range(len(frames)), desc="ground truth", disable=not show_progress):
-        world.update(frames[i])
-        image = world.camera_image(spp=32, seed=setup.seed)
-        truth[i], _ = change_centroid(image, bg_image, setup, threshold=0.02 * float(bg_image.max()))
-        signed[i] = signed_change_centroid(image, bg_image, setup)
-        images.append(image)
-    world.update(background)
-    evaluated = detected & np.all(np.isfinite(truth), axis=1) & np.all(np.isfinite(predicted), axis=1)
-    errors = error_rates(predicted[evaluated], truth[evaluated], setup.field_m)
+    summary, arrays, images, _ = locate_in_world(world, frames, background, setup, rng, predict, spp,
+                                                 show_progress=show_progress)
     result = {
-        **errors,
+        **summary,
         "paper": PAPER["tracking"],
-        "frames": len(frames),
         "toys": list(kinds),
-        "detected_frames": int(detected.sum()),
         "calibration_points": len(cal["true_m"]),
+        "calibration_rms_residual_m": np.asarray(calibration.rms_residual_m).tolist(),  # (x, y)
         "calibration_mc_worst_rel_stderr": cal["mc_rel_stderr"],
-        "dP_worst_rel_stderr": float(np.nanmax(np.abs(dp.stderr_w_m2 / dp.irradiance_w_m2)[evaluated]))
-        if evaluated.any() else float("nan"),
-        "spp_per_mixel_per_frame": spp,
-        "exposure_s": readout.sensor.exposure_s,
-        "noiseless": error_rates(predicted_ideal[evaluated], truth[evaluated], setup.field_m),
-        "signed_centroid_vs_ground_truth": error_rates(signed[evaluated], truth[evaluated], setup.field_m),
-        "vs_signed_centroid": error_rates(predicted[evaluated], signed[evaluated], setup.field_m),
-        "noise_sigma_median_pct": float(100 * np.median(np.hypot(*sigma[evaluated].T)) / setup.field_m)
-        if evaluated.any() else float("nan"),
     }
-    plot_calibration_2d(cal["true_m"], cal["observed"], cal["calibration"], out_dir / "tracking_calibration.png")
+    predicted, truth, evaluated = arrays["predicted_m"], arrays["truth_m"], arrays["evaluated"]
+    plot_calibration_2d(cal["true_m"], cal["observed"], calibration, out_dir / "tracking_calibration.png")
     plot_tracks(predicted, truth, sequence, out_dir / "tracking_paths.png")
     chosen = np.flatnonzero(evaluated)[:: max(1, int(evaluated.sum()) // 3)][:3]
     plot_overlays([images[i] for i in chosen], [(predicted[i], truth[i]) for i in chosen], setup,
                   out_dir / "tracking_frames.png", title="tracking wind-up toys")
-    np.savez(out_dir / "tracking_data.npz", predicted_m=predicted, truth_m=truth, detected=detected,
-             predicted_noiseless_m=predicted_ideal, predicted_sigma_m=sigma, sensor_sigma_m=sigma_sensor,
-             evaluated=evaluated,
-             change_dn=readout.change_dn, dP_w_m2=dp.irradiance_w_m2, dP_stderr_w_m2=dp.stderr_w_m2)
+    np.savez(out_dir / "tracking_data.npz", **arrays)
     return result
