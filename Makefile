@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml
 	@touch $(STAMP)
 
 demo: setup
-	$(VENV)/bin/mincam-sim demo --out out/demo
+	$(VENV)/bin/mincam-sim -v demo --out out/demo
 
 test: setup
 	$(PY) -m pytest -m "not slow" -q

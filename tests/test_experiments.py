@@ -77,3 +77,17 @@ def test_speed_errors_within_frequency_resolution(run):
     pred_v = np.array(r["predicted_speed_px_s"])
     periods = r["omega_d_rad_per_px"] * true_v / r["frame_rate_hz"] * r["frames_per_speed"] / (2 * np.pi)
     assert np.all(np.abs(pred_v / true_v - 1) <= 1 / periods)
+
+
+def test_two_mixel_trajectory_from_side_speeds(run):
+    """Each side speed of the turning vehicle within the frequency-resolution bound (1 / periods seen), and
+    the turn radius and heading change that follow from them have the right sign and size."""
+    _, results = run
+    r = results["speed"]["vehicle_trajectory"]
+    omega_d = results["speed"]["vehicle"]["omega_d_rad_per_m"]
+    duration = r["frames"] / r["frame_rate_hz"]
+    for true_v, est_v in zip(r["true_side_speeds_m_s"], r["estimated_side_speeds_m_s"], strict=True):
+        periods = omega_d * true_v * duration / (2 * np.pi)
+        assert abs(est_v / true_v - 1) <= 1 / periods
+    assert r["estimated_turn_radius_m"] > 0  # turning left, as simulated
+    assert 0 < r["estimated_heading_change_rad"] < 2 * r["true_heading_change_rad"]

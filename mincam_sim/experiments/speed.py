@@ -63,8 +63,9 @@ def road_video(setup: Setup, rng, out_dir: Path, show_progress: bool) -> dict:
         m = maps.measure(crops)
         signal = read_out(m.irradiance_w_m2, m.irradiance_w_m2.min(0), setup, rng).frames_dn[:, 0]
         true_v.append(FRAME_RATE_HZ * k)
-        pred_v.append(_speed(signal, FRAME_RATE_HZ, omega_d_px, v_min, DIFFERENCE_ORDER))
-        plain_v.append(_speed(signal, FRAME_RATE_HZ, omega_d_px, v_min, 0))
+        v_max = FRAME_RATE_HZ * max(shifts)
+        pred_v.append(_speed(signal, FRAME_RATE_HZ, omega_d_px, v_min, DIFFERENCE_ORDER, v_max))
+        plain_v.append(_speed(signal, FRAME_RATE_HZ, omega_d_px, v_min, 0, v_max))
         spectra.append((signal, k))
     true_v, pred_v = np.array(true_v), np.array(pred_v)
     _plots(spectra, omega_d_px, true_v, pred_v, v_min, out_dir, "speed_road_video", "px/s")
@@ -113,8 +114,8 @@ def vehicle(setup: Setup, rng, out_dir: Path, show_progress: bool) -> dict:
             irr[i] = world.estimates(spp, seed=setup.seed).mean()  # same seed every frame: correlated noise
         signal = read_out(irr[:, None], np.array([irr.min()]), setup, rng).frames_dn[:, 0]
         true_v.append(v)
-        pred_v.append(_speed(signal, VEHICLE_RATE_HZ, omega_d, min(speeds), DIFFERENCE_ORDER))
-        plain_v.append(_speed(signal, VEHICLE_RATE_HZ, omega_d, min(speeds), 0))
+        pred_v.append(_speed(signal, VEHICLE_RATE_HZ, omega_d, min(speeds), DIFFERENCE_ORDER, max(speeds)))
+        plain_v.append(_speed(signal, VEHICLE_RATE_HZ, omega_d, min(speeds), 0, max(speeds)))
         spectra.append((signal, v))
     true_v, pred_v = np.array(true_v), np.array(pred_v)
     _plots(spectra, omega_d, true_v, pred_v, min(speeds), out_dir, "speed_vehicle", "m/s", VEHICLE_RATE_HZ)
@@ -131,10 +132,66 @@ def vehicle(setup: Setup, rng, out_dir: Path, show_progress: bool) -> dict:
     }
 
 
-def _speed(signal: np.ndarray, rate_hz: float, omega_d: float, v_min: float, order: int) -> float:
-    """Speed from the FFT peak of the ``order``-th difference of the signal, above half the lowest speed's peak."""
+def vehicle_trajectory(setup: Setup, rng, show_progress: bool) -> dict:
+    """Two sinusoid mixels, one on each side of a vehicle turning on a circle, give the two side speeds; with
+    the vehicle's width they give the turn radius and heading change (paper Sec. 4.3, last paragraph)."""
+    from ..estimators import trajectory_from_speeds
+    from ..render import scene_dicts as sd
+    from ..render.world import WorldRenderer, transform_update
+    from .common import read_out
+
+    d, width, v, radius = VEHICLE_HEIGHT_M, 1.6, 10.0, 5.0  # [m], [m], [m/s], [m] (turning left)
+    cam = Mincam(tuple(
+        sinusoid_mixel(setup, Pose((0.0, side * width / 2, d), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)), name)
+        for side, name in ((1, "left"), (-1, "right"))
+    ))
+    n_frames = 128 if setup.quick else 256
+    size = v * n_frames / VEHICLE_RATE_HZ + width + 1.0
+    road = objects.road_texture((512, 512), rng)  # ~7 mm texels: asphalt-scale grain
+    road_matrix = Pose((size / 2 - 0.5, 0.0, 0.0), (0.0, 0.0, 1.0), (0.0, 1.0, 0.0)).matrix() @ np.diag(
+        [size / 2, size / 2, 1, 1])
+    world = WorldRenderer(cam, {"road": sd.textured_plane(road, 2.0, 2.0, np.eye(4)), "sky": sd.sky(1.0)},
+                          replicates=4)
+    omega_d = float(scene_frequency(2 * np.pi / MASK_PERIOD_M, setup.d_f_m, d))
+    spp = 1 << 18 if setup.quick else 1 << 19
+    irr = np.empty((n_frames, 2))
+    for i in progress(range(n_frames), desc="turning vehicle", disable=not show_progress):
+        t = i / VEHICLE_RATE_HZ
+        heading = v / radius * t
+        centre = np.array([radius * np.sin(heading), radius * (1 - np.cos(heading))])  # vehicle on its circle
+        world_to_vehicle = Pose((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), (-np.sin(-heading), np.cos(-heading), 0.0))
+        move = world_to_vehicle.matrix()
+        move[:2, 3] = -move[:2, :2] @ centre
+        # the textured_plane spans [-1, 1]^2 scaled by 1 here, so road_matrix carries the road's size
+        world.update(transform_update("road", move @ road_matrix))
+        irr[i] = world.estimates(spp, seed=setup.seed).mean(axis=0)
+    dn = read_out(irr, irr.min(axis=0), setup, rng).frames_dn
+    speeds = [_speed(dn[:, k], VEHICLE_RATE_HZ, omega_d, 0.5 * v, DIFFERENCE_ORDER, 1.5 * v) for k in range(2)]
+    path = trajectory_from_speeds(np.array([speeds[0]]), np.array([speeds[1]]), width, n_frames / VEHICLE_RATE_HZ)
+    true_left, true_right = v * (1 - width / (2 * radius)), v * (1 + width / (2 * radius))
+    est_radius = float(path.turn_radius_m[0])
+    return {
+        "width_m": width,
+        "true_turn_radius_m": radius,
+        "estimated_turn_radius_m": est_radius,
+        "turn_radius_error_pct": abs(est_radius / radius - 1) * 100,
+        "true_side_speeds_m_s": [true_left, true_right],
+        "estimated_side_speeds_m_s": speeds,
+        "true_heading_change_rad": v / radius * n_frames / VEHICLE_RATE_HZ,
+        "estimated_heading_change_rad": float(path.heading_change_rad[0]),
+        "frames": n_frames,
+        "frame_rate_hz": VEHICLE_RATE_HZ,
+    }
+
+
+def _speed(signal: np.ndarray, rate_hz: float, omega_d: float, v_min: float, order: int,
+           v_max: float | None = None) -> float:
+    """Speed from the FFT peak of the ``order``-th difference of the signal, searched between half the slowest
+    and 1.5 x the fastest speed of interest (the band a speedometer is built for)."""
     f_min = 0.5 * omega_d * v_min / (2 * np.pi)
-    return float(speed_from_signal(np.diff(signal, n=order), rate_hz, omega_d, min_frequency_hz=f_min))
+    f_max = None if v_max is None else min(rate_hz / 2, 1.5 * omega_d * v_max / (2 * np.pi))
+    return float(speed_from_signal(np.diff(signal, n=order), rate_hz, omega_d, min_frequency_hz=f_min,
+                                   max_frequency_hz=f_max))
 
 
 def _plots(spectra, omega_d, true_v, pred_v, v_min, out_dir, stem, unit, rate=FRAME_RATE_HZ) -> None:
@@ -154,4 +211,5 @@ def run(setup: Setup, out_dir: Path, show_progress: bool = False) -> dict:
     result = road_video(setup, rng, out_dir, show_progress)
     result["paper"] = PAPER["speed"]
     result["vehicle"] = vehicle(setup, rng, out_dir, show_progress)
+    result["vehicle_trajectory"] = vehicle_trajectory(setup, rng, show_progress)
     return result
