@@ -55,27 +55,6 @@ class Measurements:
         """Radiant power on each detector [W] = irradiance x detector area."""
         return self.irradiance_w_m2 * np.asarray(detector_areas_m2, dtype=np.float64)[None, :]
 
-    def __sub__(self, other: Measurements) -> Measurements:
-        """Difference of two measurement sets assuming independent errors (use engine helpers for
-        correlated-seed differences, whose error is smaller)."""
-        return Measurements(
-            self.irradiance_w_m2 - other.irradiance_w_m2,
-            np.hypot(self.stderr_w_m2, other.stderr_w_m2),
-            list(self.mixel_names),
-            {"difference_of": [self.meta, other.meta]},
-        )
-
-    @staticmethod
-    def concatenate(parts: list[Measurements]) -> Measurements:
-        if not parts:
-            raise ValueError("nothing to concatenate")
-        return Measurements(
-            np.concatenate([p.irradiance_w_m2 for p in parts]),
-            np.concatenate([p.stderr_w_m2 for p in parts]),
-            list(parts[0].mixel_names),
-            dict(parts[0].meta),
-        )
-
     def save_npz(self, path: str | Path) -> Path:
         """Write arrays + JSON metadata to an ``.npz`` file."""
         path = Path(path)

@@ -67,7 +67,3 @@ class ResultStore:
         self.stderr.flush()
         self.done[indices] = True
         self.done.flush()
-
-    @property
-    def complete(self) -> bool:
-        return bool(np.all(self.done))

@@ -212,3 +212,32 @@ def test_response_maps_match_reference_on_unseen_frames():
     sigma = np.hypot(ref.stderr_w_m2, pred.stderr_w_m2)
     assert np.all(sigma / ref.irradiance_w_m2 < 0.02)
     assert_close_mc(pred.irradiance_w_m2, ref.irradiance_w_m2, sigma, what="response map vs reference")
+
+
+def test_scalar_fallback_reference_form_matches_closed_form():
+    """The scalar_rgb fallback (no LLVM, no GPU) renders the literal scene correctly; the fast form, a Python
+    plugin, refuses it with a clear message (run in a subprocess: the variant is per process)."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    code = (
+        "import json, numpy as np\n"
+        "from mincam_sim import Screen, masks, single\n"
+        "from mincam_sim.render.screen_engine import ScreenRenderer\n"
+        "r = ScreenRenderer(single(masks.constant(1.0)), Screen(), 'reference', replicates=8)\n"
+        "m = r.render(np.ones(Screen().shape), spp=1 << 17, seed=0)\n"
+        "try:\n"
+        "    ScreenRenderer(single(), Screen(), 'fast')\n"
+        "    err = ''\n"
+        "except RuntimeError as e:\n"
+        "    err = str(e)\n"
+        "print(json.dumps([float(m.irradiance_w_m2[0, 0]), float(m.stderr_w_m2[0, 0]), m.meta['variant'], err]))\n"
+    )
+    env = {**os.environ, "MINCAM_VARIANT": "scalar_rgb"}
+    out = subprocess.run([sys.executable, "-c", code], env=env, check=True, capture_output=True, text=True)
+    value, sigma, variant, err = json.loads(out.stdout.strip().splitlines()[-1])
+    assert variant == "scalar_rgb"
+    assert_close_mc(value, closed_form(Screen(), single()[0]), sigma, what="scalar_rgb reference")
+    assert "vectorised Mitsuba variant" in err

@@ -8,7 +8,7 @@ table (z = 0, seen from above with +y up) that is world (x, y); on the screen it
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
@@ -64,7 +64,6 @@ class Setup:
     camera_px: int = 160
     seed: int = 0
     quick: bool = False
-    extra: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         for key in ("depth_m", "d_f_m", "detector_size_m", "mask_size_m", "field_m"):

@@ -149,25 +149,14 @@ def _main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     mi = mitsuba()
     if args.check:
+        from .scene_dicts import irradiancemeter
+
         scene = mi.load_dict(
             {
                 "type": "scene",
                 "integrator": {"type": "path"},
                 "emitter": {"type": "constant", "radiance": {"type": "spectrum", "value": 1.0}},
-                "shape": {
-                    "type": "rectangle",
-                    "sensor": {
-                        "type": "irradiancemeter",
-                        "sampler": {"type": "independent", "sample_count": 1024},
-                        "film": {
-                            "type": "hdrfilm",
-                            "width": 1,
-                            "height": 1,
-                            "pixel_format": "luminance",
-                            "rfilter": {"type": "box"},
-                        },
-                    },
-                },
+                "shape": {"type": "rectangle", "sensor": irradiancemeter(1024)},
             }
         )
         value = float(mi.TensorXf(mi.render(scene)).numpy().mean())

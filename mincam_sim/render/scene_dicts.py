@@ -47,6 +47,15 @@ def bitmap_dict(array: np.ndarray, filter_type: str = "bilinear") -> dict:
     }
 
 
+def irradiancemeter(spp: int) -> dict:
+    """Mitsuba's irradiance meter (attach to a shape): mean irradiance over the shape [W/m^2], 1 x 1 film."""
+    return {
+        "type": "irradiancemeter",
+        "sampler": {"type": "independent", "sample_count": int(spp)},
+        "film": {"type": "hdrfilm", "width": 1, "height": 1, "pixel_format": "luminance", "rfilter": {"type": "box"}},
+    }
+
+
 def mask_surface_matrix(mixel: Mixel) -> np.ndarray:
     """World matrix of a mixel's mask rectangle (see module docstring for the orientation)."""
     w, h = mixel.mask.width_m, mixel.mask.height_m
@@ -93,17 +102,7 @@ def mixel_reference_shapes(mixel: Mixel, key: str, spp: int, max_bounce_depth: i
             "type": "rectangle",
             "to_world": _transform(detector),
             "bsdf": black_bsdf(),
-            "sensor": {
-                "type": "irradiancemeter",
-                "sampler": {"type": "independent", "sample_count": int(spp)},
-                "film": {
-                    "type": "hdrfilm",
-                    "width": 1,
-                    "height": 1,
-                    "pixel_format": "luminance",
-                    "rfilter": {"type": "box"},
-                },
-            },
+            "sensor": irradiancemeter(spp),
         },
         f"{key}_mask": {
             "type": "rectangle",

@@ -40,6 +40,8 @@ def trace_groups(
         Seed of the independent sampler; each kernel launch derives its own.
     """
     mi = backend.mitsuba()
+    if not backend.is_jit():
+        return _render_groups_scalar(mi, scene, sensor, n_groups, samples_per_group, seed, position_sample)
     import drjit as dr
 
     integrator = scene.integrator()
@@ -67,3 +69,14 @@ def trace_groups(
                 value = value.reshape(ng * ns, -1).mean(axis=1)
             totals[g0 : g0 + ng] += value.reshape(ng, ns).sum(axis=1)
     return totals / samples_per_group
+
+
+def _render_groups_scalar(mi, scene, sensor, n_groups, samples_per_group, seed, position_sample) -> np.ndarray:
+    """Scalar variants trace one ray at a time in C++: use ``mi.render`` (1 x 1 film, one render per group)."""
+    if position_sample is not None:
+        backend.require_jit("Tracing groups with a position-sample map (the fast mixel sensor)")
+    out = np.empty(n_groups)
+    for g in range(n_groups):
+        image = mi.render(scene, sensor=sensor, spp=int(samples_per_group), seed=(seed * 1_000_003 + g) & 0x7FFFFFFF)
+        out[g] = float(np.asarray(image, dtype=np.float64).mean())
+    return out
