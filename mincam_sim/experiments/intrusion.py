@@ -11,6 +11,8 @@ from ..estimators import intrusion_position
 from .common import (
     PAPER,
     Setup,
+    camera_fov_deg,
+    camera_pixel_to_table,
     fit_calibration_1d,
     intrusion_mincam,
     locate_in_world,
@@ -64,7 +66,7 @@ def run(setup: Setup, out_dir: Path, show_progress: bool = False) -> dict:
                                   "car_b": (car_b.positions_m[i], car_b.headings_rad[i])})
               for i in range(len(car_a.times_s))]
     background = toy_updates(table, {})
-    camera = sd.pinhole_camera(setup.center.matrix(), _fov(setup), setup.camera_px, setup.camera_px, spp=32)
+    camera = sd.pinhole_camera(setup.center.matrix(), camera_fov_deg(setup), setup.camera_px, setup.camera_px, spp=32)
     world = WorldRenderer(cam, world_elements(table), replicates=8, camera=camera)
     spp = setup.spp // 2 if setup.quick else setup.spp
     calibration = cal["calibration"]
@@ -86,15 +88,7 @@ def run(setup: Setup, out_dir: Path, show_progress: bool = False) -> dict:
     return result
 
 
-def _fov(setup: Setup) -> float:
-    from .common import camera_fov_deg
-
-    return camera_fov_deg(setup)
-
-
 def _band_region(setup: Setup, shape) -> np.ndarray:
-    from .common import camera_pixel_to_table
-
     rows, cols = np.indices(shape)
     xy = camera_pixel_to_table(setup, rows, cols, shape)
     return np.abs(xy[..., 0] - BOUNDARY_X_M) <= BAND_M / 2
