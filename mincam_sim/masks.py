@@ -22,6 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
+from . import mask_profiles as prof
+from .mask_profiles import MaskProfile
+
 DEFAULT_MASK_SIZE_M = 2e-3  # [m] square mask side: with d_f = 2 mm it gives a ~53 degree field of view
 DEFAULT_RESOLUTION = 256  # texels per side of generated masks
 MAX_TEXELS = 8192 * 8192
@@ -39,6 +42,15 @@ class Mask:
         Physical size of the mask [m].
     name : str
         Short label used in file names and metadata.
+    meta : dict
+        Free-form description (generator parameters, film ...).
+    profile : MaskProfile, optional
+        The exact analytic transmission (set by the generators: ramps, sinusoids, circular ramps ...). The
+        renderer evaluates it at every ray, so the texel array is then only a picture of the mask; without a
+        profile the array *is* the mask, reconstructed with ``interpolation``.
+    interpolation : {"bilinear", "nearest"}
+        How a raster mask (no profile) is read between texels: ``"bilinear"`` between texel centres (smooth
+        images) or ``"nearest"`` (piecewise-constant printer dots).
     """
 
     transmission: np.ndarray
@@ -46,6 +58,8 @@ class Mask:
     height_m: float = DEFAULT_MASK_SIZE_M
     name: str = "mask"
     meta: dict = field(default_factory=dict)
+    profile: MaskProfile | None = None
+    interpolation: str = "bilinear"
 
     def __post_init__(self) -> None:
         t = np.array(self.transmission, dtype=np.float64, copy=True)
@@ -78,6 +92,11 @@ class Mask:
             v = getattr(self, key)
             if not (np.isfinite(v) and v > 0):
                 raise ValueError(f"mask {self.name!r}: {key} must be a positive size in metres, got {v!r}")
+        if self.profile is not None and not isinstance(self.profile, MaskProfile):
+            raise TypeError(f"mask {self.name!r}: profile must be a mincam_sim.mask_profiles.MaskProfile or None")
+        if self.interpolation not in ("bilinear", "nearest"):
+            raise ValueError(f"mask {self.name!r}: interpolation must be 'bilinear' or 'nearest', "
+                             f"got {self.interpolation!r}")
         t.setflags(write=False)
         object.__setattr__(self, "transmission", t)
         object.__setattr__(self, "width_m", float(self.width_m))
@@ -95,11 +114,33 @@ class Mask:
 
     def scaled(self, k: float) -> Mask:
         """The same mask with transmission multiplied by ``k`` (result must stay in [0, 1])."""
-        return Mask(self.transmission * k, self.width_m, self.height_m, f"{self.name}*{k:g}", dict(self.meta))
+        profile = None if self.profile is None else prof.Affine(self.profile, float(k), 0.0)
+        return Mask(self.transmission * k, self.width_m, self.height_m, f"{self.name}*{k:g}", dict(self.meta),
+                    profile, self.interpolation)
 
     def complement(self) -> Mask:
         """The complementary mask 1 - M."""
-        return Mask(1.0 - self.transmission, self.width_m, self.height_m, f"1-{self.name}", dict(self.meta))
+        profile = None if self.profile is None else prof.Affine(self.profile, -1.0, 1.0)
+        return Mask(1.0 - self.transmission, self.width_m, self.height_m, f"1-{self.name}", dict(self.meta),
+                    profile, self.interpolation)
+
+    @property
+    def is_analytic(self) -> bool:
+        """True when the renderer evaluates the mask exactly (a profile), not from its texel array."""
+        return self.profile is not None
+
+    def fingerprint_parts(self) -> dict:
+        """Everything that determines what this mask transmits (for run identities)."""
+        import hashlib
+
+        return {
+            "transmission_sha256": hashlib.sha256(np.ascontiguousarray(self.transmission).tobytes()).hexdigest(),
+            "shape": list(self.shape),
+            "width_m": self.width_m,
+            "height_m": self.height_m,
+            "profile": None if self.profile is None else self.profile.describe(),
+            "interpolation": self.interpolation,
+        }
 
     def normalized_coords(self) -> tuple[np.ndarray, np.ndarray]:
         """Texel-centre coordinates (x, y) in [0, 1], x left to right, y bottom to top, each (H, W)."""
@@ -140,6 +181,23 @@ def from_function(
     return Mask(values, width_m, width_m if height_m is None else height_m, name, meta)
 
 
+def from_profile(
+    profile: MaskProfile,
+    name: str,
+    resolution: int | tuple[int, int] = DEFAULT_RESOLUTION,
+    width_m: float = DEFAULT_MASK_SIZE_M,
+    height_m: float | None = None,
+    **meta,
+) -> Mask:
+    """An analytic mask: exact ``profile`` (evaluated per ray when rendering) and its texel picture."""
+    h, w = _check_resolution(resolution)
+    hgt = width_m if height_m is None else height_m
+    for key, v in (("width_m", width_m), ("height_m", hgt)):
+        if not (np.isfinite(v) and v > 0):
+            raise ValueError(f"mask {name!r}: {key} must be a positive size in metres, got {v!r}")
+    return Mask(prof.sample(profile, (h, w), width_m, hgt), width_m, hgt, name, meta, profile)
+
+
 def ramp(
     kind: str = "x",
     resolution: int | tuple[int, int] = DEFAULT_RESOLUTION,
@@ -147,10 +205,12 @@ def ramp(
     height_m: float | None = None,
 ) -> Mask:
     """Linear ramp mask: ``kind`` is ``"x"``, ``"1-x"``, ``"y"`` or ``"1-y"`` (the paper's Eq. 2 and 5)."""
-    funcs = {"x": lambda x, y: x, "1-x": lambda x, y: 1 - x, "y": lambda x, y: y, "1-y": lambda x, y: 1 - y}
-    if kind not in funcs:
-        raise ValueError(f"unknown ramp {kind!r}: choose one of {', '.join(funcs)}")
-    return from_function(funcs[kind], f"ramp_{kind}", resolution, width_m, height_m, kind="ramp", ramp=kind)
+    kinds = ("x", "1-x", "y", "1-y")
+    if kind not in kinds:
+        raise ValueError(f"unknown ramp {kind!r}: choose one of {', '.join(kinds)}")
+    hgt = width_m if height_m is None else height_m
+    return from_profile(prof.Ramp(kind, float(width_m), float(hgt)), f"ramp_{kind}", resolution, width_m, hgt,
+                        kind="ramp", ramp=kind)
 
 
 def constant(
@@ -160,10 +220,10 @@ def constant(
     height_m: float | None = None,
 ) -> Mask:
     """Uniform mask of transmission ``value`` (1 = open aperture)."""
-    return from_function(
-        lambda x, y: np.full_like(x, value), f"constant_{value:g}", resolution, width_m, height_m,
-        kind="constant", value=value,
-    )
+    if not (np.isfinite(value) and 0.0 <= value <= 1.0):
+        raise ValueError(f"constant mask transmission must lie in [0, 1], got {value!r}")
+    return from_profile(prof.Constant(float(value)), f"constant_{value:g}", resolution, width_m, height_m,
+                        kind="constant", value=value)
 
 
 def sinusoid(
@@ -194,15 +254,9 @@ def sinusoid(
     if a0 - abs(a1) < -1e-12 or a0 + abs(a1) > 1 + 1e-12:
         raise ValueError(f"sinusoid a0={a0}, a1={a1} leaves [0, 1]: need a0 - |a1| >= 0 and a0 + |a1| <= 1")
     hgt = width_m if height_m is None else height_m
-    t = np.deg2rad(direction_deg)
-
-    def func(x, y):
-        xm, ym = (x - 0.5) * width_m, (y - 0.5) * hgt
-        arg = omega_rad_per_m * (xm * np.cos(t) + ym * np.sin(t)) + phase_rad
-        return np.clip(a0 + a1 * np.cos(arg), 0, 1)
-
-    return from_function(
-        func, f"sinusoid_{omega_rad_per_m:g}", resolution, width_m, hgt, kind="sinusoid",
+    profile = prof.Sinusoid(float(omega_rad_per_m), float(a0), float(a1), float(phase_rad), float(direction_deg))
+    return from_profile(
+        profile, f"sinusoid_{omega_rad_per_m:g}", resolution, width_m, hgt, kind="sinusoid",
         omega_rad_per_m=omega_rad_per_m, a0=a0, a1=a1, phase_rad=phase_rad, direction_deg=direction_deg,
     )
 
@@ -433,7 +487,8 @@ def circular_ramp(
         frac = np.where(outside, np.where(d_start <= d_end, 0.0, 1.0), frac)
     frac = np.where((dx == 0) & (dy == 0), 0.0, np.clip(frac, 0.0, 1.0))  # centre: all points tie -> start
     meta["values"] = [v0, v1]
-    return Mask(np.clip(v0 + (v1 - v0) * frac, 0.0, 1.0), width_m, hgt, name, meta)
+    profile = prof.CircularArc(float(cx), float(cy), float(r_m), float(start_angle_deg), float(sweep_deg), v0, v1)
+    return Mask(np.clip(v0 + (v1 - v0) * frac, 0.0, 1.0), width_m, hgt, name, meta, profile)
 
 
 # ============================================================================================ file I/O
@@ -722,7 +777,8 @@ class PrintedFilm:
         t = self.t_min + (self.t_max - self.t_min) * v**self.gamma
         meta = dict(mask.meta)
         meta.update({"film": asdict(self), "printed_from": mask.name})
-        return Mask(np.clip(t, 0.0, 1.0), mask.width_m, mask.height_m, f"{mask.name}@film", meta)
+        return Mask(np.clip(t, 0.0, 1.0), mask.width_m, mask.height_m, f"{mask.name}@film", meta,
+                    interpolation="nearest")
 
 
 def _dot_grid(width_m: float, height_m: float, dpi: float) -> tuple[int, int]:

@@ -74,6 +74,12 @@ class Mixel:
     def with_mask(self, mask: Mask) -> Mixel:
         return replace(self, mask=mask)
 
+    def body_corners_m(self) -> np.ndarray:
+        """World coordinates (8, 3) [m] of the mixel's body: the box from the detector plane to the mask."""
+        hw, hh = self.mask.width_m / 2, self.mask.height_m / 2
+        local = np.array([(x, y, z) for x in (-hw, hw) for y in (-hh, hh) for z in (0.0, self.d_f_m)])
+        return self.pose.to_world(local)
+
     def half_fov_tan(self) -> tuple[float, float]:
         """tan of the half field of view (x, y): widest ray from a detector edge through the far mask edge."""
         return (
@@ -84,9 +90,16 @@ class Mixel:
 
 @dataclass(frozen=True, eq=False)
 class Mincam:
-    """A minimalist camera: several mixels, each with its own pose, mask and d_f."""
+    """A minimalist camera: several mixels, each with its own pose, mask and d_f.
+
+    Every mixel's body (housing box from its detector plane to its mask, closed at the back) is an opaque
+    object in every other mixel's view, in every render form. Bodies that intersect are physically impossible
+    and refused, unless ``allow_overlap`` is set: then the mincam is an idealisation (e.g. co-located mixels,
+    spacing 0) and each mixel is rendered as if it were alone, without the others' bodies.
+    """
 
     mixels: tuple[Mixel, ...]
+    allow_overlap: bool = False
 
     def __post_init__(self) -> None:
         mixels = tuple(self.mixels)
@@ -96,6 +109,21 @@ class Mincam:
         if len(set(names)) != len(names):
             raise ValueError(f"mixel names must be unique, got {names}")
         object.__setattr__(self, "mixels", mixels)
+        if not self.allow_overlap:
+            for i, a in enumerate(mixels):
+                for b in mixels[i + 1 :]:
+                    if bodies_overlap(a, b):
+                        raise ValueError(
+                            f"the bodies of mixels {a.name!r} and {b.name!r} intersect (each is a "
+                            f"{a.mask.width_m * 1e3:g} x {a.mask.height_m * 1e3:g} x {a.d_f_m * 1e3:g} mm box from "
+                            "its detector to its mask): move them apart, or pass allow_overlap=True to render an "
+                            "idealised mincam in which each mixel sees the scene as if it were alone"
+                        )
+
+    @property
+    def occluding_bodies(self) -> bool:
+        """True when the mixels' bodies are part of each other's scene (False for idealised overlaps)."""
+        return not self.allow_overlap
 
     def __len__(self) -> int:
         return len(self.mixels)
@@ -111,6 +139,28 @@ class Mincam:
         return [m.name for m in self.mixels]
 
 
+def bodies_overlap(a: Mixel, b: Mixel, tolerance_m: float = 1e-9) -> bool:
+    """True if the two mixels' body boxes share interior volume (separating-axis test of two oriented boxes)."""
+    boxes = []
+    for m in (a, b):
+        axes = m.pose.matrix()[:3, :3].T  # rows: local x, y, z in world coordinates
+        half = np.array([m.mask.width_m / 2, m.mask.height_m / 2, m.d_f_m / 2])
+        center = np.asarray(m.pose.position_m) + axes[2] * m.d_f_m / 2
+        boxes.append((center, axes, half))
+    (ca, ua, ha), (cb, ub, hb) = boxes
+    candidates = [*ua, *ub] + [np.cross(x, y) for x in ua for y in ub]
+    for axis in candidates:
+        norm = np.linalg.norm(axis)
+        if norm < 1e-12:
+            continue
+        axis = axis / norm
+        ra = np.sum(ha * np.abs(ua @ axis))
+        rb = np.sum(hb * np.abs(ub @ axis))
+        if abs((cb - ca) @ axis) >= ra + rb - tolerance_m:
+            return False
+    return True
+
+
 def layout(
     masks: Sequence[Mask],
     offsets_m: Sequence[tuple[float, float]],
@@ -118,10 +168,13 @@ def layout(
     center: Pose | None = None,
     d_f_m: float = DEFAULT_D_F_M,
     detector_size_m: float = DEFAULT_DETECTOR_SIZE_M,
+    allow_overlap: bool | None = None,
 ) -> Mincam:
     """Mincam with mixels placed at in-plane offsets (right, up) [m] from a centre pose, all facing its way.
 
     Offsets are in the viewer's frame: +right, +up, as seen looking along the centre pose's forward axis.
+    ``allow_overlap=None`` allows it only where bodies do intersect (e.g. spacing 0, the idealised co-located
+    mincam of the paper's model); ``False`` refuses it.
     """
     if len(masks) != len(offsets_m):
         raise ValueError(f"{len(masks)} masks but {len(offsets_m)} offsets: give one offset per mask")
@@ -132,7 +185,9 @@ def layout(
     for mask, (dx, dy), name in zip(masks, offsets_m, names, strict=True):
         offset = -dx * left + dy * up
         mixels.append(Mixel(mask, d_f_m, detector_size_m, center.translated(tuple(offset)), name))
-    return Mincam(tuple(mixels))
+    if allow_overlap is None:
+        allow_overlap = any(bodies_overlap(a, b) for i, a in enumerate(mixels) for b in mixels[i + 1 :])
+    return Mincam(tuple(mixels), allow_overlap=allow_overlap)
 
 
 def pair_layout(spacing_m: float = PAPER_SPACING_M, resolution: int = 256, **kw) -> Mincam:

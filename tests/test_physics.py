@@ -98,7 +98,7 @@ def test_mask_orientation_projects_without_inversion():
     frames = [white_square(screen, (sx * 0.12, sy * 0.12), 0.1) for sx, sy in ((1, 1), (-1, 1), (1, -1), (-1, -1))]
     m = renderer.render(frames, spp=SPP, seed=3)
     top_right, others = m.irradiance_w_m2[0, 0], m.irradiance_w_m2[1:, 0]
-    assert top_right > 50 * m.stderr_w_m2[0, 0]
+    assert top_right > 20 * m.stderr_w_m2[0, 0]  # clearly lit (the reference form has ~2 % noise here)
     assert np.all(others == 0.0)
     maps = response_maps(cam, screen, samples_per_texel=4, seed=3).weights_sr[0]
     gx, gy = screen.texel_centers_m()
@@ -135,7 +135,8 @@ def test_sinusoid_mask_frequency_scales_with_depth(depth_m):
     d_f = 2e-3
     sin_mask = masks.sinusoid(omega_df, 0.5, 0.5, resolution=512)
     screen = Screen(width_m=1.2, height_m=1.2, resolution=(480, 8), pose=Pose((0, 0, -depth_m), (0, 0, 1)))
-    cam = Mincam((Mixel(sin_mask, d_f, name="sin"), Mixel(masks.constant(1.0), d_f, name="open")))
+    cam = Mincam((Mixel(sin_mask, d_f, name="sin"), Mixel(masks.constant(1.0), d_f, name="open")),
+                 allow_overlap=True)  # co-located: each rendered as if alone
     maps = response_maps(cam, screen, samples_per_texel=16, seed=5)
     gx, _ = screen.texel_centers_m()
     x = gx[0]

@@ -17,8 +17,10 @@ from .. import objects
 from ..calibration import Calibration1D, Calibration2D
 from ..estimators import noise_threshold
 from ..geometry import Pose
+from ..mask_profiles import Band, Ramp
 from ..masks import Mask
 from ..optics import Mincam, layout
+from ..scene.tabletop import Tabletop
 from ..screen import Screen, Sweep, grid_sweep, line_sweep
 from ..sensor import SensorModel
 
@@ -105,13 +107,10 @@ def band_ramp(setup: Setup, kind: str, boundary_x_m: float, band_m: float) -> Ma
         raise ValueError(f"band ramp kind must be 'y' or '1-y', got {kind!r}")
     u0 = setup.scene_to_mask(boundary_x_m)
     half = band_m * setup.d_f_m / setup.depth_m / setup.mask_size_m / 2
-
-    def func(x, y):
-        ramp = y if kind == "y" else 1.0 - y
-        return np.where(np.abs(x - u0) <= half, ramp, 0.0)
-
-    return masks_mod.from_function(func, f"band_ramp_{kind}", setup.mask_resolution, setup.mask_size_m,
-                                   kind="band_ramp", ramp=kind, boundary_x_m=boundary_x_m, band_m=band_m)
+    size = setup.mask_size_m
+    profile = Band(Ramp(kind, size, size), (u0 - half - 0.5) * size, (u0 + half - 0.5) * size)
+    return masks_mod.from_profile(profile, f"band_ramp_{kind}", setup.mask_resolution, size,
+                                  kind="band_ramp", ramp=kind, boundary_x_m=boundary_x_m, band_m=band_m)
 
 
 def intrusion_mincam(setup: Setup, boundary_x_m: float, band_m: float) -> Mincam:
@@ -148,7 +147,7 @@ def mincam_on_screen(mincam: Mincam, setup: Setup) -> Mincam:
         local = setup.center.to_local(np.asarray(m.pose.position_m))
         world = Pose().to_world(local)
         mixels.append(m.with_pose(Pose(tuple(world), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0))))
-    return Mincam(tuple(mixels))
+    return Mincam(tuple(mixels), allow_overlap=mincam.allow_overlap)
 
 
 @dataclass
@@ -241,51 +240,23 @@ def fit_calibration_2d(observed: np.ndarray, true_m: np.ndarray, meta: dict) -> 
 # Tabletop world and ground truth
 
 
-@dataclass
-class Tabletop:
-    """A printed background on a table, an area light above, toys that move (pure description)."""
-
-    background: np.ndarray
-    size_m: float
-    toys: dict  # name -> trimesh.Trimesh (object frame)
-    light_radiance_w_m2_sr: float
-    light_size_m: float = 0.6
-    light_height_m: float = 1.5
-    park_m: tuple[float, float] = (20.0, 20.0)  # where toys wait, far outside every field of view
-
-
 def make_tabletop(setup: Setup, toys: dict, rng: np.random.Generator) -> Tabletop:
     background = objects.printed_background((256, 256), rng, kind="paper")
     return Tabletop(background, 1.2, toys, setup.table_light_radiance_w_m2_sr)
 
 
 def world_elements(table: Tabletop) -> dict:
-    """Mitsuba elements of a tabletop (render layer)."""
-    from ..render import scene_dicts as sd
+    """Mitsuba elements of a tabletop (built by the render layer)."""
+    from ..render.elements import tabletop_elements
 
-    elements = {
-        "table": sd.textured_plane(table.background, table.size_m, table.size_m,
-                                   Pose((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)).matrix()),
-        "light": sd.area_light(table.light_size_m, table.light_size_m,
-                               Pose((0.0, 0.0, table.light_height_m), (0.0, 0.0, -1.0)).matrix(),
-                               table.light_radiance_w_m2_sr),
-    }
-    for name, mesh in table.toys.items():
-        vertices = objects.mesh_at(mesh, table.park_m, 0.0)
-        elements[name] = sd.mesh_object(name, vertices, mesh.faces, float(mesh.metadata.get("albedo", 0.8)))
-    return elements
+    return tabletop_elements(table)
 
 
 def toy_updates(table: Tabletop, placements: dict) -> dict:
     """Parameter updates placing toys: ``placements[name] = (position (2,), heading)`` or None (parked)."""
-    from ..render.world import vertex_update
+    from ..render.elements import toy_updates as updates
 
-    updates = {}
-    for name, mesh in table.toys.items():
-        where = placements.get(name)
-        pos, heading = (table.park_m, 0.0) if where is None else where
-        updates.update(vertex_update(name, objects.mesh_at(mesh, pos, heading)))
-    return updates
+    return updates(table, placements)
 
 
 def camera_fov_deg(setup: Setup) -> float:

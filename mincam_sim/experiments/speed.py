@@ -84,8 +84,9 @@ def road_video(setup: Setup, rng, out_dir: Path, show_progress: bool) -> dict:
 
 def vehicle(setup: Setup, rng, out_dir: Path, show_progress: bool) -> dict:
     """The physical version: a mixel at height d over a textured road moving at v."""
-    from ..render import scene_dicts as sd
-    from ..render.world import WorldRenderer, transform_update
+    from ..render.elements import road_elements, road_update
+    from ..render.world import WorldRenderer
+    from ..scene.road import Road
     from .common import read_out
 
     d = VEHICLE_HEIGHT_M
@@ -94,15 +95,8 @@ def vehicle(setup: Setup, rng, out_dir: Path, show_progress: bool) -> dict:
     speeds = VEHICLE_SPEEDS_M_S[::2] if setup.quick else VEHICLE_SPEEDS_M_S
     length = max(speeds) * n_frames / VEHICLE_RATE_HZ + 1.0  # travel plus 0.5 m margins [m]
     width = 0.6  # [m], wider than the field of view at this height
-    road = objects.road_texture((512, 4096), rng)
-
-    def road_at(center_x: float) -> np.ndarray:
-        pose = Pose((center_x, 0.0, 0.0), (0.0, 0.0, 1.0), (0.0, 1.0, 0.0))
-        return pose.matrix() @ np.diag([length / 2, width / 2, 1, 1])
-
-    elements = {"road": sd.textured_plane(road, length, width, Pose((0, 0, 0), (0, 0, 1)).matrix()),
-                "sky": sd.sky(1.0)}
-    world = WorldRenderer(cam, elements, replicates=4)
+    road = Road(objects.road_texture((512, 4096), rng), length, width, sky_radiance_w_m2_sr=1.0)
+    world = WorldRenderer(cam, road_elements(road), replicates=4)
     omega_d = float(scene_frequency(2 * np.pi / MASK_PERIOD_M, setup.d_f_m, d))
     spp = 1 << 17 if setup.quick else 1 << 19
     true_v, pred_v, plain_v, spectra = [], [], [], []
@@ -110,7 +104,7 @@ def vehicle(setup: Setup, rng, out_dir: Path, show_progress: bool) -> dict:
         irr = np.empty(n_frames)
         for i in range(n_frames):
             # the vehicle moves +x at v: the road under the mixel (at x = 0) moves -x, starting 0.5 m from its end
-            world.update(transform_update("road", road_at(length / 2 - 0.5 - v * i / VEHICLE_RATE_HZ)))
+            world.update(road_update(road, length / 2 - 0.5 - v * i / VEHICLE_RATE_HZ))
             irr[i] = world.estimates(spp, seed=setup.seed).mean()  # same seed every frame: correlated noise
         signal = read_out(irr[:, None], np.array([irr.min()]), setup, rng).frames_dn[:, 0]
         true_v.append(v)

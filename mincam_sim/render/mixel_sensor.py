@@ -11,8 +11,10 @@ Estimator (irradiance averaged over the detector, W/m^2)::
 with ``x_d`` uniform on the detector (from the sub-pixel film position) and ``x_m`` uniform on the mask (from
 the aperture sample): ``weight = A_m T(x_m) cos(t_d) cos(t_m) / r^2`` and both cosines equal the local z of the
 ray direction (detector and mask are parallel). The integrator then returns the radiance L arriving along the
-ray. The mask is applied as a weight, not as a surface, so no ray is wasted on the mask or the housing; rays
-start on the mask plane, so the mixels' own geometry is not part of the fast-form scene.
+ray. The mask is applied as a weight, not as a surface, so no ray is wasted on the mask or the housing.
+Masks with an analytic profile are evaluated exactly (:mod:`.mask_eval`). Rays start on the mask plane (a
+hair's breadth beyond it, :data:`START_OFFSET_M`, so that they never meet the body they leave); the other
+mixels' bodies are part of the scene (:func:`.scene_dicts.mincam_body_shapes`) and shadow what they hide.
 """
 
 from __future__ import annotations
@@ -23,9 +25,10 @@ import numpy as np
 
 from ..optics import Mixel
 from . import backend
-from .scene_dicts import mask_transmission_texture
+from .mask_eval import MaskEvaluator, local_to_mask_xy
 
 PLUGIN_NAME = "mincam_mixel_array"
+START_OFFSET_M = 1e-6  # [m] rays start this far along their direction past the mask plane (0.05 % of d_f)
 
 
 def _make_class():
@@ -47,7 +50,7 @@ def _make_class():
             self._geometry = [
                 (m.d_f_m, m.detector_size_m, m.mask.width_m, m.mask.height_m) for m in mixels
             ]
-            self._textures = [mi.load_dict(mask_transmission_texture(m.mask)) for m in mixels]
+            self._masks = [MaskEvaluator(m.mask) for m in mixels]
 
         def update_pose(self, index: int, matrix: np.ndarray) -> None:
             self._matrices[index] = mi.Transform4f(np.asarray(matrix).tolist())
@@ -66,16 +69,14 @@ def _make_class():
                 d_f, det, w, h = self._geometry[k]
                 sel = active & (index == k)
                 x_d = mi.Point3f((frac_x - 0.5) * det, (frac_y - 0.5) * det, 0.0)
-                x_m = mi.Point3f((0.5 - sample3.x) * w, (0.5 - sample3.y) * h, d_f)
+                x_m = mi.Point3f((sample3.x - 0.5) * w, (sample3.y - 0.5) * h, d_f)
                 delta = mi.Vector3f(x_m - x_d)
                 r2 = dr.squared_norm(delta)
                 d_local = delta * dr.rsqrt(r2)
-                si = dr.zeros(mi.SurfaceInteraction3f)
-                si.uv = mi.Point2f(sample3.x, sample3.y)
-                transmission = self._textures[k].eval_1(si, sel)
+                transmission = self._masks[k](*local_to_mask_xy(x_m.x, x_m.y), sel)
                 w_k = (w * h) * transmission * d_local.z * d_local.z / r2
                 to_world = self._matrices[k]
-                origin = dr.select(sel, to_world @ x_m, origin)
+                origin = dr.select(sel, to_world @ mi.Point3f(x_m + d_local * START_OFFSET_M), origin)
                 direction = dr.select(sel, dr.normalize(to_world @ d_local), direction)
                 weight = dr.select(sel, w_k, weight)
             ray = mi.Ray3f(origin, direction, time, [])

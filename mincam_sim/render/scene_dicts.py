@@ -14,15 +14,47 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..masks import Mask
 from ..optics import Mixel
 from ..screen import Screen
 from . import backend
 
 
-def _transform(matrix: np.ndarray):
+class SceneFrame:
+    """Where world metres go in a Mitsuba scene: ``scene = scale * (world - origin_m)``.
+
+    Mitsuba restarts a ray that crossed a surface (the reference form's mask) at an offset of about
+    ``9e-5 * (1 + max|p|)`` scene units. In metres with the mixel near the origin that is ~90 um: close
+    occluders would seem that much nearer. Scenes of the literal mixel are therefore built in millimetres
+    around the mixel itself (``SceneFrame.millimetres_around(p)``), where the offset is ~0.3 um.
+    Irradiance and radiance do not depend on the length unit.
+    """
+
+    def __init__(self, origin_m=(0.0, 0.0, 0.0), scale: float = 1.0) -> None:
+        self.origin_m = np.asarray(origin_m, dtype=np.float64)
+        self.scale = float(scale)
+
+    @classmethod
+    def millimetres_around(cls, origin_m) -> SceneFrame:
+        return cls(origin_m, 1e3)
+
+    def matrix(self) -> np.ndarray:
+        """4 x 4 world -> scene matrix."""
+        m = np.eye(4) * self.scale
+        m[3, 3] = 1.0
+        m[:3, 3] = -self.scale * self.origin_m
+        return m
+
+    def apply(self, matrix: np.ndarray) -> np.ndarray:
+        """A local -> world matrix turned into local -> scene."""
+        return self.matrix() @ np.asarray(matrix, dtype=np.float64)
+
+
+WORLD = SceneFrame()
+
+
+def _transform(matrix: np.ndarray, frame: SceneFrame = WORLD):
     mi = backend.mitsuba()
-    return mi.ScalarTransform4f(np.asarray(matrix, dtype=np.float64).tolist())
+    return mi.ScalarTransform4f(frame.apply(matrix).tolist())
 
 
 def black_bsdf() -> dict:
@@ -64,11 +96,6 @@ def mask_surface_matrix(mixel: Mixel) -> np.ndarray:
     return mixel.pose.matrix() @ local
 
 
-def mask_transmission_texture(mask: Mask) -> dict:
-    """The transmission texture of a mask (bilinear between texel centres, clamped at the edges)."""
-    return bitmap_dict(mask.transmission)
-
-
 def housing_matrices(mixel: Mixel) -> list[np.ndarray]:
     """World matrices of the 4 walls of the black tube between detector plane (z = 0) and mask (z = d_f)."""
     w, h, d = mixel.mask.width_m, mixel.mask.height_m, mixel.d_f_m
@@ -89,33 +116,68 @@ def housing_matrices(mixel: Mixel) -> list[np.ndarray]:
     return walls
 
 
-def mixel_reference_shapes(mixel: Mixel, key: str, spp: int, max_bounce_depth: int = 1) -> dict:
+BACK_PLATE_GAP = 1e-3  # back plate this fraction of d_f behind the detector plane (no coplanar surfaces)
+
+
+def back_plate_matrix(mixel: Mixel) -> np.ndarray:
+    """World matrix of the body's back (a black plate of the mask's size just behind the detector plane)."""
+    w, h = mixel.mask.width_m, mixel.mask.height_m
+    local = np.diag([w / 2, h / 2, 1.0, 1.0])
+    local[2, 3] = -BACK_PLATE_GAP * mixel.d_f_m
+    return mixel.pose.matrix() @ local
+
+
+def mixel_body_shapes(mixel: Mixel, key: str, frame: SceneFrame = WORLD) -> dict:
+    """A mixel's body as an occluder for the other mixels: 4 black housing walls and a black back plate.
+
+    The front (the mask) is left open: whatever enters through it is absorbed inside the closed black box, so
+    from outside the body is an opaque black box, and a mixel's own rays (which start on its mask plane) never
+    meet its own body.
+    """
+    shapes = {f"{key}_body_back": {"type": "rectangle", "to_world": _transform(back_plate_matrix(mixel), frame),
+                                   "bsdf": black_bsdf()}}
+    for i, wall in enumerate(housing_matrices(mixel)):
+        shapes[f"{key}_body_wall{i}"] = {"type": "rectangle", "to_world": _transform(wall, frame),
+                                         "bsdf": black_bsdf()}
+    return shapes
+
+
+def mincam_body_shapes(mincam, frame: SceneFrame = WORLD, skip: int | None = None) -> dict:
+    """Bodies of every mixel (except index ``skip``), or none for an idealised, overlapping mincam."""
+    if not mincam.occluding_bodies:
+        return {}
+    shapes: dict = {}
+    for k, mixel in enumerate(mincam):
+        if k != skip:
+            shapes.update(mixel_body_shapes(mixel, f"mixel{k}", frame))
+    return shapes
+
+
+def mixel_reference_shapes(mixel: Mixel, key: str, spp: int, frame: SceneFrame = WORLD) -> dict:
     """The literal mixel: detector with an ``irradiancemeter``, textured transmissive mask, black housing.
 
     The mask is Mitsuba's ``mask`` BSDF (stochastic null pass-through with probability = transmission) over a
-    black BSDF, so transmitted light continues unchanged and the rest is absorbed.
+    black BSDF, so transmitted light continues unchanged and the rest is absorbed. Analytic masks use an exact
+    texture (:func:`.mask_eval.opacity_texture`).
     """
+    from .mask_eval import opacity_texture
+
     s = mixel.detector_size_m
     detector = mixel.pose.matrix() @ np.diag([s / 2, s / 2, 1.0, 1.0])
     shapes = {
         f"{key}_detector": {
             "type": "rectangle",
-            "to_world": _transform(detector),
+            "to_world": _transform(detector, frame),
             "bsdf": black_bsdf(),
             "sensor": irradiancemeter(spp),
         },
         f"{key}_mask": {
             "type": "rectangle",
-            "to_world": _transform(mask_surface_matrix(mixel)),
-            "bsdf": {
-                "type": "mask",
-                "opacity": bitmap_dict(1.0 - mixel.mask.transmission),
-                "bsdf": black_bsdf(),
-            },
+            "to_world": _transform(mask_surface_matrix(mixel), frame),
+            "bsdf": {"type": "mask", "opacity": opacity_texture(mixel.mask), "bsdf": black_bsdf()},
         },
     }
-    for i, wall in enumerate(housing_matrices(mixel)):
-        shapes[f"{key}_housing{i}"] = {"type": "rectangle", "to_world": _transform(wall), "bsdf": black_bsdf()}
+    shapes.update(mixel_body_shapes(mixel, key, frame))
     return shapes
 
 
@@ -128,13 +190,13 @@ def frame_tensor(frame: np.ndarray):
     return texture_tensor(np.asarray(frame)[::-1])
 
 
-def screen_shape(screen: Screen, frame: np.ndarray | None = None) -> dict:
+def screen_shape(screen: Screen, frame: np.ndarray | None = None, scene_frame: SceneFrame = WORLD) -> dict:
     """An emissive display: black surface, area emitter whose radiance is the frame (nearest texel)."""
     frame = screen.blank() if frame is None else screen.check_frame(frame)
     radiance = bitmap_dict(frame[::-1], filter_type="nearest")
     return {
         "type": "rectangle",
-        "to_world": _transform(screen_matrix(screen)),
+        "to_world": _transform(screen_matrix(screen), scene_frame),
         "bsdf": black_bsdf(),
         "emitter": {"type": "area", "radiance": radiance},
     }

@@ -19,14 +19,14 @@ from ..optics import Mincam
 from ..progress import progress
 from ..store import ResultStore
 from . import backend
-from .mixel_sensor import mixel_position_sample, sensor_dict
-from .screen_engine import derive_seed, geometry_meta
-from .tracing import trace_groups
+from .elements import transform_update, vertex_update
+from .estimation import derive_seed, samples_for_target, worst_relative_stderr
+from .mask_eval import mask_model_meta
+from .mincam_scene import CAMERA_KEY, SENSOR_KEY, MincamScene, geometry_meta
 
 MAX_SPP = 1 << 26  # cap of the target-noise budget, samples per mixel per frame
-SENSOR_KEY = "mincam"
-CAMERA_KEY = "ground_truth_camera"
 Updates = Mapping[str, np.ndarray]
+__all__ = ["CAMERA_KEY", "SENSOR_KEY", "WorldRenderer", "transform_update", "vertex_update"]
 
 
 class WorldRenderer:
@@ -48,45 +48,24 @@ class WorldRenderer:
 
     def __init__(self, mincam: Mincam, elements: dict, replicates: int = 8, max_depth: int = 3,
                  camera: dict | None = None) -> None:
-        if int(replicates) != replicates or replicates < 2:
+        if isinstance(replicates, bool) or int(replicates) != replicates or replicates < 2:
             raise ValueError(f"replicates must be an integer >= 2, got {replicates!r}")
-        if int(max_depth) != max_depth or max_depth < 2:
-            raise ValueError(f"max_depth must be an integer >= 2 (2 = emitters seen directly), got {max_depth!r}")
-        reserved = {SENSOR_KEY, CAMERA_KEY, "integrator", "type"} & set(elements)
-        if reserved:
-            raise ValueError(f"scene element names {sorted(reserved)} are reserved; rename them")
+        backend.require_jit("The fast mixel sensor (a Python Mitsuba plugin)")
+        self.world = MincamScene.world(mincam, elements, max_depth, camera)
         self.mi = backend.mitsuba()
         self.mincam, self.replicates = mincam, int(replicates)
-        scene = {"type": "scene", "integrator": {"type": "path", "max_depth": int(max_depth)},
-                 SENSOR_KEY: sensor_dict(len(mincam)), **elements}
-        if camera is not None:
-            scene[CAMERA_KEY] = camera
-        self.scene = self.mi.load_dict(scene)
-        sensors = {s.id(): s for s in self.scene.sensors()}
-        self.sensor = sensors[SENSOR_KEY]
-        self.sensor.set_mixels(list(mincam))
-        self.camera = sensors.get(CAMERA_KEY)
-        self.params = self.mi.traverse(self.scene)
-        self._position_sample = mixel_position_sample(len(mincam), self.replicates)
+        self.scene = self.world.fast_scene
+        self.sensor = self.world.sensor(SENSOR_KEY)
+        self.camera = self.world.sensor(CAMERA_KEY)
+        self.params = self.world.params
 
     def update(self, updates: Updates) -> None:
         """Set scene parameters (numpy arrays or Mitsuba values) and apply them without reloading."""
-        if not updates:
-            return
-        for key, value in updates.items():
-            if key not in self.params:
-                raise KeyError(f"unknown scene parameter {key!r}; see WorldRenderer.params.keys()")
-            self.params[key] = _as_param(self.mi, self.params[key], value)
-        self.params.update()
+        self.world.update(updates)
 
     def estimates(self, spp: int, seed: int) -> np.ndarray:
         """(replicates, n_mixels) independent irradiance estimates [W/m^2], ``spp / replicates`` rays each."""
-        if int(spp) != spp or spp <= 0:
-            raise ValueError(f"spp (samples per mixel per frame) must be a positive integer, got {spp!r}")
-        n, r = len(self.mincam), self.replicates
-        per_rep = max(1, -(-int(spp) // r))
-        means = trace_groups(self.scene, self.sensor, n * r, per_rep, seed, self._position_sample)
-        return means.reshape(n, r).T
+        return self.world.fast_estimates(spp, self.replicates, seed)
 
     def measure_changes(
         self,
@@ -130,11 +109,9 @@ class WorldRenderer:
         if target_rel_stderr > 0 and len(frames):
             pilot_idx = np.unique(np.linspace(0, len(frames) - 1, min(4, len(frames))).astype(int))
             pilot, _ = self.measure_changes([frames[i] for i in pilot_idx], background, spp, seed, correlated)
-            significant = np.abs(pilot.irradiance_w_m2) > 3 * pilot.stderr_w_m2
-            rel = np.abs(pilot.stderr_w_m2 / np.where(significant, pilot.irradiance_w_m2, np.nan))
-            worst = float(np.nanmax(rel)) if significant.any() else 0.0
+            worst = worst_relative_stderr(pilot.irradiance_w_m2, pilot.stderr_w_m2, significance=3.0)
             budget = {"pilot_spp": int(spp), "pilot_worst_rel_stderr": worst, "target_rel_stderr": target_rel_stderr}
-            spp = int(min(MAX_SPP, max(spp, np.ceil(1.5 * spp * (worst / target_rel_stderr) ** 2))))
+            spp = samples_for_target(spp, worst, target_rel_stderr, MAX_SPP)
         self.update(background)
         bg = self.estimates(spp, seed)
         columns = [f"dP_{m}" for m in self.mincam.names] + [f"P_{m}" for m in self.mincam.names]
@@ -164,12 +141,12 @@ class WorldRenderer:
         self.update(background)
         meta = {"form": "fast_world", "spp_per_mixel_per_frame": int(spp), "seed": seed, "correlated_seeds": correlated,
                 "replicates": self.replicates, "background_w_m2": bg.mean(0).tolist(),
+                "masks": {m.name: mask_model_meta(m.mask) for m in self.mincam},
                 "background_stderr_w_m2": (bg.std(0, ddof=1) / np.sqrt(self.replicates)).tolist(),
                 **backend.describe(), **geometry_meta(self.mincam)}
         meta.update(budget)
-        significant = np.abs(values[:, :n]) > 3 * errors[:, :n]
-        rel = np.abs(errors[:, :n] / np.where(significant, values[:, :n], np.nan))
-        meta["reached_rel_stderr"] = float(np.nanmax(rel)) if significant.any() else None
+        reached = worst_relative_stderr(values[:, :n], errors[:, :n], significance=3.0)
+        meta["reached_rel_stderr"] = reached if np.isfinite(reached) else None
         names = self.mincam.names
         dp = Measurements(values[:, :n], errors[:, :n], names, {**meta, "quantity": "dP = P(frame) - P(background)"})
         p = Measurements(values[:, n:], errors[:, n:], names, {**meta, "quantity": "P(frame)"})
@@ -177,28 +154,7 @@ class WorldRenderer:
 
     def camera_image(self, spp: int = 64, seed: int = 0) -> np.ndarray:
         """Image (rows, cols) of the ground-truth pinhole camera [W m^-2 sr^-1], row 0 at the top."""
-        if self.camera is None:
-            raise ValueError("this scene has no ground-truth camera; pass camera=pinhole_camera(...)")
-        img = self.mi.render(self.scene, sensor=self.camera, spp=int(spp), seed=int(seed))
-        return np.asarray(img, dtype=np.float64)[..., 0]
-
-
-def vertex_update(name: str, vertices_m: np.ndarray) -> dict[str, np.ndarray]:
-    """Parameter update moving mesh ``name`` to new vertex positions (n, 3) [m]."""
-    return {f"{name}.vertex_positions": np.asarray(vertices_m, dtype=np.float32).ravel()}
-
-
-def transform_update(name: str, matrix: np.ndarray) -> dict[str, np.ndarray]:
-    """Parameter update setting shape ``name``'s to_world matrix (4 x 4)."""
-    return {f"{name}.to_world": np.asarray(matrix, dtype=np.float64)}
-
-
-def _as_param(mi, current, value):
-    if not isinstance(value, np.ndarray):
-        return value
-    if value.shape == (4, 4):
-        return mi.Transform4f(value.tolist())
-    return type(current)(np.asarray(value, dtype=np.float32).ravel())
+        return self.world.camera_image(spp, seed)
 
 
 def _fingerprint(updates: Sequence[Updates]) -> list:

@@ -1,0 +1,68 @@
+"""The Monte Carlo rules every form shares: one seed rule, one replicate / standard-error path, one budget policy.
+
+* Seeds: :func:`derive_seed` turns the user's seed and a *purpose* (``"fast"``, ``"reference"``, ``"response"``,
+  ``"pilot"`` ...) into the seed of one kernel launch; the same inputs always give the same seed, different
+  purposes never share random numbers by accident.
+* Standard errors: every value is the mean of ``R >= 2`` independent replicate estimates;
+  :func:`replicate_mean_stderr` returns the mean and ``std(ddof=1) / sqrt(R)``.
+* Budgets: :func:`samples_for_target` extrapolates a pilot's sample count to a target relative standard error,
+  with one margin and one cap for all forms.
+"""
+
+from __future__ import annotations
+
+import zlib
+
+import numpy as np
+
+TARGET_MARGIN = 1.5  # samples beyond the extrapolated need: a pilot's noise estimate (few replicates) is itself noisy
+
+
+def derive_seed(*parts: int | str) -> int:
+    """A 31-bit seed derived deterministically from ``parts`` (same inputs, same seed)."""
+    return zlib.crc32(repr(parts).encode()) & 0x7FFFFFFF
+
+
+def replicate_mean_stderr(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and standard error over axis 0 (independent replicates, at least 2)."""
+    samples = np.asarray(samples, dtype=np.float64)
+    r = samples.shape[0]
+    if r < 2:
+        raise ValueError("a standard error needs at least 2 independent replicates")
+    return samples.mean(axis=0), samples.std(axis=0, ddof=1) / np.sqrt(r)
+
+
+def check_counts(samples: int, replicates: int, what: str = "spp (samples per mixel per frame)") -> None:
+    """Raise a clear ``ValueError`` unless both are valid integers (samples >= 1, replicates >= 2)."""
+    if isinstance(samples, bool) or int(samples) != samples or samples <= 0:
+        raise ValueError(f"{what} must be a positive integer, got {samples!r}")
+    if isinstance(replicates, bool) or int(replicates) != replicates or replicates < 2:
+        raise ValueError(f"replicates must be an integer >= 2 (needed for a standard error), got {replicates!r}")
+
+
+def worst_relative_stderr(values: np.ndarray, stderr: np.ndarray, significance: float = 0.0) -> float:
+    """Largest ``stderr / |value|`` over values that are non-zero (and > ``significance`` sigma, if given).
+
+    NaN when no value qualifies (e.g. nothing was seen), so that callers never mistake it for "exact".
+    """
+    values, stderr = np.asarray(values, float), np.asarray(stderr, float)
+    live = np.abs(values) > 0
+    if significance > 0:
+        live &= np.abs(values) > significance * stderr
+    if not live.any():
+        return float("nan")
+    return float(np.max(stderr[live] / np.abs(values[live])))
+
+
+def samples_for_target(pilot_samples: int, pilot_rel: float, target_rel: float, cap: int,
+                       exponent: float = 0.5) -> int:
+    """Samples needed to bring ``pilot_rel`` (measured with ``pilot_samples``) down to ``target_rel``.
+
+    ``rel ~ samples^-exponent`` (0.5 for plain Monte Carlo; stratified estimators converge faster), times
+    :data:`TARGET_MARGIN`, at least the pilot and at most ``cap``. An unmeasurable pilot (NaN, 0) keeps the
+    pilot's count.
+    """
+    if not (np.isfinite(pilot_rel) and pilot_rel > 0):
+        return int(pilot_samples)
+    need = pilot_samples * TARGET_MARGIN * (pilot_rel / target_rel) ** (1.0 / exponent)
+    return int(min(cap, max(pilot_samples, np.ceil(need))))

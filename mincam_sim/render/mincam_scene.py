@@ -1,0 +1,214 @@
+"""One scene object for a mincam anywhere (a display or a world), with the forms as solvers over it.
+
+:class:`MincamScene` holds the mincam and its content (a :class:`~mincam_sim.screen.Screen`, or Mitsuba elements
+of a world in metres) and builds, on demand, the Mitsuba scenes the forms trace:
+
+* the *fast* scene: content + every mixel's body (opaque boxes, :func:`.scene_dicts.mincam_body_shapes`) + the
+  mixel-array sensor (rays start on the mask apertures); response maps use it for their visibility rays;
+* the *reference* scenes (displays only): one per mixel, in millimetres around that mixel
+  (:class:`.scene_dicts.SceneFrame`), with its literal detector, mask surface and housing and the other
+  mixels' bodies.
+
+Parameter updates (a display frame, moved meshes) go to every scene built so far. The estimates of every form
+come back as ``(replicates, n_mixels)`` arrays of independent estimates [W/m^2]; seeds follow
+:func:`.estimation.derive_seed` with the form as purpose.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from ..optics import Mincam
+from ..screen import Screen, check_visible
+from . import backend
+from .estimation import check_counts, derive_seed
+from .mixel_sensor import mixel_position_sample, sensor_dict
+from .scene_dicts import (
+    SCREEN_KEY,
+    SCREEN_RADIANCE_PARAM,
+    WORLD,
+    SceneFrame,
+    frame_tensor,
+    mincam_body_shapes,
+    mixel_reference_shapes,
+    screen_shape,
+)
+from .tracing import trace_groups
+
+SENSOR_KEY = "mincam"
+CAMERA_KEY = "ground_truth_camera"
+REFERENCE_MAX_DEPTH = 3  # detector ray -> mask pass-through (one bounce) -> screen emission, plus margin
+RESERVED_KEYS = {SENSOR_KEY, CAMERA_KEY, "integrator", "type"}
+
+
+class MincamScene:
+    """A mincam in a display or world scene.
+
+    Use :meth:`display` or :meth:`world` to build one.
+    """
+
+    def __init__(self, mincam: Mincam, *, screen: Screen | None = None, elements: dict | None = None,
+                 max_depth: int = 2, camera: dict | None = None) -> None:
+        if (screen is None) == (elements is None):
+            raise ValueError("a MincamScene holds either a screen or world elements")
+        if isinstance(max_depth, bool) or int(max_depth) != max_depth or max_depth < 2:
+            raise ValueError(f"max_depth must be an integer >= 2 (2 = emitters seen directly), got {max_depth!r}")
+        if elements is not None:
+            reserved = RESERVED_KEYS & set(elements)
+            if reserved:
+                raise ValueError(f"scene element names {sorted(reserved)} are reserved; rename them")
+        self.mincam, self.screen, self.elements = mincam, screen, elements
+        self.max_depth, self.camera_dict = int(max_depth), camera
+        self.mi = backend.mitsuba()
+        self._fast = None
+        self._fast_params = None
+        self._reference: list | None = None
+        self._reference_params: list = []
+        self._frame: np.ndarray | None = None
+
+    @classmethod
+    def display(cls, mincam: Mincam, screen: Screen) -> MincamScene:
+        """A mincam in front of an emissive display in a dark room."""
+        check_visible(screen, mincam)
+        return cls(mincam, screen=screen, max_depth=2)
+
+    @classmethod
+    def world(cls, mincam: Mincam, elements: dict, max_depth: int = 3, camera: dict | None = None) -> MincamScene:
+        """A mincam in a general scene (elements: name -> Mitsuba dict or object, in metres)."""
+        return cls(mincam, elements=dict(elements), max_depth=max_depth, camera=camera)
+
+    # ------------------------------------------------------------------------------------------ scenes
+    def _content(self, frame: SceneFrame | None = None) -> dict:
+        if self.screen is not None:
+            return {SCREEN_KEY: screen_shape(self.screen, self._frame, frame or WORLD)}
+        return dict(self.elements)
+
+    @property
+    def fast_scene(self):
+        """The scene of the fast forms (loaded on first use)."""
+        if self._fast is None:
+            scene = {"type": "scene", "integrator": {"type": "path", "max_depth": self.max_depth},
+                     SENSOR_KEY: sensor_dict(len(self.mincam)), **self._content(),
+                     **mincam_body_shapes(self.mincam)}
+            if self.camera_dict is not None:
+                scene[CAMERA_KEY] = self.camera_dict
+            self._fast = self.mi.load_dict(scene)
+            sensors = {s.id(): s for s in self._fast.sensors()}
+            sensors[SENSOR_KEY].set_mixels(list(self.mincam))
+            self._fast_params = self.mi.traverse(self._fast)
+        return self._fast
+
+    @property
+    def params(self):
+        """``mi.traverse`` parameters of the fast scene (keys such as ``"car.vertex_positions"``)."""
+        _ = self.fast_scene
+        return self._fast_params
+
+    def sensor(self, key: str = SENSOR_KEY):
+        sensors = {s.id(): s for s in self.fast_scene.sensors()}
+        return sensors.get(key)
+
+    def reference_scenes(self) -> list:
+        """One literal scene per mixel, in millimetres around it (displays only)."""
+        if self.screen is None:
+            raise ValueError("the reference form renders display scenes only; use the fast form for worlds")
+        if self._reference is None:
+            self._reference, self._reference_params = [], []
+            for k, mixel in enumerate(self.mincam):
+                frame = SceneFrame.millimetres_around(mixel.pose.to_world(np.array([0.0, 0.0, mixel.d_f_m])))
+                scene = {"type": "scene", "integrator": {"type": "path", "max_depth": REFERENCE_MAX_DEPTH},
+                         **self._content(frame), **mixel_reference_shapes(mixel, f"mixel{k}", spp=1, frame=frame),
+                         **mincam_body_shapes(self.mincam, frame, skip=k)}
+                loaded = self.mi.load_dict(scene, optimize=False)
+                self._reference.append(loaded)
+                self._reference_params.append(self.mi.traverse(loaded))
+        return self._reference
+
+    # ------------------------------------------------------------------------------------------ updates
+    def set_frame(self, frame: np.ndarray) -> None:
+        """Show ``frame`` (radiance, W m^-2 sr^-1, row 0 at the top) on the display."""
+        if self.screen is None:
+            raise ValueError("set_frame needs a display scene")
+        self._frame = self.screen.check_frame(frame)
+        tensor = frame_tensor(self._frame)
+        for params in ([self._fast_params] if self._fast is not None else []) + self._reference_params:
+            params[SCREEN_RADIANCE_PARAM] = tensor
+            params.update()
+
+    def update(self, updates: Mapping[str, object]) -> None:
+        """Set fast-scene parameters (numpy arrays or Mitsuba values) without reloading."""
+        if not updates:
+            return
+        params = self.params
+        for key, value in updates.items():
+            if key not in params:
+                raise KeyError(f"unknown scene parameter {key!r}; see the scene's params.keys()")
+            params[key] = _as_param(self.mi, params[key], value)
+        params.update()
+
+    # ------------------------------------------------------------------------------------------ solvers
+    def fast_estimates(self, spp: int, replicates: int, seed: int, purpose: str = "fast") -> np.ndarray:
+        """(replicates, n_mixels) independent estimates [W/m^2] of the fast form, ``spp / replicates`` rays each."""
+        check_counts(spp, replicates)
+        n = len(self.mincam)
+        per_rep = max(1, -(-int(spp) // int(replicates)))
+        means = trace_groups(self.fast_scene, self.sensor(), n * replicates, per_rep, derive_seed(seed, purpose),
+                             position_sample=mixel_position_sample(n, replicates))
+        return means.reshape(n, replicates).T
+
+    def reference_estimates(self, spp: int, replicates: int, seed: int) -> np.ndarray:
+        """(replicates, n_mixels) independent estimates [W/m^2] of the literal scene."""
+        check_counts(spp, replicates)
+        per_rep = max(1, -(-int(spp) // int(replicates)))
+        out = np.zeros((replicates, len(self.mincam)))
+        for k, scene in enumerate(self.reference_scenes()):
+            sensor = next(shape.sensor() for shape in scene.shapes() if shape.sensor() is not None)
+            out[:, k] = trace_groups(scene, sensor, replicates, per_rep, derive_seed(seed, "reference", k))
+        return out
+
+    def camera_image(self, spp: int = 64, seed: int = 0) -> np.ndarray:
+        """Image (rows, cols) of the ground-truth pinhole camera [W m^-2 sr^-1], row 0 at the top."""
+        camera = self.sensor(CAMERA_KEY)
+        if camera is None:
+            raise ValueError("this scene has no ground-truth camera; pass camera=pinhole_camera(...)")
+        img = self.mi.render(self.fast_scene, sensor=camera, spp=int(spp), seed=int(seed))
+        return np.asarray(img, dtype=np.float64)[..., 0]
+
+
+def geometry_meta(mincam: Mincam, screen: Screen | None = None) -> dict:
+    """JSON-friendly description of the set-up (poses, sizes, mask contents), stored with every output."""
+    meta: dict = {
+        "mixels": [
+            {
+                "name": m.name,
+                "position_m": list(m.pose.position_m),
+                "forward": list(m.pose.forward),
+                "up": list(m.pose.up),
+                "d_f_m": m.d_f_m,
+                "detector_size_m": m.detector_size_m,
+                "mask": {"name": m.mask.name, **m.mask.fingerprint_parts()},
+            }
+            for m in mincam
+        ],
+        "mixel_bodies": "occluding" if mincam.occluding_bodies else "ignored (idealised overlapping mincam)",
+    }
+    if screen is not None:
+        meta["screen"] = {
+            "width_m": screen.width_m,
+            "height_m": screen.height_m,
+            "resolution": list(screen.resolution),
+            "position_m": list(screen.pose.position_m),
+            "forward": list(screen.pose.forward),
+            "up": list(screen.pose.up),
+        }
+    return meta
+
+
+def _as_param(mi, current, value):
+    if not isinstance(value, np.ndarray):
+        return value
+    if value.shape == (4, 4):
+        return mi.Transform4f(value.tolist())
+    return type(current)(np.asarray(value, dtype=np.float32).ravel())

@@ -1,0 +1,225 @@
+"""Response maps: what each mixel sees of every display texel, traced once, then any frame is ``sum(W * frame)``.
+
+For texel ``t`` and mixel ``k``::
+
+    W[k, t] = 1/A_d int_det int_texel T(x_m) cos(t_d) cos(t_s) / r^2 V(x_m, x_s) dA_s dA_d
+
+estimated from pairs (x_d on the detector, x_s in the texel); x_m is where the segment crosses the mask plane
+(outside the aperture the housing blocks it), ``t_s`` is measured at the screen (emission only from its front),
+and V is a visibility ray in the mincam's scene (the other mixels' bodies included).
+
+Sampling: the samples of a texel form ``replicates`` independent blocks of ``k x k`` samples. Within a
+block, sample ``(jx, jy)`` takes detector stratum ``(jx, jy)`` and texel stratum
+``((k - 1 - jy + s_x) mod k, (jx + s_y) mod k)`` with random shifts ``s_x, s_y`` drawn per (texel, block):
+both factors stay stratified; the transposition keeps the texel's x stratum independent of the detector's x
+stratum (the detector blur couples them along the same axis); and since every sample's texel stratum is
+uniform over the ``k x k`` strata, every sample is uniform over the product domain, so each block is unbiased
+whatever the integrand couples (tilted masks, rotated screens). A *fixed* pairing converges to an integral
+over a sub-manifold of the product domain, and identical pairings across blocks hide that from the standard
+error. The variance of each weight comes from the spread of the independent blocks.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..measurements import Measurements
+from ..optics import Mincam
+from ..progress import progress
+from ..screen import Screen
+from . import backend
+from .estimation import derive_seed
+from .mask_eval import MaskEvaluator, local_to_mask_xy, mask_model_meta
+from .mincam_scene import MincamScene, geometry_meta
+from .mixel_sensor import START_OFFSET_M
+
+MAX_LANES = 1 << 23  # samples per kernel launch
+
+
+@dataclass
+class ResponseMaps:
+    """What each mixel sees on the display: ``P_k = sum(W[k] * frame)``.
+
+    Attributes
+    ----------
+    weights_sr : (n_mixels, rows, cols) ndarray
+        Irradiance on the detector per unit texel radiance [W/m^2 per W m^-2 sr^-1 = sr].
+    variance_sr2 : (n_mixels, rows, cols) ndarray
+        Monte Carlo variance of each weight; texels are independent.
+    """
+
+    weights_sr: np.ndarray
+    variance_sr2: np.ndarray
+    mixel_names: list[str]
+    meta: dict = field(default_factory=dict)
+
+    def measure(self, frames: np.ndarray, chunk: int = 256) -> Measurements:
+        """Measurements of frames (n, rows, cols) or one frame (rows, cols) [W m^-2 sr^-1]."""
+        frames = np.asarray(frames, dtype=np.float64)
+        if frames.ndim == 2:
+            frames = frames[None]
+        if frames.ndim != 3 or frames.shape[1:] != self.weights_sr.shape[1:]:
+            raise ValueError(f"frames of shape {frames.shape[1:]} do not match the maps' {self.weights_sr.shape[1:]}")
+        w = self.weights_sr.reshape(len(self.mixel_names), -1).T
+        v = self.variance_sr2.reshape(len(self.mixel_names), -1).T
+        values = np.empty((len(frames), w.shape[1]))
+        var = np.empty_like(values)
+        for i in range(0, len(frames), chunk):
+            f = frames[i : i + chunk].reshape(len(frames[i : i + chunk]), -1)
+            values[i : i + chunk] = f @ w
+            var[i : i + chunk] = (f * f) @ v
+        meta = {**self.meta, "form": "response_map"}
+        return Measurements(values, np.sqrt(var), list(self.mixel_names), meta)
+
+    def save_exr(self, directory: str | Path) -> list[Path]:
+        """One OpenEXR per mixel (channels W and sigma), the picture of what the mixel sees."""
+        from ..imageio import write_exr
+
+        directory = Path(directory)
+        directory.mkdir(parents=True, exist_ok=True)
+        paths = []
+        for k, name in enumerate(self.mixel_names):
+            path = directory / f"response_{_safe(name)}.exr"
+            img = np.stack([self.weights_sr[k], np.sqrt(self.variance_sr2[k])], axis=-1)
+            write_exr(path, img, channels=("W", "sigma"), metadata={"units": "sr", "mixel": name, **self.meta})
+            paths.append(path)
+        return paths
+
+    def save_npz(self, path: str | Path) -> Path:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(path, weights_sr=self.weights_sr, variance_sr2=self.variance_sr2,
+                 mixel_names=np.array(self.mixel_names), meta_json=np.array(json.dumps(self.meta, default=str)))
+        return path
+
+    @classmethod
+    def load_npz(cls, path: str | Path) -> ResponseMaps:
+        with np.load(path, allow_pickle=False) as d:
+            return cls(d["weights_sr"], d["variance_sr2"], [str(s) for s in d["mixel_names"]],
+                       json.loads(str(d["meta_json"])))
+
+
+def _safe(name: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_" else "_" for c in name)
+
+
+def response_maps(
+    mincam: Mincam,
+    screen: Screen,
+    samples_per_texel: int = 64,
+    seed: int = 0,
+    mixel_indices: Sequence[int] | None = None,
+    max_lanes: int = MAX_LANES,
+    replicates: int = 4,
+    show_progress: bool = False,
+) -> ResponseMaps:
+    """Trace each mixel's response map over the display's texels (see the module docstring).
+
+    Parameters
+    ----------
+    samples_per_texel : int
+        Samples per texel and mixel; rounded to ``replicates * k^2`` (k strata per axis in a block).
+    replicates : int
+        Independent blocks per texel (>= 2), whose spread gives each weight's variance.
+    show_progress : bool
+        A progress bar over (mixel, texel chunk) launches on stderr.
+    """
+    backend.require_jit("Response maps")
+    if isinstance(samples_per_texel, bool) or int(samples_per_texel) != samples_per_texel or samples_per_texel < 2:
+        raise ValueError(f"samples_per_texel must be an integer >= 2, got {samples_per_texel!r}")
+    if isinstance(replicates, bool) or int(replicates) != replicates or not 2 <= replicates <= samples_per_texel:
+        raise ValueError(f"replicates must be an integer in [2, samples_per_texel], got {replicates!r}")
+    world = MincamScene.display(mincam, screen)
+    scene = world.fast_scene  # screen + the mixels' bodies: the visibility rays' scene
+    mi = backend.mitsuba()
+    import drjit as dr
+
+    strata = max(1, int(np.sqrt(samples_per_texel / replicates)))  # k
+    block = strata * strata
+    spt = replicates * block
+    rows, cols = screen.shape
+    n_tex = rows * cols
+    texels_per_chunk = max(1, min(n_tex, max_lanes // spt))
+    right, up, normal = (np.asarray(a).tolist() for a in screen.pose.axes())
+    center = [float(c) for c in screen.pose.position_m]
+    texel_area = screen.texel_area_m2
+    indices = list(range(len(mincam))) if mixel_indices is None else list(mixel_indices)
+
+    weights = np.zeros((len(indices), n_tex))
+    variance = np.zeros((len(indices), n_tex))
+    sampler = mi.load_dict({"type": "independent"})
+    launches = [(out_k, k, start) for out_k, k in enumerate(indices) for start in range(0, n_tex, texels_per_chunk)]
+    evaluators = {k: MaskEvaluator(mincam[k].mask) for k in indices}
+    for out_k, k, start in progress(launches, desc="response maps", disable=not show_progress):
+        mixel = mincam[k]
+        to_world = mixel.pose.matrix()
+        rot = mi.Matrix3f(to_world[:3, :3].tolist())
+        origin = mi.Point3f(*(float(c) for c in to_world[:3, 3]))
+        rot_t = mi.Matrix3f(to_world[:3, :3].T.tolist())
+        d_f, det = mixel.d_f_m, mixel.detector_size_m
+        count = min(texels_per_chunk, n_tex - start)
+        sampler.seed(derive_seed(seed, "response", k, start), count * spt)
+        lane = dr.arange(mi.UInt32, count * spt)
+        texel = lane // spt + start
+        j = lane % block  # detector stratum within the block
+        block_id = texel * replicates + (lane % spt) // block
+        shift_x, shift_y = mi.sample_tea_32(block_id, mi.UInt32(derive_seed(seed, "pairing", k)))
+        jx, jy = j % strata, j // strata
+        mx = (strata - 1 - jy + shift_x % strata) % strata  # texel stratum paired with (jx, jy) in this block
+        my = (jx + shift_y % strata) % strata
+        col = mi.Float(texel % cols)
+        row = mi.Float(texel // cols)
+        jitter_det = sampler.next_2d()
+        jitter_screen = sampler.next_2d()
+        s_det = mi.Point2f((mi.Float(jx) + jitter_det.x) / strata, (mi.Float(jy) + jitter_det.y) / strata)
+        s_screen = mi.Point2f((mi.Float(mx) + jitter_screen.x) / strata, (mi.Float(my) + jitter_screen.y) / strata)
+        xs = ((col + s_screen.x) / cols - 0.5) * screen.width_m
+        ys = (0.5 - (row + s_screen.y) / rows) * screen.height_m
+        p_screen = mi.Point3f(
+            center[0] + xs * right[0] + ys * up[0],
+            center[1] + xs * right[1] + ys * up[1],
+            center[2] + xs * right[2] + ys * up[2],
+        )
+        x_d = mi.Vector3f((s_det.x - 0.5) * det, (s_det.y - 0.5) * det, 0.0)
+        p_det = origin + rot @ x_d
+        delta = p_screen - p_det
+        r2 = dr.squared_norm(delta)
+        direction = delta * dr.rsqrt(r2)
+        d_local = rot_t @ direction
+        cos_d = d_local.z
+        cos_s = -dr.dot(direction, mi.Vector3f(*(float(c) for c in normal)))
+        valid = (cos_d > 0) & (cos_s > 0)
+        t_mask = d_f / dr.maximum(cos_d, 1e-12)
+        x_m = x_d + d_local * t_mask
+        transmission = evaluators[k](*local_to_mask_xy(x_m.x, x_m.y), valid)
+        valid &= transmission > 0
+        p_start = p_det + direction * (t_mask + START_OFFSET_M)
+        dist_after = dr.sqrt(r2) - t_mask - START_OFFSET_M
+        shadow = mi.Ray3f(p_start, direction, dist_after * (1 - 1e-5), 0.0, [])
+        valid &= ~scene.ray_test(shadow, valid)
+        g = dr.select(valid, transmission * cos_d * cos_s / r2 * texel_area, 0.0)
+        blocks = np.asarray(dr.block_sum(g, block), dtype=np.float64).reshape(count, replicates) / block
+        weights[out_k, start : start + count] = blocks.mean(axis=1)
+        variance[out_k, start : start + count] = blocks.var(axis=1, ddof=1) / replicates
+    names = [mincam[k].name for k in indices]
+    meta = {
+        "form": "response_map",
+        "estimator": "texel_area_sampling_with_visibility_rays",
+        "samples_per_texel": spt,
+        "replicate_blocks": replicates,
+        "strata_per_block": f"{strata}x{strata}",
+        "pairing": "detector stratum (jx, jy) with texel stratum (k-1-jy+s_x, jx+s_y) mod k, s random per block",
+        "seed": seed,
+        "units": "sr (W/m^2 on the detector per W m^-2 sr^-1 of texel radiance)",
+        "masks": {mincam[k].name: mask_model_meta(mincam[k].mask) for k in indices},
+        **backend.describe(),
+        **geometry_meta(Mincam(tuple(mincam[k] for k in indices), allow_overlap=True), screen),
+        "mixel_bodies": "occluding" if mincam.occluding_bodies else "ignored (idealised overlapping mincam)",
+    }
+    return ResponseMaps(weights.reshape(len(indices), rows, cols), variance.reshape(len(indices), rows, cols),
+                        names, meta)

@@ -1,0 +1,221 @@
+"""Flat emissive displays and the frames shown on them (pure numpy).
+
+A screen is a rectangle of ``width_m`` x ``height_m`` whose front faces along ``pose.forward``; it emits only
+from its front. Frames are arrays of radiance [W m^-2 sr^-1] of shape ``(rows, cols) = (resolution[1],
+resolution[0])`` in image convention: row 0 at the top, column 0 on the left, as seen by a viewer in front of
+the screen. Screen coordinates ``(x_m, y_m)`` [m] are centred on the screen, +x to the viewer's right, +y up.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..geometry import Pose
+
+INCH_M = 0.0254  # [m]
+
+
+def diagonal_to_size(diagonal_in: float, aspect: tuple[int, int] = (16, 9)) -> tuple[float, float]:
+    """(width, height) [m] of a display of the given diagonal [inch] and aspect ratio."""
+    a, b = aspect
+    diag = diagonal_in * INCH_M
+    return diag * a / np.hypot(a, b), diag * b / np.hypot(a, b)
+
+
+PAPER_SCREEN_SIZE_M = diagonal_to_size(50.0)  # the paper's 50" 16:9 calibration display
+DEFAULT_DISTANCE_M = 0.5  # [m]
+
+
+@dataclass(frozen=True)
+class Screen:
+    """A flat emissive display.
+
+    Parameters
+    ----------
+    width_m, height_m : float
+        Physical size [m].
+    resolution : (int, int)
+        Pixels (columns, rows) of the display, i.e. texels of the emission texture.
+    pose : Pose
+        Screen centre and facing direction (forward = direction of emission), up = screen up.
+        Default: 0.5 m in front of a mincam at the origin that looks along -z.
+    """
+
+    width_m: float = PAPER_SCREEN_SIZE_M[0]
+    height_m: float = PAPER_SCREEN_SIZE_M[1]
+    resolution: tuple[int, int] = (256, 144)
+    pose: Pose = field(default_factory=lambda: Pose((0.0, 0.0, -DEFAULT_DISTANCE_M), (0.0, 0.0, 1.0)))
+
+    def __post_init__(self) -> None:
+        for key in ("width_m", "height_m"):
+            v = getattr(self, key)
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"screen {key} must be a positive size in metres, got {v!r}")
+        res = tuple(self.resolution)
+        if len(res) != 2 or any(int(r) != r or r < 1 for r in res):
+            raise ValueError(f"screen resolution must be two positive integers (columns, rows), got {res!r}")
+        if res[0] * res[1] > 4096 * 4096:
+            raise ValueError(f"screen resolution {res} is too large (max 4096 x 4096 texels)")
+        object.__setattr__(self, "resolution", (int(res[0]), int(res[1])))
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """Frame shape (rows, cols)."""
+        return self.resolution[1], self.resolution[0]
+
+    @property
+    def texel_size_m(self) -> tuple[float, float]:
+        """(width, height) of one display pixel [m]."""
+        return self.width_m / self.resolution[0], self.height_m / self.resolution[1]
+
+    @property
+    def texel_area_m2(self) -> float:
+        w, h = self.texel_size_m
+        return w * h
+
+    def texel_centers_m(self) -> tuple[np.ndarray, np.ndarray]:
+        """Screen coordinates (x_m, y_m) [m] of every texel centre, each of frame shape."""
+        cols, rows = self.resolution
+        x = ((np.arange(cols) + 0.5) / cols - 0.5) * self.width_m
+        y = (0.5 - (np.arange(rows) + 0.5) / rows) * self.height_m
+        return np.meshgrid(x, y)
+
+    def to_world(self, x_m, y_m) -> np.ndarray:
+        """World points [m] of screen coordinates (x right, y up as seen by a viewer in front)."""
+        left, up, _ = self.pose.axes()
+        # Local +x of a pose is cross(up, forward); for a screen facing the viewer that is the viewer's right.
+        x_m, y_m = np.broadcast_arrays(np.asarray(x_m, float), np.asarray(y_m, float))
+        return np.asarray(self.pose.position_m) + x_m[..., None] * left + y_m[..., None] * up
+
+    def from_world(self, points_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Screen coordinates (x_m, y_m) of world points projected on the screen plane."""
+        local = self.pose.to_local(points_m)
+        return local[..., 0], local[..., 1]
+
+    def blank(self) -> np.ndarray:
+        """An all-black frame."""
+        return np.zeros(self.shape)
+
+    def check_frame(self, frame: np.ndarray, name: str = "frame") -> np.ndarray:
+        """Validate a frame (shape, finite, >= 0) and return it as float64."""
+        f = np.asarray(frame, dtype=np.float64)
+        if f.shape != self.shape:
+            raise ValueError(f"{name} has shape {f.shape} but this screen's frames are {self.shape} (rows, cols)")
+        if not np.all(np.isfinite(f)):
+            raise ValueError(f"{name} contains NaN or infinite radiance; frames must be finite and >= 0")
+        if f.min() < 0:
+            raise ValueError(f"{name} has negative radiance ({f.min():.3g}); displays emit >= 0 W/m^2/sr")
+        return f
+
+
+def coverage(screen: Screen, x0_m: float, x1_m: float, y0_m: float, y1_m: float) -> np.ndarray:
+    """Fraction of each display pixel covered by the rectangle [x0, x1] x [y0, y1] (screen coords, m)."""
+    cols, rows = screen.resolution
+    tw, th = screen.texel_size_m
+    xe = (np.arange(cols + 1) / cols - 0.5) * screen.width_m
+    ye = (0.5 - np.arange(rows + 1) / rows) * screen.height_m  # top edge first
+    fx = np.clip(np.minimum(xe[1:], x1_m) - np.maximum(xe[:-1], x0_m), 0, None) / tw
+    fy = np.clip(np.minimum(ye[:-1], y1_m) - np.maximum(ye[1:], y0_m), 0, None) / th
+    return np.outer(fy, fx)
+
+
+def white_square(
+    screen: Screen, center_m: tuple[float, float], size_m: float, radiance: float = 1.0
+) -> np.ndarray:
+    """Frame with a white square of side ``size_m`` centred at ``center_m`` (screen coords [m]) on black.
+
+    Pixels partly covered are lit in proportion to their covered area (box filter); squares aligned with
+    the pixel grid are exact.
+    """
+    if not (np.isfinite(size_m) and size_m > 0):
+        raise ValueError(f"square size_m must be > 0 metres, got {size_m!r}")
+    cx, cy = center_m
+    return radiance * coverage(screen, cx - size_m / 2, cx + size_m / 2, cy - size_m / 2, cy + size_m / 2)
+
+
+def vertical_line(screen: Screen, x_m: float, width_m: float, radiance: float = 1.0) -> np.ndarray:
+    """Frame with a full-height bright vertical band of ``width_m`` centred at ``x_m``."""
+    return radiance * coverage(screen, x_m - width_m / 2, x_m + width_m / 2, -screen.height_m, screen.height_m)
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """Positions [m] (n, 2) of a white square in screen coordinates, with its side and radiance."""
+
+    positions_m: np.ndarray
+    size_m: float
+    radiance: float = 1.0
+
+    def __len__(self) -> int:
+        return len(self.positions_m)
+
+    def frames(self, screen: Screen) -> Iterator[np.ndarray]:
+        for p in self.positions_m:
+            yield white_square(screen, tuple(p), self.size_m, self.radiance)
+
+    def frame_stack(self, screen: Screen) -> np.ndarray:
+        """All frames as one (n, rows, cols) array."""
+        stack = np.empty((len(self), *screen.shape))
+        for i, frame in enumerate(self.frames(screen)):
+            stack[i] = frame
+        return stack
+
+
+def line_sweep(
+    start_m: tuple[float, float], end_m: tuple[float, float], n: int, size_m: float, radiance: float = 1.0
+) -> Sweep:
+    """``n`` square positions evenly spaced from ``start_m`` to ``end_m`` (a 1D sweep along a boundary)."""
+    if n < 1:
+        raise ValueError(f"a sweep needs n >= 1 positions, got {n}")
+    t = np.linspace(0.0, 1.0, n)[:, None]
+    pos = (1 - t) * np.asarray(start_m, float) + t * np.asarray(end_m, float)
+    return Sweep(pos, size_m, radiance)
+
+
+def grid_sweep(
+    x_range_m: tuple[float, float],
+    y_range_m: tuple[float, float],
+    nx: int,
+    ny: int,
+    size_m: float,
+    radiance: float = 1.0,
+) -> Sweep:
+    """Square positions on an ``nx`` x ``ny`` grid (row-major, y from top to bottom) for 2D calibration."""
+    if nx < 1 or ny < 1:
+        raise ValueError(f"a grid sweep needs nx, ny >= 1, got {nx}, {ny}")
+    xs = np.linspace(*x_range_m, nx)
+    ys = np.linspace(*y_range_m, ny)[::-1]
+    gx, gy = np.meshgrid(xs, ys)
+    return Sweep(np.column_stack([gx.ravel(), gy.ravel()]), size_m, radiance)
+
+
+def check_visible(screen: Screen, mixels) -> None:
+    """Raise ``ValueError`` if a mixel is behind the screen or sees none of it through its aperture.
+
+    Visibility is tested on a 65 x 65 grid of screen points against the mixel's widest rays (detector edge to
+    the far mask edge); it is a sanity check of the set-up, the measurements themselves come from rays.
+    """
+    xs, ys = np.meshgrid(np.linspace(-0.5, 0.5, 65) * screen.width_m, np.linspace(-0.5, 0.5, 65) * screen.height_m)
+    points = screen.to_world(xs, ys).reshape(-1, 3)
+    normal = screen.pose.axes()[2]
+    for mixel in mixels:
+        offset = np.asarray(mixel.pose.position_m) - np.asarray(screen.pose.position_m)
+        if float(offset @ normal) <= 0:
+            raise ValueError(
+                f"mixel {mixel.name!r} at {mixel.pose.position_m} m is behind the screen or in its plane; "
+                "displays emit only from their front: move the mixel in front of the screen (along the screen's "
+                f"forward {screen.pose.forward}) or turn the screen round"
+            )
+        local = mixel.pose.to_local(points)
+        tx, ty = mixel.half_fov_tan()
+        z = local[:, 2]
+        seen = (z > mixel.d_f_m) & (np.abs(local[:, 0]) <= tx * z) & (np.abs(local[:, 1]) <= ty * z)
+        if not seen.any():
+            raise ValueError(
+                f"the screen lies entirely outside mixel {mixel.name!r}'s field of view "
+                f"(+/-{np.degrees(np.arctan(tx)):.1f} x +/-{np.degrees(np.arctan(ty)):.1f} deg about its forward "
+                f"{mixel.pose.forward}): point the mixel at the screen or move the screen in front of it"
+            )
