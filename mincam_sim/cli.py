@@ -116,9 +116,15 @@ class _MincamGroup(TyperGroup):
         return code
 
 
-app = typer.Typer(cls=_MincamGroup, add_completion=False, no_args_is_help=True, help=__doc__,
+HELP = ("Simulate minimalist cameras (mixels: photodetectors behind grayscale masks) with Mitsuba 3. Errors are one "
+        "line on stderr with exit code 2 (--debug shows the traceback); progress bars go to stderr (--quiet "
+        "silences them).")
+
+# rich_markup_mode=None: plain help, so units such as [m] in option help are shown, not taken for markup.
+app = typer.Typer(cls=_MincamGroup, add_completion=False, no_args_is_help=True, help=HELP, rich_markup_mode=None,
                   pretty_exceptions_show_locals=False)
-masks_app = typer.Typer(no_args_is_help=True, help="Generate the mask library or export print-ready masks.")
+masks_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None,
+                        help="Generate the mask library or export print-ready masks.")
 app.add_typer(masks_app, name="masks")
 
 

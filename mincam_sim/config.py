@@ -366,6 +366,11 @@ def _build_mincam(cfg: dict, mixel_tables: list, base: Path) -> Mincam:
         position = _vector(where, "position_m", t["position_m"], 3)
         forward = _vector(where, "forward", t["forward"], 3)
         up = _vector(where, "up", t["up"], 3)
+        if np.linalg.norm(forward) == 0:
+            raise ConfigError(f"{where} forward must be a non-zero direction, got {list(forward)}")
+        if np.linalg.norm(np.cross(forward, up)) < 1e-9 * np.linalg.norm(forward) * max(np.linalg.norm(up), 1e-300):
+            raise ConfigError(f"{where} up {list(up)} must not be parallel to forward {list(forward)}; give an up "
+                              "direction across the viewing direction")
         mixel_d_f = d_f if t["d_f_m"] is None else _number(where, "d_f_m", t["d_f_m"], positive=True)
         mixel_det = det if t["detector_size_m"] is None else _number(where, "detector_size_m",
                                                                       t["detector_size_m"], positive=True)
@@ -420,7 +425,8 @@ def load_frames_npy(path: Path, screen: Screen) -> np.ndarray:
             raise ValueError("it does not start with the .npy magic bytes")
         frames = np.load(path, mmap_mode="r", allow_pickle=False)
     except (ValueError, OSError, EOFError) as err:
-        detail = "it holds Python objects (pickled)" if "pickle" in str(err) else str(err)
+        pickled = "pickle" in str(err) or "Python objects" in str(err)
+        detail = "it holds Python objects (pickled)" if pickled else str(err)
         raise ConfigError(f"{where} is not a readable .npy array ({detail}); save a float array of shape "
                           "(n, rows, cols) with numpy.save") from None
     if not isinstance(frames, np.ndarray) or frames.dtype.kind not in "biuf":
@@ -471,6 +477,8 @@ def _build_frames(cfg: dict, screen: Screen, base: Path) -> tuple[np.ndarray, np
             _check_stack_size(nx * ny, screen, f"nx x ny = {nx} x {ny}")
             sweep = grid_sweep(x_range, y_range, nx, ny, square, radiance)
         frames = sweep.frame_stack(screen) + background
+    except ConfigError:
+        raise
     except ValueError as err:
         raise ConfigError(f"[frames]: {err}") from None
     return frames, sweep.positions_m
