@@ -167,22 +167,26 @@ def _announce_variant() -> None:
 
 
 def variant_problem(variant: str) -> str | None:
-    """Why ``variant`` cannot run on this machine, or None if it can (asks Dr.Jit; renders nothing)."""
+    """Why ``variant`` cannot run on this machine, or None if it can. Renders nothing.
+
+    Uses ``mincam_sim.render.backend.variant_available(name)`` when the backend offers it; otherwise asks the
+    backend to load the variant (only the render layer imports Mitsuba / Dr.Jit) and reports its refusal.
+    """
     from .render import backend
 
     ask = getattr(backend, "variant_available", None)
     if callable(ask):
         return None if ask(variant) else f"Mitsuba variant {variant!r} is not available on this machine"
-    if variant == "scalar_rgb":
-        return None
-    backend.configure_libllvm()
-    import drjit as dr
-
-    if variant == "cuda_ad_mono" and not dr.has_backend(dr.JitBackend.CUDA):
-        return "Mitsuba variant 'cuda_ad_mono' needs a CUDA GPU and driver, and this machine has none"
-    if variant == "llvm_ad_mono" and not dr.has_backend(dr.JitBackend.LLVM):
-        return ("Mitsuba variant 'llvm_ad_mono' needs libLLVM >= 16, which Dr.Jit could not load (pip install "
-                "karellen-llvm-core, or set DRJIT_LIBLLVM_PATH)")
+    backend.request_variant(variant)
+    try:
+        loaded = backend.variant()
+    except (ImportError, RuntimeError, AttributeError, OSError) as err:
+        why = _one_line(str(err))[:160]
+        if variant.startswith("cuda"):
+            return f"Mitsuba variant {variant!r} needs a working CUDA GPU and driver, and none was found ({why})"
+        return f"Mitsuba variant {variant!r} cannot be loaded on this machine ({why})"
+    if loaded != variant:
+        return f"Mitsuba variant {loaded!r} is already in use in this process, not {variant!r}"
     return None
 
 
@@ -213,7 +217,6 @@ def check_variant(config_variant: str | None = None) -> str | None:
     problem = variant_problem(wanted)
     if problem is not None:
         raise BackendUnavailableError(f"{source}: {problem}; use another variant or leave it unset (automatic)")
-    backend.request_variant(wanted)
     return wanted
 
 
@@ -252,7 +255,22 @@ def check_out_file(path: Path, what: str = "output file") -> Path:
 
 
 def config_identity(cfg: Any, variant: str | None = None) -> dict:
-    """Everything a config's numbers depend on, as content fingerprints (what ``identity.json`` records)."""
+    """Everything a config's numbers depend on, as content fingerprints (what ``identity.json`` records).
+
+    Parameters
+    ----------
+    cfg : RenderConfig
+        The validated config.
+    variant : str, optional
+        The Mitsuba variant that renders (None: recorded as "automatic").
+
+    Returns
+    -------
+    dict
+        form, seed, the requested budget (only the counts the form uses), fingerprints of the mincam, each mask,
+        the screen and the frames (of the sweep recipe, or of the frame array for ``npy``), mixel names, the
+        variant and the library versions.
+    """
     from .identity import fingerprint, frames_fingerprint, library_versions
 
     run = cfg.run
@@ -306,12 +324,13 @@ def run_render_config(
     """
     from .atomic import atomic_path
     from .identity import run_key
+    from .render import backend
     from .render.screen_engine import render_frames
     from .store import check_identity, clear_store, lock_out_dir
 
     out = Path(cfg.run.out_dir)
     run_dir = out / "run"
-    identity = config_identity(cfg, cfg.run.variant)
+    identity = config_identity(cfg, backend.variant())  # the variant in use: CUDA and LLVM differ in the last bits
     key = run_key(identity)
     with lock_out_dir(out):
         if overwrite:
@@ -390,6 +409,9 @@ def render(
         cfg.run.out_dir = out_dir
     variant = check_variant(cfg.run.variant)
     cfg.run.variant = variant
+    if variant == "scalar_rgb" and cfg.run.form != "reference":
+        raise ConfigError(f"[run] form = {cfg.run.form!r} needs a vectorised Mitsuba variant (llvm_ad_mono or "
+                          "cuda_ad_mono); scalar_rgb renders only form = \"reference\"")
     if check:
         check_out_dir(cfg.run.out_dir, create=False)
         for line in _summary_lines(cfg, variant):
