@@ -111,6 +111,8 @@ class _MincamGroup(TyperGroup):
         except typer.Abort:
             typer.echo("error: aborted", err=True)
             code = 1
+        if code == 130:  # Ctrl-C (typer turns KeyboardInterrupt into exit code 130)
+            typer.echo("error: interrupted; results written so far are kept, and the same command resumes", err=True)
         if standalone_mode:
             sys.exit(code)
         return code
