@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY      = $(VENV)/bin/python
 STAMP   = $(VENV)/.installed
 
-.PHONY: setup demo test test-all bench lint clean
+.PHONY: setup demo test test-all bench lint bad-inputs clean
 
 setup: $(STAMP)
 
@@ -30,6 +30,10 @@ bench: setup
 
 lint: setup
 	$(VENV)/bin/ruff check .
+
+# Runs ~80 bad (and a few good) inputs through the CLI in fresh processes and counts the clear one-line errors.
+bad-inputs: setup
+	$(PY) tests/test_cli_errors.py
 
 clean:
 	rm -rf $(VENV) out build *.egg-info

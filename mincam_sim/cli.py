@@ -1,35 +1,161 @@
-"""Command line: ``mincam-sim render CONFIG.toml``, ``mincam-sim masks ...``, ``mincam-sim demo`` ..."""
+"""Command line: ``mincam-sim render CONFIG.toml``, ``mincam-sim masks ...``, ``mincam-sim demo`` ...
+
+Every user error (config, option, file, output location, a backend this machine lacks) is one line
+``error: ...`` on stderr with exit code 2, caught in one place (:class:`_MincamGroup`); ``--debug`` (or
+``MINCAM_DEBUG=1``) shows the traceback instead. Progress bars go to stderr unless ``--quiet``.
+"""
 
 from __future__ import annotations
 
+import inspect
+import os
 import sys
+import traceback
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import numpy as np
 import typer
+from typer.core import TyperGroup
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, help=__doc__)
-masks_app = typer.Typer(no_args_is_help=True, help="Generate the mask library or export print-ready masks.")
+from .errors import BackendUnavailableError, ConfigError, MincamError
+
+try:  # typer >= 0.2x vendors click
+    from typer._click.exceptions import ClickException
+except ImportError:  # pragma: no cover - older typer on the real click
+    from click.exceptions import ClickException
+
+ENV_DEBUG = "MINCAM_DEBUG"
+_PACKAGE_DIR = Path(__file__).resolve().parent
+_BACKEND_FILE = _PACKAGE_DIR / "render" / "backend.py"
+
+_state: dict[str, Any] = {"verbose": False, "quiet": False, "debug": False, "variant": None}
+
+
+# ------------------------------------------------------------------------------------------- error handling
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+def _is_backend_error(err: BaseException) -> bool:
+    """True if ``err`` was raised by mincam_sim.render.backend (a variant that cannot be loaded)."""
+    innermost = None
+    for frame, _ in traceback.walk_tb(err.__traceback__):
+        filename = Path(frame.f_code.co_filename).resolve()
+        if _PACKAGE_DIR in filename.parents:
+            innermost = filename
+    return innermost == _BACKEND_FILE
+
+
+def _is_user_error(err: BaseException) -> bool:
+    if isinstance(err, MincamError | ValueError | OSError | EOFError | MemoryError):
+        return True
+    return isinstance(err, RuntimeError | ImportError) and _is_backend_error(err)
+
+
+def user_error_message(err: BaseException) -> str:
+    """The one-line message shown for a user error (without the ``error: `` prefix)."""
+    if isinstance(err, MemoryError):
+        return "out of memory; use fewer frames, a lower resolution or fewer samples"
+    if isinstance(err, EOFError):
+        return f"unexpected end of file ({err or 'no data left'}); the file is empty or truncated"
+    if isinstance(err, OSError) and not isinstance(err, MincamError) and err.strerror:
+        target = f": {err.filename}" if err.filename else ""
+        other = f" -> {err.filename2}" if getattr(err, "filename2", None) else ""
+        return _one_line(f"{err.strerror}{target}{other}")
+    text = _one_line(str(err))
+    if not text:
+        text = type(err).__name__
+    if isinstance(err, MincamError | ValueError):
+        return text
+    return f"{text} ({type(err).__name__})"
+
+
+def _fail_line(message: str, code: int = 2) -> typer.Exit:
+    typer.echo(f"error: {_one_line(message)}", err=True)
+    return typer.Exit(code)
+
+
+class _MincamGroup(TyperGroup):
+    """Top-level command group: turns user errors into one line on stderr and exit code 2, in one place."""
+
+    def invoke(self, ctx: Any) -> Any:
+        try:
+            return super().invoke(ctx)
+        except typer.Exit:
+            raise
+        except BaseException as err:
+            if isinstance(err, KeyboardInterrupt | SystemExit) or _state["debug"] or not _is_user_error(err):
+                raise
+            raise _fail_line(user_error_message(err)) from None
+
+    def main(self, args: Any = None, prog_name: Any = None, complete_var: Any = None,
+             standalone_mode: bool = True, **extra: Any) -> Any:
+        _state.update(verbose=False, quiet=False, debug=os.environ.get(ENV_DEBUG, "") not in ("", "0"),
+                      variant=None)
+        try:
+            rv = super().main(args=args, prog_name=prog_name, complete_var=complete_var, standalone_mode=False,
+                              **extra)
+            code = rv if isinstance(rv, int) else 0
+        except ClickException as err:
+            ctx = getattr(err, "ctx", None)
+            if type(err).__name__ == "NoArgsIsHelpError":  # a bare command group: its help, as usual
+                typer.echo(ctx.get_help() if ctx is not None else err.format_message(), err=True)
+                code = 0
+            else:
+                hint = f" (see '{ctx.command_path} --help')" if ctx is not None else ""
+                typer.echo(f"error: {_one_line(err.format_message())}{hint}", err=True)
+                code = err.exit_code
+        except typer.Abort:
+            typer.echo("error: aborted", err=True)
+            code = 1
+        if code == 130:  # Ctrl-C (typer turns KeyboardInterrupt into exit code 130)
+            typer.echo("error: interrupted; results written so far are kept, and the same command resumes", err=True)
+        if standalone_mode:
+            sys.exit(code)
+        return code
+
+
+HELP = ("Simulate minimalist cameras (mixels: photodetectors behind grayscale masks) with Mitsuba 3. Errors are one "
+        "line on stderr with exit code 2 (--debug shows the traceback); progress bars go to stderr (--quiet "
+        "silences them).")
+
+# rich_markup_mode=None: plain help, so units such as [m] in option help are shown, not taken for markup.
+app = typer.Typer(cls=_MincamGroup, add_completion=False, no_args_is_help=True, help=HELP, rich_markup_mode=None,
+                  pretty_exceptions_show_locals=False)
+masks_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None,
+                        help="Generate the mask library or export print-ready masks.")
 app.add_typer(masks_app, name="masks")
-
-_state = {"verbose": False}
 
 
 @app.callback()
 def _global(
     variant: Annotated[str | None, typer.Option(help="Mitsuba variant: cuda_ad_mono, llvm_ad_mono or scalar_rgb "
                                                      "(default: automatic; env MINCAM_VARIANT)")] = None,
-    verbose: Annotated[bool, typer.Option("--verbose", "-v", help="print the variant and progress bars")] = False,
+    verbose: Annotated[bool, typer.Option("--verbose", "-v", help="print the Mitsuba variant in use")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress bars on stderr")] = False,
+    debug: Annotated[bool, typer.Option("--debug", help="show the traceback of an error (env MINCAM_DEBUG=1)")]
+    = False,
 ) -> None:
+    from . import progress
     from .render import backend
 
+    _state.update(verbose=verbose, quiet=quiet, debug=debug or _state["debug"], variant=variant)
+    progress.set_enabled(not quiet)
+    if variant is not None and variant not in backend.SUPPORTED_VARIANTS:
+        raise ConfigError(f"--variant {variant!r} is not a Mitsuba variant mincam_sim supports: choose one of "
+                          f"{', '.join(backend.SUPPORTED_VARIANTS)}")
     backend.request_variant(variant)
-    _state["verbose"] = verbose
 
 
 def _say(msg: str) -> None:
     typer.echo(msg, err=True)
+
+
+def _show_progress() -> bool:
+    return not _state["quiet"]
 
 
 def _announce_variant() -> None:
@@ -39,49 +165,263 @@ def _announce_variant() -> None:
         _say(f"mincam-sim: Mitsuba variant {backend.variant()} ({backend.describe()['mitsuba']})")
 
 
-def _fail(err: Exception) -> None:
-    typer.echo(f"error: {err}", err=True)
-    raise typer.Exit(2)
+# --------------------------------------------------------------------------------------- checks before work
 
 
-def run_render_config(cfg, show_progress: bool = False):
-    """Render a validated :class:`~mincam_sim.config.RenderConfig`; write outputs; return (measurements, maps)."""
-    from .render.screen_engine import render_frames
+def variant_problem(variant: str) -> str | None:
+    """Why ``variant`` cannot run on this machine, or None if it can. Renders nothing.
 
-    out = cfg.run.out_dir
-    m, maps = render_frames(
-        cfg.mincam, cfg.screen, cfg.frames, cfg.run.form, cfg.run.spp, cfg.run.samples_per_texel,
-        cfg.run.target_rel_stderr, cfg.run.seed, cfg.run.replicates, out_dir=out / "run", show_progress=show_progress,
-    )
-    m.meta["config"] = cfg.raw
+    Uses ``mincam_sim.render.backend.variant_available(name)`` when the backend offers it; otherwise asks the
+    backend to load the variant (only the render layer imports Mitsuba / Dr.Jit) and reports its refusal.
+    """
+    from .render import backend
+
+    ask = getattr(backend, "variant_available", None)
+    if callable(ask):
+        return None if ask(variant) else f"Mitsuba variant {variant!r} is not available on this machine"
+    backend.request_variant(variant)
+    try:
+        loaded = backend.variant()
+    except (ImportError, RuntimeError, AttributeError, OSError) as err:
+        why = _one_line(str(err))[:160]
+        if variant.startswith("cuda"):
+            return f"Mitsuba variant {variant!r} needs a working CUDA GPU and driver, and none was found ({why})"
+        return f"Mitsuba variant {variant!r} cannot be loaded on this machine ({why})"
+    if loaded != variant:
+        return f"Mitsuba variant {loaded!r} is already in use in this process, not {variant!r}"
+    return None
+
+
+def check_variant(config_variant: str | None = None) -> str | None:
+    """Validate the variant asked for (``--variant`` > the config's ``[run] variant`` > ``MINCAM_VARIANT``)
+    before anything renders, request it, and return it (None: automatic).
+
+    Raises
+    ------
+    ConfigError
+        Unknown variant name.
+    BackendUnavailableError
+        The variant cannot run here (e.g. ``cuda_ad_mono`` without a GPU).
+    """
+    from .render import backend
+
+    if _state["variant"] is not None:
+        wanted, source = _state["variant"], "--variant"
+    elif config_variant:
+        wanted, source = config_variant, "[run] variant"
+    elif os.environ.get(backend.ENV_VARIANT):
+        wanted, source = os.environ[backend.ENV_VARIANT], backend.ENV_VARIANT
+    else:
+        return None
+    if wanted not in backend.SUPPORTED_VARIANTS:
+        raise ConfigError(f"{source} = {wanted!r} is not a supported Mitsuba variant: choose one of "
+                          f"{', '.join(backend.SUPPORTED_VARIANTS)}")
+    problem = variant_problem(wanted)
+    if problem is not None:
+        raise BackendUnavailableError(f"{source}: {problem}; use another variant or leave it unset (automatic)")
+    return wanted
+
+
+def check_out_dir(path: Path, what: str = "output directory", create: bool = True) -> Path:
+    """Make sure ``path`` can be a writable directory (create it unless ``create`` is False); ConfigError if not."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise ConfigError(f"{what} {path} is an existing file, not a directory; choose a directory path")
+    ancestor = path
+    while not ancestor.exists():
+        if ancestor.parent == ancestor:
+            break
+        ancestor = ancestor.parent
+    if ancestor.exists() and not ancestor.is_dir():
+        raise ConfigError(f"{what} {path} cannot be created: {ancestor} is a file")
+    if ancestor.exists() and not os.access(ancestor, os.W_OK | os.X_OK):
+        raise ConfigError(f"{what} {path} cannot be written: no permission in {ancestor}")
+    if create:
+        try:
+            path.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise ConfigError(f"cannot create {what} {path}: {err.strerror or err}") from None
+    return path
+
+
+def check_out_file(path: Path, what: str = "output file") -> Path:
+    """Make sure ``path`` can be written as a file (its directory is created); ConfigError if not."""
+    path = Path(path)
+    if path.is_dir():
+        raise ConfigError(f"{what} {path} is an existing directory; give a file name")
+    check_out_dir(path.parent if str(path.parent) else Path("."), f"directory of the {what}")
+    return path
+
+
+# ------------------------------------------------------------------------------------------------- render
+
+
+def config_identity(cfg: Any, variant: str | None = None) -> dict:
+    """Everything a config's numbers depend on, as content fingerprints (what ``identity.json`` records).
+
+    Parameters
+    ----------
+    cfg : RenderConfig
+        The validated config.
+    variant : str, optional
+        The Mitsuba variant that renders (None: recorded as "automatic").
+
+    Returns
+    -------
+    dict
+        form, seed, the requested budget (only the counts the form uses), fingerprints of the mincam, each mask,
+        the screen and the frames (of the sweep recipe, or of the frame array for ``npy``), mixel names, the
+        variant and the library versions.
+    """
+    from .identity import fingerprint, frames_fingerprint, library_versions
+
+    run = cfg.run
+    budget: dict[str, Any] = {"target_rel_stderr": run.target_rel_stderr}
+    if run.form == "response_map":
+        if run.target_rel_stderr == 0:
+            budget["samples_per_texel"] = run.samples_per_texel
+    else:
+        budget["replicates"] = run.replicates
+        if run.target_rel_stderr == 0:
+            budget["spp"] = run.spp
     if cfg.frame_positions_m is not None:
-        m.meta["frame_positions_m"] = cfg.frame_positions_m.tolist()
-    m.save_npz(out / "measurements.npz")
-    m.save_csv(out / "measurements.csv")
-    if maps is not None:
-        maps.save_exr(out / "response_maps")
+        frames = cfg.raw["frames"]
+        recipe = {k: frames[k] for k in ("square_m", "radiance_w_m2_sr", "background_w_m2_sr")}
+        frames_fp = fingerprint({"kind": cfg.frames_kind, "positions_m": np.asarray(cfg.frame_positions_m),
+                                 "shape": list(cfg.frames.shape), **recipe})
+    else:
+        frames_fp = frames_fingerprint(cfg.frames)
+    return {"form": run.form, "seed": run.seed, "budget": budget, "mincam": fingerprint(cfg.mincam),
+            "mixels": cfg.mincam.names, "masks": [fingerprint(m.mask) for m in cfg.mincam],
+            "screen": fingerprint(cfg.screen), "frames": frames_fp, "variant": variant or "automatic",
+            "versions": library_versions()}
+
+
+def _finished_results(out: Path, key: str, n_frames: int) -> Any:
+    """The measurements a finished run with identity ``key`` wrote to ``out``, or None."""
+    from .measurements import Measurements
+
+    path = out / "measurements.npz"
+    if not path.is_file():
+        return None
+    try:
+        m = Measurements.load_npz(path)
+    except Exception:  # torn or foreign: render again (the file is replaced atomically at the end)
+        return None
+    if m.meta.get("identity_key") != key or m.n_frames != n_frames:
+        return None
+    return m
+
+
+def run_render_config(
+    cfg: Any, show_progress: bool = False, overwrite: bool = False, reuse: bool = False
+) -> tuple[Any, Any]:
+    """Render a validated :class:`~mincam_sim.config.RenderConfig`; write outputs; return (measurements, maps).
+
+    The output directory is locked while this runs. ``identity.json`` there records the content fingerprints
+    of everything the numbers depend on (:func:`config_identity`); a rerun with different content is refused
+    (StaleResultError naming what changed) unless ``overwrite``, which first removes the previous run's store
+    and maps. With ``reuse``, a finished run with the same identity is not rendered again: its
+    ``measurements.npz`` is returned (and maps as None).
+    """
+    from .atomic import atomic_path
+    from .identity import run_key
+    from .render import backend
+    from .render.screen_engine import render_frames
+    from .store import check_identity, clear_store, lock_out_dir
+
+    out = Path(cfg.run.out_dir)
+    run_dir = out / "run"
+    identity = config_identity(cfg, backend.variant())  # the variant in use: CUDA and LLVM differ in the last bits
+    key = run_key(identity)
+    with lock_out_dir(out):
+        if overwrite:
+            clear_store(run_dir, extra=("response_maps.npz",))
+        same = check_identity(out, identity, overwrite=overwrite)
+        if same and reuse:
+            done = _finished_results(out, key, len(cfg.frames))
+            if done is not None:
+                _say(f"mincam-sim: {out} holds the finished results of this same run; shown again (--overwrite "
+                     "renders anew)")
+                return done, None
+        extra: dict[str, Any] = {}
+        if "overwrite" in inspect.signature(render_frames).parameters:
+            extra["overwrite"] = overwrite
+        m, maps = render_frames(
+            cfg.mincam, cfg.screen, cfg.frames, cfg.run.form, cfg.run.spp, cfg.run.samples_per_texel,
+            cfg.run.target_rel_stderr, cfg.run.seed, cfg.run.replicates, out_dir=run_dir,
+            show_progress=show_progress, **extra,
+        )
+        m.meta["config"] = cfg.raw
+        m.meta["identity_key"] = key
+        if cfg.frame_positions_m is not None:
+            m.meta["frame_positions_m"] = cfg.frame_positions_m.tolist()
+        if maps is not None:
+            maps.save_exr(out / "response_maps")
+        with atomic_path(out / "measurements.csv") as tmp:
+            m.save_csv(tmp)
+        with atomic_path(out / "measurements.npz") as tmp:  # last: it marks the run finished
+            m.save_npz(tmp)
     return m, maps
+
+
+def _summary_lines(cfg: Any, variant: str | None) -> list[str]:
+    run, screen = cfg.run, cfg.screen
+    lines = [f"config: {cfg.source or 'text'} is valid"]
+    for mixel in cfg.mincam:
+        p = ", ".join(f"{v:+.4f}" for v in mixel.pose.position_m)
+        mask = mixel.mask
+        lines.append(f"mixel {mixel.name}: mask {mask.name} ({mask.shape[1]}x{mask.shape[0]} texels, "
+                     f"{1e3 * mask.width_m:g} x {1e3 * mask.height_m:g} mm) at d_f {1e3 * mixel.d_f_m:g} mm, "
+                     f"detector {1e3 * mixel.detector_size_m:g} mm, position [{p}] m")
+    lines.append(f"screen: {screen.width_m:.4f} x {screen.height_m:.4f} m, {screen.resolution[0]} x "
+                 f"{screen.resolution[1]} texels, {-screen.pose.position_m[2]:g} m from the mincam")
+    f = cfg.frames
+    lines.append(f"frames: {len(f)} ({cfg.frames_kind}), {f.shape[2]} x {f.shape[1]} texels, radiance "
+                 f"{f.min():g} .. {f.max():g} W m^-2 sr^-1, {f.nbytes / 2**20:.1f} MiB")
+    if run.form == "response_map":
+        budget = (f"target relative stderr {run.target_rel_stderr:g}" if run.target_rel_stderr > 0
+                  else f"{run.samples_per_texel} samples per texel")
+    else:
+        budget = (f"target relative stderr {run.target_rel_stderr:g}" if run.target_rel_stderr > 0
+                  else f"{run.spp} samples per mixel per frame") + f", {run.replicates} replicates"
+    lines.append(f"form: {run.form}, {budget}, seed {run.seed}, variant {variant or 'automatic'}")
+    out = Path(run.out_dir)
+    state = "exists" if out.is_dir() else "will be created"
+    if (out / "identity.json").exists() or (out / "run" / "run.json").exists():
+        state += ", holds an earlier run (resumed if unchanged, refused if different unless --overwrite)"
+    lines.append(f"out dir: {out} ({state})")
+    return lines
 
 
 @app.command()
 def render(
     config: Annotated[Path, typer.Argument(help="TOML configuration (see `mincam-sim config-example`)")],
     out_dir: Annotated[Path | None, typer.Option("--out", help="override [run] out_dir")] = None,
+    check: Annotated[bool, typer.Option("--check", help="validate the config and print a summary; render "
+                                                        "nothing")] = False,
+    overwrite: Annotated[bool, typer.Option("--overwrite", help="replace the results of a different run in the "
+                                                                "output directory")] = False,
 ) -> None:
     """Render the measurements a config describes; write measurements.npz/.csv (+ response maps as EXR)."""
-    from .config import ConfigError, load_config
-    from .render import backend
+    from .config import load_config
 
-    try:
-        cfg = load_config(config)
-        if cfg.run.variant:
-            backend.request_variant(cfg.run.variant)
-        if out_dir is not None:
-            cfg.run.out_dir = out_dir
-        _announce_variant()
-        m, _ = run_render_config(cfg, show_progress=_state["verbose"])
-    except (ConfigError, ValueError, FileNotFoundError) as err:
-        _fail(err)
+    cfg = load_config(config)
+    if out_dir is not None:
+        cfg.run.out_dir = out_dir
+    variant = check_variant(cfg.run.variant)
+    cfg.run.variant = variant
+    if variant == "scalar_rgb" and cfg.run.form != "reference":
+        raise ConfigError(f"[run] form = {cfg.run.form!r} needs a vectorised Mitsuba variant (llvm_ad_mono or "
+                          "cuda_ad_mono); scalar_rgb renders only form = \"reference\"")
+    if check:
+        check_out_dir(cfg.run.out_dir, create=False)
+        for line in _summary_lines(cfg, variant):
+            typer.echo(line)
+        return
+    check_out_dir(cfg.run.out_dir)
+    _announce_variant()
+    m, _ = run_render_config(cfg, show_progress=_show_progress(), overwrite=overwrite, reuse=True)
     np.set_printoptions(precision=6, suppress=False, linewidth=120)
     typer.echo(f"# {m.n_frames} frames x {len(m.mixel_names)} mixels, irradiance [W/m^2] +/- stderr, "
                f"variant {m.meta.get('variant')}, worst relative stderr {m.meta['reached_rel_stderr']:.2e}")
@@ -110,11 +450,12 @@ def masks_generate(
     """Write the standard mask library (ramps, constant, sinusoid, circular ramp) as OpenEXR + PNG previews."""
     from .masks import generate_library
 
-    try:
-        paths = generate_library(out_dir, resolution=resolution, size_m=size_m)
-    except ValueError as err:
-        _fail(err)
-    for p in paths:
+    if not 1 <= resolution <= 8192:
+        raise ConfigError(f"--resolution must be 1 to 8192 texels per side, got {resolution}")
+    if not (np.isfinite(size_m) and size_m > 0):
+        raise ConfigError(f"--size-m must be a positive mask side in metres, got {size_m}")
+    check_out_dir(out_dir)
+    for p in generate_library(out_dir, resolution=resolution, size_m=size_m):
         typer.echo(str(p))
 
 
@@ -131,21 +472,23 @@ def masks_export(
     preview: Annotated[Path | None, typer.Option(help="also write what the film will transmit (OpenEXR)")] = None,
 ) -> None:
     """Export a mask as a print-ready PNG at DPI and physical size; optionally preview the printed film."""
-    from .config import ConfigError, parse_mask
+    from .config import parse_mask
     from .masks import PrintedFilm, export_print_png, save_exr
 
-    try:
-        mask = parse_mask(spec, size_m, 512, "mask")
-        film = PrintedFilm(t_min=film_t_min, t_max=film_t_max, dpi=dpi, levels=levels,
-                           halftone="ordered" if halftone else None)
-        path = export_print_png(mask, out, dpi=dpi, film=film)
-        if preview is not None:
-            printed = film.print(mask)
-            save_exr(printed, preview)
-            typer.echo(f"{preview}: printed film transmits {printed.transmission.min():.3f}.."
-                       f"{printed.transmission.max():.3f} on a {printed.shape[1]}x{printed.shape[0]} dot grid")
-    except (ConfigError, ValueError, OSError) as err:
-        _fail(err)
+    if not (np.isfinite(size_m) and size_m > 0):
+        raise ConfigError(f"--size-m must be a positive mask side in metres, got {size_m}")
+    check_out_file(out, "--out file")
+    if preview is not None:
+        check_out_file(preview, "--preview file")
+    mask = parse_mask(spec, size_m, 512, "mask")
+    film = PrintedFilm(t_min=film_t_min, t_max=film_t_max, dpi=dpi, levels=levels,
+                       halftone="ordered" if halftone else None)
+    path = export_print_png(mask, out, dpi=dpi, film=film)
+    if preview is not None:
+        printed = film.print(mask)
+        save_exr(printed, preview)
+        typer.echo(f"{preview}: printed film transmits {printed.transmission.min():.3f}.."
+                   f"{printed.transmission.max():.3f} on a {printed.shape[1]}x{printed.shape[0]} dot grid")
     typer.echo(str(path))
 
 
@@ -154,7 +497,8 @@ def _render_demo(out_dir: Path) -> None:
     from .plots import plot_response_maps, plot_sweep
 
     cfg = load_config({"run": {"out_dir": str(out_dir), "target_rel_stderr": 1e-3}})
-    m, maps = run_render_config(cfg, show_progress=_state["verbose"])
+    # The demo is a fixed job: it starts afresh in its own output directory every time.
+    m, maps = run_render_config(cfg, show_progress=_show_progress(), overwrite=True)
     plot_sweep(np.asarray(cfg.frame_positions_m)[:, 0], m, out_dir / "sweep.png")
     if maps is not None:
         plot_response_maps(maps, cfg.screen, out_dir / "response_maps.png")
@@ -176,6 +520,22 @@ def _print_table(results: dict) -> None:
                    f"{'-':>8} / {'-':<8}        {v['n']}")
 
 
+def _setup(**kw: Any) -> Any:
+    from .experiments import Setup
+
+    for key in ("spacing_m", "depth_m"):
+        if key in kw and not np.isfinite(kw[key]):
+            raise ConfigError(f"--{key.replace('_', '-')} must be a finite number of metres, got {kw[key]}")
+    if "bit_depth" in kw and not 1 <= kw["bit_depth"] <= 32:
+        raise ConfigError(f"--bit-depth must be 1 to 32 bits, got {kw['bit_depth']}")
+    if kw.get("seed", 0) < 0:
+        raise ConfigError(f"--seed must be an integer >= 0, got {kw['seed']}")
+    try:
+        return Setup(**kw)
+    except ValueError as err:
+        raise ConfigError(str(err).replace("Setup.", "--").replace("_", "-")) from None
+
+
 @app.command()
 def reproduce(
     experiment: Annotated[str, typer.Argument(help="intrusion, tracking, speed or all")] = "all",
@@ -187,16 +547,19 @@ def reproduce(
     bit_depth: Annotated[int, typer.Option(help="ADC bits (paper: 12)")] = 12,
 ) -> None:
     """Reproduce the paper's experiments in simulation; print the error table beside the paper's."""
-    from .experiments import EXPERIMENTS, Setup
+    from .experiments import EXPERIMENTS
     from .experiments import reproduce as run
+    from .store import lock_out_dir
 
+    if experiment != "all" and experiment not in EXPERIMENTS:
+        raise ConfigError(f"unknown experiment {experiment!r}: choose {', '.join(EXPERIMENTS)} or all")
     names = list(EXPERIMENTS) if experiment == "all" else [experiment]
-    try:
-        setup = Setup(quick=quick, seed=seed, spacing_m=spacing_m, depth_m=depth_m, bit_depth=bit_depth)
-        _announce_variant()
-        results = run(names, setup, out_dir, show_progress=_state["verbose"])
-    except ValueError as err:
-        _fail(err)
+    setup = _setup(quick=quick, seed=seed, spacing_m=spacing_m, depth_m=depth_m, bit_depth=bit_depth)
+    check_variant()
+    check_out_dir(out_dir)
+    _announce_variant()
+    with lock_out_dir(out_dir):
+        results = run(names, setup, out_dir, show_progress=_show_progress())
     _print_table(results)
     typer.echo(f"# results.json and plots in {out_dir}")
 
@@ -208,13 +571,16 @@ def study(
     quick: Annotated[bool, typer.Option("--quick", help="fewer spacings and depths")] = False,
 ) -> None:
     """Studies: `spacing` = intrusion error against mixel spacing (0-10 cm) and depth, before/after calibration."""
-    from .experiments import Setup
     from .experiments import spacing as spacing_study
+    from .store import lock_out_dir
 
     if what != "spacing":
-        _fail(ValueError(f"unknown study {what!r}: the available study is 'spacing'"))
+        raise ConfigError(f"unknown study {what!r}: the available study is 'spacing'")
+    check_variant()
+    check_out_dir(out_dir)
     _announce_variant()
-    result = spacing_study.run(Setup(quick=quick), out_dir, show_progress=_state["verbose"])
+    with lock_out_dir(out_dir):
+        result = spacing_study.run(_setup(quick=quick), out_dir, show_progress=_show_progress())
     typer.echo("spacing [cm]  " + "  ".join(f"{100 * s:6.1f}" for s in result["spacing_m"]))
     for depth, rows in result["by_depth"].items():
         typer.echo(f"d={depth} m avg error before [%] " + " ".join(f"{v:6.2f}" for v in rows["avg_before_pct"]))
@@ -228,15 +594,20 @@ def demo(
 ) -> None:
     """Built-in default job: a 2-mixel (x | 1-x) mincam 0.5 m from a 50" screen with a white square swept along
     the boundary (measurements, response maps as EXR, plots), then `reproduce all --quick` and the spacing study."""
-    from .experiments import EXPERIMENTS, Setup
+    from .experiments import EXPERIMENTS
     from .experiments import reproduce as run
     from .experiments import spacing as spacing_study
+    from .store import lock_out_dir
 
+    check_variant()
+    check_out_dir(out_dir)
     _announce_variant()
     _render_demo(out_dir / "render")
-    results = run(list(EXPERIMENTS), Setup(quick=True), out_dir / "repro", show_progress=_state["verbose"])
+    with lock_out_dir(out_dir / "repro"):
+        results = run(list(EXPERIMENTS), _setup(quick=True), out_dir / "repro", show_progress=_show_progress())
     _print_table(results)
-    spacing_study.run(Setup(quick=True), out_dir / "study")
+    with lock_out_dir(out_dir / "study"):
+        spacing_study.run(_setup(quick=True), out_dir / "study", show_progress=_show_progress())
     typer.echo(f"demo: wrote {out_dir}/render, {out_dir}/repro (results.json, plots), {out_dir}/study")
 
 
@@ -247,6 +618,8 @@ def figures(
     """Write the README's figures (mixel geometry, masks, response maps)."""
     from .figures import make_figures
 
+    check_variant()
+    check_out_dir(out_dir)
     for path in make_figures(out_dir):
         typer.echo(str(path))
 

@@ -3,11 +3,16 @@
 Every key carries its unit in its name (``_m`` metres, ``_rad`` radians, ``_w_m2_sr`` radiance ...). Unknown
 keys or names are errors that list what is allowed. The documented schema with every default is
 :data:`EXAMPLE_TOML` (also printed by ``mincam-sim config-example``).
+
+Every problem with a document raises :class:`~mincam_sim.errors.ConfigError` (a ``ValueError``) naming the
+field and the fix -- never a ``TypeError`` or ``KeyError``. Relative paths (``[run] out_dir``, ``[frames] path``
+and ``file:`` masks) resolve against the config file's directory.
 """
 
 from __future__ import annotations
 
 import tomllib
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -15,10 +20,11 @@ from typing import Any
 import numpy as np
 
 from . import masks as masks_mod
+from .errors import ConfigError
 from .geometry import Pose
 from .masks import Mask
 from .optics import DEFAULT_D_F_M, DEFAULT_DETECTOR_SIZE_M, PAPER_SPACING_M, Mincam, Mixel, layout
-from .screen import Screen, Sweep, diagonal_to_size, grid_sweep, line_sweep
+from .screen import Screen, Sweep, check_visible, diagonal_to_size, grid_sweep, line_sweep
 
 EXAMPLE_TOML = """\
 # mincam-sim render configuration. Units are in the key names: _m metres, _in inches, _deg degrees,
@@ -32,7 +38,7 @@ target_rel_stderr = 0.0    # > 0: pick samples automatically to reach this relat
 replicates = 8             # independent estimates per value, for the standard error
 seed = 0                   # same seed, same numbers
 variant = ""               # "" = automatic (cuda_ad_mono > llvm_ad_mono > scalar_rgb)
-out_dir = "out/render"     # measurements.npz / .csv (+ response maps as OpenEXR) are written here
+out_dir = "out/render"     # measurements.npz / .csv (+ response maps as OpenEXR); relative to this file
 
 [mincam]
 layout = "pair"            # "pair" (x | 1-x), "cross" (x, 1-x, y, 1-y around a centre), "custom" ([[mixel]] below)
@@ -45,7 +51,8 @@ mask_resolution = 256      # texels per side of generated masks
 # For layout = "custom", one table per mixel:
 # [[mixel]]
 # name = "left"
-# mask = "ramp:x"          # "ramp:x|1-x|y|1-y", "constant:<t>", "file:<path.png|.exr>", or a table:
+# mask = "ramp:x"          # "ramp:x|1-x|y|1-y", "constant:<t>", "file:<path.png|.exr>" (relative to this
+#                          # file), or a table:
 #                          # {kind = "sinusoid", omega_rad_per_m = 15708.0, a0 = 0.5, a1 = 0.5, phase_rad = 0.0,
 #                          #  direction_deg = 0.0}
 # position_m = [-0.0165, 0.0, 0.0]
@@ -70,7 +77,7 @@ ny = 9                     # grid_sweep
 square_m = 0.03            # side of the white square
 radiance_w_m2_sr = 1.0     # radiance of the white square (black elsewhere)
 background_w_m2_sr = 0.0   # radiance of the rest of the screen
-path = ""                  # npy: path of the frame stack
+path = ""                  # npy: path of the frame stack (relative to this file)
 """
 
 _SCHEMA: dict[str, dict[str, Any]] = {
@@ -92,49 +99,130 @@ _SCHEMA: dict[str, dict[str, Any]] = {
 }
 _MIXEL_KEYS = {"name": None, "mask": None, "position_m": [0.0, 0.0, 0.0], "forward": [0.0, 0.0, -1.0],
                "up": [0.0, 1.0, 0.0], "d_f_m": None, "detector_size_m": None}
+_SINUSOID_KEYS = {"omega_rad_per_m": None, "a0": 0.5, "a1": 0.5, "phase_rad": 0.0, "direction_deg": 0.0}
 _FORMS = ("response_map", "fast", "reference")
 _LAYOUTS = ("pair", "cross", "custom")
 _FRAME_KINDS = ("line_sweep", "grid_sweep", "npy")
+_VARIANTS = ("", "cuda_ad_mono", "llvm_ad_mono", "scalar_rgb")
+
+MAX_MASK_RESOLUTION = 8192  # texels per side (masks.MAX_TEXELS = 8192^2)
+MAX_SCREEN_TEXELS = 4096 * 4096  # Screen's own limit
+MAX_FRAME_STACK_BYTES = 8 * 2**30  # [bytes] the frames are built in memory (float64)
+MAX_REPLICATES = 4096
+MAX_INT = 2**63 - 1
 
 
-class ConfigError(ValueError):
-    """A configuration value is missing, unknown or out of range; the message says which and how to fix it."""
+def _describe(value: Any) -> str:
+    """Short repr of a config value for messages (with its TOML type)."""
+    kind = {bool: "boolean", int: "integer", float: "number", str: "string", list: "array", dict: "table",
+            tuple: "array"}.get(type(value), type(value).__name__)
+    text = repr(value)
+    if len(text) > 60:
+        text = text[:57] + "..."
+    return f"{text} ({kind})"
 
 
-def _check_keys(section: str, given: dict, allowed: dict) -> dict:
+def _table(where: str, value: Any) -> dict:
+    if not isinstance(value, dict):
+        raise ConfigError(f"{where} must be a table (a [section] with key = value lines), got {_describe(value)}")
+    bad = [k for k in value if not isinstance(k, str)]
+    if bad:
+        raise ConfigError(f"{where}: keys must be strings, got {bad[0]!r}")
+    return value
+
+
+def _check_keys(section: str, given: Any, allowed: dict) -> dict:
+    given = _table(f"[{section}]" if not section.startswith("[") else section, given)
     unknown = sorted(set(given) - set(allowed))
     if unknown:
+        where = section if section.startswith("[") else f"[{section}]"
         raise ConfigError(
-            f"[{section}]: unknown key(s) {', '.join(unknown)}; allowed keys are {', '.join(sorted(allowed))}"
+            f"{where}: unknown key(s) {', '.join(unknown)}; allowed keys are {', '.join(sorted(allowed))}"
         )
     return {**allowed, **given}
 
 
-def _positive(section: str, key: str, value, integer: bool = False, allow_zero: bool = False):
-    ok_type = isinstance(value, int) if integer else isinstance(value, int | float)
-    if isinstance(value, bool) or not ok_type or not np.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
-        kind = "an integer" if integer else "a number"
-        bound = ">= 0" if allow_zero else "> 0"
-        raise ConfigError(f"[{section}] {key} must be {kind} {bound}, got {value!r}")
+def _where(section: str, key: str) -> str:
+    return f"{section} {key}" if section.startswith("[") else f"[{section}] {key}"
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _number(section: str, key: str, value: Any, *, minimum: float | None = None, positive: bool = False) -> float:
+    """A finite real number (not a boolean, not a string); ``positive``: > 0; ``minimum``: >= minimum."""
+    if not _is_number(value) or (isinstance(value, float) and not np.isfinite(value)):
+        bound = " > 0" if positive else (f" >= {minimum:g}" if minimum is not None else "")
+        raise ConfigError(f"{_where(section, key)} must be a number{bound} (no quotes, no units), got "
+                          f"{_describe(value)}")
+    if positive and not value > 0:
+        raise ConfigError(f"{_where(section, key)} must be a number > 0, got {value!r}")
+    if minimum is not None and not value >= minimum:
+        raise ConfigError(f"{_where(section, key)} must be a number >= {minimum:g}, got {value!r}")
+    return float(value)
+
+
+def _integer(section: str, key: str, value: Any, *, minimum: int = 1, maximum: int = MAX_INT) -> int:
+    """An integer in [minimum, maximum]; booleans and fractional numbers are refused, not converted."""
+    if isinstance(value, bool) or not isinstance(value, int):
+        hint = " (a whole number, no decimal point)" if isinstance(value, float) else ""
+        bound = "> 0" if minimum == 1 else f">= {minimum}"
+        raise ConfigError(f"{_where(section, key)} must be an integer {bound}{hint}, got {_describe(value)}")
+    if value < minimum:
+        bound = "> 0" if minimum == 1 else f">= {minimum}"
+        raise ConfigError(f"{_where(section, key)} must be an integer {bound}, got {value!r}")
+    if value > maximum:
+        raise ConfigError(f"{_where(section, key)} must be at most {maximum}, got {value!r}")
+    return int(value)
+
+
+def _positive(section: str, key: str, value: Any, integer: bool = False, allow_zero: bool = False):
+    """Backward-compatible helper: a positive (or >= 0) number or integer."""
+    if integer:
+        return _integer(section, key, value, minimum=0 if allow_zero else 1)
+    return _number(section, key, value, minimum=0.0) if allow_zero else _number(section, key, value, positive=True)
+
+
+def _string(section: str, key: str, value: Any) -> str:
+    if not isinstance(value, str):
+        raise ConfigError(f"{_where(section, key)} must be a string (in quotes), got {_describe(value)}")
     return value
 
 
-def _choice(section: str, key: str, value, choices) -> str:
-    if value not in choices:
-        raise ConfigError(f"[{section}] {key} = {value!r} is not one of {', '.join(map(repr, choices))}")
+def _choice(section: str, key: str, value: Any, choices: Sequence[str]) -> str:
+    if not isinstance(value, str) or value not in choices:
+        raise ConfigError(f"{_where(section, key)} = {value!r} is not one of {', '.join(map(repr, choices))}")
     return value
 
 
-def _vector(section: str, key: str, value, n: int) -> tuple[float, ...]:
+def _vector(section: str, key: str, value: Any, n: int) -> tuple[float, ...]:
     if not isinstance(value, list | tuple) or len(value) != n or not all(
-        isinstance(v, int | float) and not isinstance(v, bool) for v in value
+        _is_number(v) and np.isfinite(v) for v in value
     ):
-        raise ConfigError(f"[{section}] {key} must be a list of {n} numbers, got {value!r}")
+        raise ConfigError(f"{_where(section, key)} must be a list of {n} finite numbers, got {_describe(value)}")
     return tuple(float(v) for v in value)
+
+
+def _int_pair(section: str, key: str, value: Any, maximum: int) -> tuple[int, int]:
+    if not isinstance(value, list | tuple) or len(value) != 2:
+        raise ConfigError(f"{_where(section, key)} must be a list of two integers, got {_describe(value)}")
+    return tuple(_integer(section, f"{key}[{i}]", v, maximum=maximum) for i, v in enumerate(value))  # type: ignore
+
+
+def _path(section: str, key: str, value: Any, base: Path) -> Path:
+    """A path string resolved against ``base`` (the config file's directory) unless absolute."""
+    text = _string(section, key, value)
+    if "\x00" in text:
+        raise ConfigError(f"{_where(section, key)} contains a NUL character; give a plain file path")
+    path = Path(text).expanduser()
+    return path if path.is_absolute() else base / path
 
 
 @dataclass
 class RunConfig:
+    """[run]: how to render. ``out_dir`` is resolved against the config file's directory."""
+
     form: str
     spp: int
     samples_per_texel: int
@@ -155,10 +243,32 @@ class RenderConfig:
     frames: np.ndarray
     frame_positions_m: np.ndarray | None
     raw: dict
+    source: Path | None = None
+    frames_kind: str = "line_sweep"
 
 
-def parse_mask(spec, size_m: float, resolution: int, where: str) -> Mask:
-    """A mask from a config value: ``"ramp:x"``, ``"constant:0.5"``, ``"file:path"`` or a table."""
+def parse_mask(spec: Any, size_m: float, resolution: int, where: str, base_dir: str | Path | None = None) -> Mask:
+    """A mask from a config value: ``"ramp:x"``, ``"constant:0.5"``, ``"file:path"`` or a sinusoid table.
+
+    Parameters
+    ----------
+    spec : str or dict
+        The mask description.
+    size_m : float
+        Side of generated masks (and width of loaded PNGs) [m].
+    resolution : int
+        Texels per side of generated masks.
+    where : str
+        Named in error messages (``"[[mixel]] #2"``).
+    base_dir : str or Path, optional
+        Relative ``file:`` paths resolve against it (the config file's directory); default: the working
+        directory.
+
+    Raises
+    ------
+    ConfigError
+        Naming ``where`` and how to fix the value.
+    """
     if isinstance(spec, str):
         kind, _, arg = spec.partition(":")
         if kind == "ramp":
@@ -168,14 +278,31 @@ def parse_mask(spec, size_m: float, resolution: int, where: str) -> Mask:
                 raise ConfigError(f"{where}: {err}") from None
         if kind == "constant":
             try:
-                return masks_mod.constant(float(arg or 1.0), 1, size_m)
-            except ValueError as err:
-                raise ConfigError(f"{where}: constant mask needs a transmission in [0, 1]: {err}") from None
-        if kind == "file":
+                value = float(arg) if arg.strip() else 1.0
+            except ValueError:
+                raise ConfigError(f"{where}: constant mask needs a transmission in [0, 1] like 'constant:0.5', "
+                                  f"got {spec!r}") from None
+            if not 0.0 <= value <= 1.0:
+                raise ConfigError(f"{where}: constant mask needs a transmission in [0, 1], got {spec!r}")
             try:
-                return masks_mod.load(arg, size_m, size_m)
-            except (OSError, ValueError) as err:
+                return masks_mod.constant(value, 1, size_m)
+            except ValueError as err:
                 raise ConfigError(f"{where}: {err}") from None
+        if kind == "file":
+            if not arg.strip():
+                raise ConfigError(f"{where}: 'file:' needs a path, e.g. mask = \"file:masks/ramp_x.exr\"")
+            if "\x00" in arg:
+                raise ConfigError(f"{where}: mask file path contains a NUL character")
+            path = Path(arg).expanduser()
+            if not path.is_absolute() and base_dir is not None:
+                path = Path(base_dir) / path
+            if not path.is_file():
+                rel = " (relative paths are relative to the config file)" if base_dir is not None else ""
+                raise ConfigError(f"{where}: mask file {str(path)!r} does not exist or is not a file{rel}")
+            try:
+                return masks_mod.load(path, size_m)
+            except Exception as err:  # a user's file: any failure to read it is a config error
+                raise ConfigError(f"{where}: cannot use mask file {str(path)!r}: {err}") from None
         raise ConfigError(
             f"{where}: mask {spec!r} not understood; use 'ramp:x|1-x|y|1-y', 'constant:<t>', 'file:<path>' or a "
             "table {kind = \"sinusoid\", omega_rad_per_m = ...}"
@@ -185,38 +312,43 @@ def parse_mask(spec, size_m: float, resolution: int, where: str) -> Mask:
         kind = spec.pop("kind", None)
         if kind != "sinusoid":
             raise ConfigError(f"{where}: mask tables support kind = \"sinusoid\" (got {kind!r})")
-        allowed = {"omega_rad_per_m", "a0", "a1", "phase_rad", "direction_deg"}
-        unknown = sorted(set(spec) - allowed)
+        bad_keys = [k for k in spec if not isinstance(k, str)]
+        unknown = sorted(str(k) for k in set(spec) - set(_SINUSOID_KEYS)) if not bad_keys else [repr(bad_keys[0])]
         if unknown:
-            raise ConfigError(f"{where}: unknown sinusoid key(s) {unknown}; allowed: {sorted(allowed)}")
+            raise ConfigError(f"{where}: unknown sinusoid key(s) {unknown}; allowed: {sorted(_SINUSOID_KEYS)}")
         if "omega_rad_per_m" not in spec:
             raise ConfigError(f"{where}: a sinusoid mask needs omega_rad_per_m (angular frequency on the mask)")
+        params = {**_SINUSOID_KEYS, **spec}
+        section = f"{where} mask"
+        values = {k: _number(section, k, v) for k, v in params.items()}
+        _number(section, "omega_rad_per_m", params["omega_rad_per_m"], minimum=0.0)
         try:
-            return masks_mod.sinusoid(resolution=resolution, width_m=size_m, **spec)
+            return masks_mod.sinusoid(resolution=resolution, width_m=size_m, **values)
         except (TypeError, ValueError) as err:
             raise ConfigError(f"{where}: {err}") from None
-    raise ConfigError(f"{where}: mask must be a string or a table, got {spec!r}")
+    raise ConfigError(f"{where}: mask must be a string like \"ramp:x\" or a sinusoid table, got {_describe(spec)}")
 
 
-def _build_mincam(cfg: dict, mixel_tables: list[dict]) -> Mincam:
+def _build_mincam(cfg: dict, mixel_tables: list, base: Path) -> Mincam:
     m = cfg
-    for key in ("spacing_m",):
-        _positive("mincam", key, m[key], allow_zero=True)
-    for key in ("d_f_m", "detector_size_m", "mask_size_m"):
-        _positive("mincam", key, m[key])
-    _positive("mincam", "mask_resolution", m["mask_resolution"], integer=True)
+    spacing = _number("mincam", "spacing_m", m["spacing_m"], minimum=0.0)
+    d_f = _number("mincam", "d_f_m", m["d_f_m"], positive=True)
+    det = _number("mincam", "detector_size_m", m["detector_size_m"], positive=True)
+    size = _number("mincam", "mask_size_m", m["mask_size_m"], positive=True)
+    res = _integer("mincam", "mask_resolution", m["mask_resolution"], maximum=MAX_MASK_RESOLUTION)
     kind = _choice("mincam", "layout", m["layout"], _LAYOUTS)
-    common = {"d_f_m": m["d_f_m"], "detector_size_m": m["detector_size_m"]}
-    res, size, s = m["mask_resolution"], m["mask_size_m"], m["spacing_m"]
+    common = {"d_f_m": d_f, "detector_size_m": det}
     if kind != "custom" and mixel_tables:
-        raise ConfigError("[[mixel]] tables are only used with [mincam] layout = \"custom\"")
+        raise ConfigError("[[mixel]] tables are only used with [mincam] layout = \"custom\"; remove them or set "
+                          "layout = \"custom\"")
     try:
         if kind == "pair":
             return layout([masks_mod.ramp("x", res, size), masks_mod.ramp("1-x", res, size)],
-                          [(-s / 2, 0.0), (s / 2, 0.0)], ["x", "1-x"], **common)
+                          [(-spacing / 2, 0.0), (spacing / 2, 0.0)], ["x", "1-x"], **common)
         if kind == "cross":
             return layout([masks_mod.ramp(k, res, size) for k in ("x", "1-x", "y", "1-y")],
-                          [(-s, 0.0), (s, 0.0), (0.0, s), (0.0, -s)], ["x", "1-x", "y", "1-y"], **common)
+                          [(-spacing, 0.0), (spacing, 0.0), (0.0, spacing), (0.0, -spacing)],
+                          ["x", "1-x", "y", "1-y"], **common)
     except ValueError as err:
         raise ConfigError(f"[mincam]: {err}") from None
     if not mixel_tables:
@@ -227,17 +359,23 @@ def _build_mincam(cfg: dict, mixel_tables: list[dict]) -> Mincam:
         t = _check_keys(where, table, _MIXEL_KEYS)
         if t["mask"] is None:
             raise ConfigError(f"{where}: mask is required (e.g. mask = \"ramp:x\")")
-        mask = parse_mask(t["mask"], size, res, where)
+        name = f"m{i}" if t["name"] is None else _string(where, "name", t["name"])
+        if not name.strip():
+            raise ConfigError(f"{where} name must not be empty")
+        mask = parse_mask(t["mask"], size, res, where, base_dir=base)
+        position = _vector(where, "position_m", t["position_m"], 3)
+        forward = _vector(where, "forward", t["forward"], 3)
+        up = _vector(where, "up", t["up"], 3)
+        if np.linalg.norm(forward) == 0:
+            raise ConfigError(f"{where} forward must be a non-zero direction, got {list(forward)}")
+        if np.linalg.norm(np.cross(forward, up)) < 1e-9 * np.linalg.norm(forward) * max(np.linalg.norm(up), 1e-300):
+            raise ConfigError(f"{where} up {list(up)} must not be parallel to forward {list(forward)}; give an up "
+                              "direction across the viewing direction")
+        mixel_d_f = d_f if t["d_f_m"] is None else _number(where, "d_f_m", t["d_f_m"], positive=True)
+        mixel_det = det if t["detector_size_m"] is None else _number(where, "detector_size_m",
+                                                                      t["detector_size_m"], positive=True)
         try:
-            pose = Pose(_vector(where, "position_m", t["position_m"], 3), _vector(where, "forward", t["forward"], 3),
-                        _vector(where, "up", t["up"], 3))
-            mixels.append(Mixel(
-                mask,
-                t["d_f_m"] if t["d_f_m"] is not None else m["d_f_m"],
-                t["detector_size_m"] if t["detector_size_m"] is not None else m["detector_size_m"],
-                pose,
-                t["name"] or f"m{i}",
-            ))
+            mixels.append(Mixel(mask, mixel_d_f, mixel_det, Pose(position, forward, up), name))
         except ValueError as err:
             raise ConfigError(f"{where}: {err}") from None
     try:
@@ -247,94 +385,192 @@ def _build_mincam(cfg: dict, mixel_tables: list[dict]) -> Mincam:
 
 
 def _build_screen(cfg: dict) -> Screen:
-    _positive("screen", "diagonal_in", cfg["diagonal_in"])
-    _positive("screen", "distance_m", cfg["distance_m"])
+    diagonal = _number("screen", "diagonal_in", cfg["diagonal_in"], positive=True)
+    distance = _number("screen", "distance_m", cfg["distance_m"], positive=True)
     aspect = _vector("screen", "aspect", cfg["aspect"], 2)
-    res = _vector("screen", "resolution", cfg["resolution"], 2)
     if any(a <= 0 for a in aspect):
         raise ConfigError(f"[screen] aspect must be two positive numbers, got {cfg['aspect']!r}")
-    width, height = diagonal_to_size(cfg["diagonal_in"], aspect)
+    res = _int_pair("screen", "resolution", cfg["resolution"], maximum=4096)
+    if res[0] * res[1] > MAX_SCREEN_TEXELS:
+        raise ConfigError(f"[screen] resolution {list(res)} is too large (at most {MAX_SCREEN_TEXELS} texels)")
+    width, height = diagonal_to_size(diagonal, aspect)
     try:
-        return Screen(width, height, (int(res[0]), int(res[1])),
-                      Pose((0.0, 0.0, -cfg["distance_m"]), (0.0, 0.0, 1.0)))
+        return Screen(width, height, res, Pose((0.0, 0.0, -distance), (0.0, 0.0, 1.0)))
     except ValueError as err:
         raise ConfigError(f"[screen]: {err}") from None
+
+
+def _check_stack_size(n: int, screen: Screen, what: str) -> None:
+    rows, cols = screen.shape
+    nbytes = n * rows * cols * 8
+    if nbytes > MAX_FRAME_STACK_BYTES:
+        raise ConfigError(
+            f"[frames] {what} gives {n} frames of {cols} x {rows} texels = {nbytes / 2**30:.1f} GiB in memory "
+            f"(limit {MAX_FRAME_STACK_BYTES / 2**30:.0f} GiB); use fewer frames or a lower [screen] resolution"
+        )
+
+
+def load_frames_npy(path: Path, screen: Screen) -> np.ndarray:
+    """Frames (n, rows, cols) [W m^-2 sr^-1] from a ``.npy`` file, validated; ConfigError names the file."""
+    where = f"[frames] path {str(path)!r}"
+    if not path.is_file():
+        raise ConfigError(f"{where} is not a file; give a .npy of shape (n, rows, cols) (relative paths are "
+                          "relative to the config file)")
+    if path.stat().st_size == 0:
+        raise ConfigError(f"{where} is an empty file (0 bytes); write the frames with numpy.save")
+    try:
+        with open(path, "rb") as fh:
+            magic = fh.read(6)
+        if magic != b"\x93NUMPY":
+            raise ValueError("it does not start with the .npy magic bytes")
+        frames = np.load(path, mmap_mode="r", allow_pickle=False)
+    except (ValueError, OSError, EOFError) as err:
+        pickled = "pickle" in str(err) or "Python objects" in str(err)
+        detail = "it holds Python objects (pickled)" if pickled else str(err)
+        raise ConfigError(f"{where} is not a readable .npy array ({detail}); save a float array of shape "
+                          "(n, rows, cols) with numpy.save") from None
+    if not isinstance(frames, np.ndarray) or frames.dtype.kind not in "biuf":
+        dtype = getattr(frames, "dtype", type(frames).__name__)
+        raise ConfigError(f"{where} holds {dtype} data; frames must be real numbers (radiance)")
+    if frames.ndim == 2:
+        frames = frames[None]
+    if frames.ndim != 3:
+        raise ConfigError(f"{where} has shape {frames.shape}; frames must be (n, rows, cols) or (rows, cols)")
+    if len(frames) == 0:
+        raise ConfigError(f"{where} holds no frames (shape {frames.shape})")
+    if frames.shape[1:] != screen.shape:
+        raise ConfigError(f"{where}: frames of shape {frames.shape[1:]} (rows, cols) do not match the screen's "
+                          f"{screen.shape}; set [screen] resolution = [{frames.shape[2]}, {frames.shape[1]}]")
+    _check_stack_size(len(frames), screen, f"path {str(path)!r}")
+    out = np.asarray(frames, dtype=np.float64)
+    for i, f in enumerate(out):
+        try:
+            screen.check_frame(f, f"frame {i} of {path}")
+        except ValueError as err:
+            raise ConfigError(f"[frames]: {err}") from None
+    return out
 
 
 def _build_frames(cfg: dict, screen: Screen, base: Path) -> tuple[np.ndarray, np.ndarray | None]:
     kind = _choice("frames", "kind", cfg["kind"], _FRAME_KINDS)
     if kind == "npy":
-        path = Path(cfg["path"])
-        path = path if path.is_absolute() else base / path
-        if not cfg["path"] or not path.is_file():
-            raise ConfigError(f"[frames] path {str(path)!r} is not a file; give a .npy of shape (n, rows, cols)")
-        frames = np.load(path)
-        if frames.ndim == 2:
-            frames = frames[None]
-        for i, f in enumerate(frames):
-            try:
-                screen.check_frame(f, f"frame {i} of {path}")
-            except ValueError as err:
-                raise ConfigError(f"[frames]: {err}") from None
-        return frames.astype(np.float64), None
-    _positive("frames", "square_m", cfg["square_m"])
-    _positive("frames", "radiance_w_m2_sr", cfg["radiance_w_m2_sr"])
-    _positive("frames", "background_w_m2_sr", cfg["background_w_m2_sr"], allow_zero=True)
+        if not isinstance(cfg["path"], str) or not cfg["path"]:
+            raise ConfigError(f"[frames] kind = \"npy\" needs path = \"<file.npy>\" (a string), got "
+                              f"{_describe(cfg['path'])}")
+        return load_frames_npy(_path("frames", "path", cfg["path"], base), screen), None
+    square = _number("frames", "square_m", cfg["square_m"], positive=True)
+    radiance = _number("frames", "radiance_w_m2_sr", cfg["radiance_w_m2_sr"], positive=True)
+    background = _number("frames", "background_w_m2_sr", cfg["background_w_m2_sr"], minimum=0.0)
     sweep: Sweep
-    if kind == "line_sweep":
-        _positive("frames", "n", cfg["n"], integer=True)
-        sweep = line_sweep(_vector("frames", "start_m", cfg["start_m"], 2), _vector("frames", "end_m", cfg["end_m"], 2),
-                           cfg["n"], cfg["square_m"], cfg["radiance_w_m2_sr"])
+    try:
+        if kind == "line_sweep":
+            n = _integer("frames", "n", cfg["n"])
+            start = _vector("frames", "start_m", cfg["start_m"], 2)
+            end = _vector("frames", "end_m", cfg["end_m"], 2)
+            _check_stack_size(n, screen, f"n = {n}")
+            sweep = line_sweep(start, end, n, square, radiance)
+        else:
+            nx = _integer("frames", "nx", cfg["nx"])
+            ny = _integer("frames", "ny", cfg["ny"])
+            x_range = _vector("frames", "x_range_m", cfg["x_range_m"], 2)
+            y_range = _vector("frames", "y_range_m", cfg["y_range_m"], 2)
+            _check_stack_size(nx * ny, screen, f"nx x ny = {nx} x {ny}")
+            sweep = grid_sweep(x_range, y_range, nx, ny, square, radiance)
+        frames = sweep.frame_stack(screen) + background
+    except ConfigError:
+        raise
+    except ValueError as err:
+        raise ConfigError(f"[frames]: {err}") from None
+    return frames, sweep.positions_m
+
+
+def _read_source(source: Any, base_dir: str | Path | None) -> tuple[dict, Path, Path | None]:
+    """(raw dict, base directory, config file or None) from a path, TOML text or a dict."""
+    if isinstance(source, dict):
+        return source, Path(base_dir or "."), None
+    if isinstance(source, Path) or (isinstance(source, str) and "\n" not in source and "=" not in source
+                                    and (source.endswith(".toml") or Path(source).is_file())):
+        path = Path(source)
+        if not path.exists():
+            raise ConfigError(f"config file {path} does not exist")
+        if path.is_dir():
+            raise ConfigError(f"config file {path} is a directory; give a .toml file")
+        try:
+            text = path.read_bytes().decode("utf-8")
+        except UnicodeDecodeError:
+            raise ConfigError(f"config file {path} is not UTF-8 text; give a TOML file") from None
+        except OSError as err:
+            raise ConfigError(f"cannot read config file {path}: {err.strerror or err}") from None
+        where = f"config file {path}"
+        base = path.parent if base_dir is None else Path(base_dir)
+    elif isinstance(source, str):
+        text, where, base, path = source, "config", Path(base_dir or "."), None
     else:
-        _positive("frames", "nx", cfg["nx"], integer=True)
-        _positive("frames", "ny", cfg["ny"], integer=True)
-        sweep = grid_sweep(_vector("frames", "x_range_m", cfg["x_range_m"], 2),
-                           _vector("frames", "y_range_m", cfg["y_range_m"], 2), cfg["nx"], cfg["ny"],
-                           cfg["square_m"], cfg["radiance_w_m2_sr"])
-    return sweep.frame_stack(screen) + cfg["background_w_m2_sr"], sweep.positions_m
+        raise ConfigError(f"a config is a TOML file path, TOML text or a dict, got {type(source).__name__}")
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{where} is not valid TOML: {err}") from None
+    return raw, base, path
 
 
 def load_config(source: str | Path | dict, base_dir: str | Path | None = None) -> RenderConfig:
-    """Parse and validate a TOML file (path), TOML text, or an already-parsed dict."""
-    if isinstance(source, dict):
-        raw, base = source, Path(base_dir or ".")
-    else:
-        text_or_path = str(source)
-        path = Path(text_or_path)
-        if "\n" not in text_or_path and path.suffix == ".toml":
-            if not path.is_file():
-                raise ConfigError(f"config file {path} does not exist")
-            text, base = path.read_text(), path.parent
-        else:
-            text, base = text_or_path, Path(base_dir or ".")
-        try:
-            raw = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as err:
-            raise ConfigError(f"config is not valid TOML: {err}") from None
+    """Parse and validate a TOML file (path), TOML text, or an already-parsed dict.
+
+    Parameters
+    ----------
+    source : str, Path or dict
+        A ``.toml`` file (a ``Path`` is always a file), TOML text, or the parsed document.
+    base_dir : str or Path, optional
+        Directory that relative paths (``out_dir``, ``[frames] path``, ``file:`` masks) resolve against;
+        default: the config file's directory, or the working directory for text and dicts.
+
+    Raises
+    ------
+    ConfigError
+        For every problem with the document (never TypeError, KeyError ...): the message names the field and
+        the fix.
+    """
+    raw, base, path = _read_source(source, base_dir)
+    bad = [k for k in raw if not isinstance(k, str)]
+    if bad:
+        raise ConfigError(f"section names must be strings, got {bad[0]!r}")
     unknown = sorted(set(raw) - set(_SCHEMA) - {"mixel"})
     if unknown:
         raise ConfigError(f"unknown section(s) {unknown}; allowed: {sorted(_SCHEMA)} and [[mixel]]")
     sections = {name: _check_keys(name, raw.get(name, {}), defaults) for name, defaults in _SCHEMA.items()}
     run = sections["run"]
-    _choice("run", "form", run["form"], _FORMS)
-    _positive("run", "spp", run["spp"], integer=True)
-    _positive("run", "samples_per_texel", run["samples_per_texel"], integer=True)
-    _positive("run", "target_rel_stderr", run["target_rel_stderr"], allow_zero=True)
-    _positive("run", "replicates", run["replicates"], integer=True)
-    if run["replicates"] < 2:
+    form = _choice("run", "form", run["form"], _FORMS)
+    spp = _integer("run", "spp", run["spp"])
+    samples_per_texel = _integer("run", "samples_per_texel", run["samples_per_texel"])
+    if samples_per_texel < 2:
+        raise ConfigError("[run] samples_per_texel must be >= 2 (its spread gives the standard error)")
+    target = _number("run", "target_rel_stderr", run["target_rel_stderr"], minimum=0.0)
+    if isinstance(run["replicates"], int) and not isinstance(run["replicates"], bool) and run["replicates"] < 2:
         raise ConfigError("[run] replicates must be >= 2 (the standard error needs two estimates)")
-    if not isinstance(run["seed"], int) or run["seed"] < 0:
-        raise ConfigError(f"[run] seed must be an integer >= 0, got {run['seed']!r}")
-    if run["variant"] not in ("", "cuda_ad_mono", "llvm_ad_mono", "scalar_rgb"):
-        raise ConfigError(f"[run] variant {run['variant']!r}: use '', 'cuda_ad_mono', 'llvm_ad_mono' or 'scalar_rgb'")
+    replicates = _integer("run", "replicates", run["replicates"], minimum=2, maximum=MAX_REPLICATES)
+    seed = _integer("run", "seed", run["seed"], minimum=0)
+    variant = run["variant"]
+    if not isinstance(variant, str) or variant not in _VARIANTS:
+        raise ConfigError(f"[run] variant {variant!r}: use '', 'cuda_ad_mono', 'llvm_ad_mono' or 'scalar_rgb'")
+    if isinstance(run["out_dir"], str) and not run["out_dir"].strip():
+        raise ConfigError("[run] out_dir must not be empty; give a directory like \"out/render\"")
+    out_dir = _path("run", "out_dir", run["out_dir"], base)
     tables = raw.get("mixel", [])
+    if isinstance(tables, dict):
+        raise ConfigError("mixels are given as [[mixel]] tables (an array of tables, double brackets), not as a "
+                          "single [mixel] table")
     if not isinstance(tables, list):
-        raise ConfigError("mixels are given as [[mixel]] tables (an array of tables)")
-    mincam = _build_mincam(sections["mincam"], tables)
+        raise ConfigError(f"mixels are given as [[mixel]] tables (an array of tables), got {_describe(tables)}")
+    for i, table in enumerate(tables):
+        _table(f"[[mixel]] #{i + 1}", table)
+    mincam = _build_mincam(sections["mincam"], tables, base)
     screen = _build_screen(sections["screen"])
+    try:
+        check_visible(screen, mincam)
+    except ValueError as err:
+        raise ConfigError(f"[mincam]/[screen]: {err}") from None
     frames, positions = _build_frames(sections["frames"], screen, base)
-    out_dir = Path(run["out_dir"])
-    run_cfg = RunConfig(run["form"], run["spp"], run["samples_per_texel"], float(run["target_rel_stderr"]),
-                        run["replicates"], run["seed"], run["variant"] or None,
-                        out_dir if out_dir.is_absolute() else base / out_dir)
-    return RenderConfig(run_cfg, mincam, screen, frames, positions, {**sections, "mixel": tables})
+    run_cfg = RunConfig(form, spp, samples_per_texel, target, replicates, seed, variant or None, out_dir)
+    return RenderConfig(run_cfg, mincam, screen, frames, positions, {**sections, "mixel": tables}, path,
+                        sections["frames"]["kind"])

@@ -106,3 +106,125 @@ def test_cli_masks_generate_and_export(tmp_path):
 
     with Image.open(png) as im:
         assert im.size[0] == round(2e-3 / 0.0254 * 1200)
+
+
+# --- paths resolve against the config file; values are refused, not coerced
+
+
+def _png(path):
+    from PIL import Image
+
+    Image.fromarray((np.linspace(0, 255, 32)[None, :] * np.ones((32, 1))).astype(np.uint8)).save(path)
+
+
+def test_config_paths_resolve_against_the_config_file(tmp_path, monkeypatch):
+    sub = tmp_path / "scene"
+    sub.mkdir()
+    _png(sub / "m.png")
+    np.save(sub / "frames.npy", np.ones((2, 18, 32)))
+    (sub / "c.toml").write_text(
+        "[run]\nout_dir = 'results'\n[mincam]\nlayout = 'custom'\n[[mixel]]\nmask = 'file:m.png'\n"
+        "[screen]\nresolution = [32, 18]\n[frames]\nkind = 'npy'\npath = 'frames.npy'\n"
+    )
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    cfg = load_config(sub / "c.toml")
+    assert cfg.mincam[0].mask.shape == (32, 32)
+    assert cfg.run.out_dir == sub / "results"
+    assert cfg.frames.shape == (2, 18, 32)
+    assert cfg.source == sub / "c.toml"
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("[run]\nseed = true", r"seed must be an integer >= 0, got True \(boolean\)"),
+        ("[screen]\nresolution = [256.5, 144]", r"resolution\[0\] must be an integer > 0 \(a whole number"),
+        ("run = 5", r"\[run\] must be a table"),
+        ("[run]\nout_dir = 5", "out_dir must be a string"),
+        ("[mincam]\nd_f_m = '2mm'", "d_f_m must be a number > 0 .no quotes, no units., got '2mm'"),
+        ("[mincam]\nlayout = 'custom'\n[[mixel]]\nmask = 'ramp:x'\nd_f_m = '2mm'", r"\[\[mixel\]\] #1 d_f_m"),
+        ("[mincam]\nlayout = 'custom'\n[mixel]\nmask = 'ramp:x'", "double brackets"),
+        ("mixel = [1]\n[mincam]\nlayout = 'custom'", r"\[\[mixel\]\] #1 must be a table"),
+        ("[frames]\nn = 100000000", "GiB in memory"),
+        ("[mincam]\nmask_resolution = 1000000000", "mask_resolution must be at most 8192"),
+    ],
+)
+def test_values_are_refused_not_coerced(text, message):
+    with pytest.raises(ConfigError, match=message):
+        load_config(text)
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [(b"", "empty file"), (b"1 2 3\n", "not a readable .npy"), (b"\x93NUMPY\x01\x00", "not a readable .npy")],
+)
+def test_unreadable_frame_files_are_config_errors(tmp_path, content, message):
+    (tmp_path / "f.npy").write_bytes(content)
+    with pytest.raises(ConfigError, match=message):
+        load_config("[frames]\nkind = 'npy'\npath = 'f.npy'\n", base_dir=tmp_path)
+
+
+def test_config_error_is_a_mincam_error():
+    from mincam_sim.errors import MincamError
+
+    assert issubclass(ConfigError, MincamError) and issubclass(ConfigError, ValueError)
+
+
+# --- reruns into one output directory
+
+
+SMALL = "[run]\nsamples_per_texel = 16\nout_dir = 'out'\n[frames]\nn = 2\n[screen]\nresolution = [32, 18]\n"
+SINE = ("[mincam]\nlayout = 'custom'\n[[mixel]]\nname = 's'\nmask = {kind = 'sinusoid', omega_rad_per_m = 3000.0, "
+        "a0 = 0.5, a1 = 0.5, phase_rad = %s}\n")
+
+
+def _render(tmp_path, text, *extra):
+    (tmp_path / "c.toml").write_text(text)
+    return CliRunner().invoke(app, ["--quiet", "render", str(tmp_path / "c.toml"), *extra])
+
+
+def test_cli_refuses_stale_results_when_a_mask_changes(tmp_path):
+    first = _render(tmp_path, SMALL + SINE % "0.0")
+    assert first.exit_code == 0, first.output
+    changed = _render(tmp_path, SMALL + SINE % "1.0")  # same name and shape, other content
+    assert changed.exit_code == 2
+    assert "different run" in changed.output and "masks" in changed.output and "--overwrite" in changed.output
+    replaced = _render(tmp_path, SMALL + SINE % "1.0", "--overwrite")
+    assert replaced.exit_code == 0, replaced.output
+    from mincam_sim.measurements import Measurements
+
+    a = Measurements.load_npz(tmp_path / "out" / "measurements.npz")
+    (tmp_path / "x").mkdir()
+    fresh = _render(tmp_path / "x", SMALL + SINE % "1.0")  # the same config into a new directory
+    assert fresh.exit_code == 0, fresh.output
+    b = Measurements.load_npz(tmp_path / "x" / "out" / "measurements.npz")
+    np.testing.assert_array_equal(a.irradiance_w_m2, b.irradiance_w_m2)
+
+
+def test_cli_rerun_of_the_same_config_with_target_noise(tmp_path):
+    text = SMALL.replace("samples_per_texel = 16", "target_rel_stderr = 0.05")
+    first = _render(tmp_path, text)
+    assert first.exit_code == 0, first.output
+    second = _render(tmp_path, text)
+    assert second.exit_code == 0, second.output
+    assert first.stdout == second.stdout
+
+
+def test_cli_refuses_an_out_dir_another_process_writes(tmp_path):
+    import subprocess
+    import sys
+
+    code = ("import sys, time; from mincam_sim.store import lock_out_dir; l = lock_out_dir(sys.argv[1]); "
+            "print('locked', flush=True); time.sleep(60)")
+    holder = subprocess.Popen([sys.executable, "-c", code, str(tmp_path / "out")], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "locked"
+        result = _render(tmp_path, SMALL)
+        assert result.exit_code == 2
+        assert f"PID {holder.pid}" in result.output and "in use by another run" in result.output
+    finally:
+        holder.kill()
+        holder.wait()
+        holder.stdout.close()

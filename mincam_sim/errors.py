@@ -1,0 +1,42 @@
+"""The project's own error types (pure Python).
+
+Every error a user can cause by what they give (a config, an option, a file, an output location, a backend this
+machine lacks) is a :class:`MincamError`; the command line turns it into one line ``error: ...`` and exit code 2.
+Errors that also are a ``ValueError`` (bad values) subclass both, so ``except ValueError`` keeps working.
+"""
+
+from __future__ import annotations
+
+
+class MincamError(Exception):
+    """Base class of mincam_sim's user-facing errors; the message says what is wrong and how to fix it."""
+
+
+class ConfigError(MincamError, ValueError):
+    """A configuration value is missing, unknown or out of range; the message names the field and the fix."""
+
+
+class StoreError(MincamError):
+    """An output directory or one of its files cannot be used (torn, foreign, unwritable ...)."""
+
+
+class StaleResultError(StoreError, ValueError):
+    """An output directory holds results of a different run; the message names what changed."""
+
+
+class OutDirLockedError(StoreError):
+    """Another process is writing into the same output directory."""
+
+
+class BackendUnavailableError(MincamError, RuntimeError):
+    """A Mitsuba variant was asked for that this machine cannot run (e.g. ``cuda_ad_mono`` without a GPU)."""
+
+
+__all__ = [
+    "BackendUnavailableError",
+    "ConfigError",
+    "MincamError",
+    "OutDirLockedError",
+    "StaleResultError",
+    "StoreError",
+]

@@ -1,0 +1,298 @@
+"""Content fingerprints of everything that determines the numbers (pure numpy; never imports Mitsuba).
+
+A run is identified by *what it computes from*, not by names: mask transmission arrays, geometry, frames,
+sample budget, seed, form, library versions. :func:`fingerprint` hashes any such description:
+
+* numpy arrays by dtype, shape and bytes (C order);
+* ``dict`` / ``list`` / ``tuple`` / ``set`` / scalars / ``str`` / ``Path`` through a canonical JSON form
+  (sorted keys; ``2`` and ``2.0`` hash alike, ``True`` and ``1`` do not);
+* dataclasses field by field (``Pose``, ``Mixel``, ``Mincam``, ``Screen``, ``Mask`` ...), recursively;
+* any object with a ``fingerprint_parts()`` method, through what that method returns.
+
+:class:`StreamingHash` hashes frames chunk by chunk as they stream (the digest does not depend on how the
+stream is cut into chunks), so a frame stack never has to be held in memory to be identified.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import hashlib
+import importlib.metadata
+import json
+import math
+from collections.abc import Iterable, Mapping
+from pathlib import PurePath
+from typing import Any
+
+import numpy as np
+
+#: Default length of a fingerprint [hex characters] (128 bits).
+FINGERPRINT_CHARS = 32
+
+#: Keys of a Mask's ``meta`` that record provenance only (where a file was read), not content.
+PROVENANCE_META_KEYS = frozenset({"source"})
+
+#: Distributions whose versions can change the numbers.
+VERSIONED_LIBRARIES = ("mincam_sim", "mitsuba", "drjit", "numpy")
+
+
+def array_digest(array: np.ndarray) -> str:
+    """sha256 hex digest of an array's dtype, shape and C-ordered bytes."""
+    arr = np.asarray(array)
+    if arr.dtype.hasobject:
+        raise TypeError("cannot fingerprint an object array by its bytes; convert it to a numeric dtype")
+    h = hashlib.sha256()
+    h.update(f"ndarray:{arr.dtype.str}:{arr.shape}:".encode())
+    h.update(np.ascontiguousarray(arr).data)
+    return h.hexdigest()
+
+
+def _number(value: float) -> Any:
+    if math.isfinite(value) and float(value).is_integer() and abs(value) < 2**53:
+        return int(value)
+    if math.isnan(value):
+        return "NaN"
+    if math.isinf(value):
+        return "Infinity" if value > 0 else "-Infinity"
+    return float(value)
+
+
+def canonical(obj: Any) -> Any:
+    """A JSON-serialisable, canonical form of ``obj`` (arrays replaced by their digest).
+
+    Parameters
+    ----------
+    obj : object
+        Scalars, strings, paths, arrays, mappings, sequences, sets, dataclasses, enums, or objects with a
+        ``fingerprint_parts()`` method.
+
+    Returns
+    -------
+    object
+        Built from ``dict`` (string keys), ``list``, ``str``, ``int``, ``float``, ``bool`` and ``None`` only.
+
+    Raises
+    ------
+    TypeError
+        For objects it does not know how to describe (their ``repr`` would not be stable across runs).
+    """
+    if obj is None or isinstance(obj, bool | str):
+        return obj
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    if isinstance(obj, int | np.integer):
+        return int(obj)
+    if isinstance(obj, float | np.floating):
+        return _number(float(obj))
+    if isinstance(obj, complex | np.complexfloating):
+        return {"__complex__": [_number(obj.real), _number(obj.imag)]}
+    if isinstance(obj, bytes):
+        return {"__bytes__": hashlib.sha256(obj).hexdigest()}
+    if isinstance(obj, PurePath):
+        return obj.as_posix()
+    if isinstance(obj, enum.Enum):
+        return {"__enum__": f"{type(obj).__name__}.{obj.name}"}
+    if isinstance(obj, np.ndarray):
+        if obj.dtype.hasobject:
+            return [canonical(v) for v in obj.tolist()]
+        return {"__ndarray__": array_digest(obj)}
+    parts = getattr(obj, "fingerprint_parts", None)
+    if callable(parts) and not isinstance(obj, type):
+        return {"__type__": type(obj).__name__, "parts": canonical(parts())}
+    if _is_mask(obj):
+        meta = {k: v for k, v in dict(obj.meta).items() if k not in PROVENANCE_META_KEYS}
+        return {"__type__": "Mask", "transmission": canonical(np.asarray(obj.transmission)),
+                "width_m": canonical(obj.width_m), "height_m": canonical(obj.height_m), "name": obj.name,
+                "meta": canonical(meta)}
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        fields = {f.name: canonical(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+        return {"__type__": type(obj).__name__, **fields}
+    if isinstance(obj, Mapping):
+        out = {}
+        for key, value in obj.items():
+            if not isinstance(key, str | int | float | bool) and key is not None:
+                raise TypeError(f"cannot fingerprint a mapping key of type {type(key).__name__}")
+            out[key if isinstance(key, str) else json.dumps(canonical(key))] = canonical(value)
+        return out
+    if isinstance(obj, set | frozenset):
+        items = [canonical(v) for v in obj]
+        return {"__set__": sorted(items, key=lambda v: json.dumps(v, sort_keys=True))}
+    if isinstance(obj, list | tuple):
+        return [canonical(v) for v in obj]
+    raise TypeError(
+        f"cannot fingerprint an object of type {type(obj).__name__}: give it a fingerprint_parts() method or "
+        "describe it with numbers, strings, arrays and dicts"
+    )
+
+
+def _is_mask(obj: Any) -> bool:
+    from .masks import Mask
+
+    return isinstance(obj, Mask)
+
+
+def canonical_json(obj: Any) -> str:
+    """The canonical form of ``obj`` as compact JSON text (sorted keys)."""
+    return json.dumps(canonical(obj), sort_keys=True, separators=(",", ":"), allow_nan=False)
+
+
+def fingerprint(obj: Any, chars: int = FINGERPRINT_CHARS) -> str:
+    """Content fingerprint of ``obj``: the first ``chars`` hex characters of a sha256.
+
+    Parameters
+    ----------
+    obj : object
+        Anything :func:`canonical` accepts (arrays, dicts, dataclasses such as ``Mincam`` or ``Screen`` ...).
+    chars : int
+        Length of the returned hex string, 16 to 64.
+
+    Returns
+    -------
+    str
+        Equal for equal content (same array bytes, same numbers), different otherwise.
+    """
+    if not 16 <= chars <= 64:
+        raise ValueError(f"a fingerprint has 16 to 64 hex characters, got {chars}")
+    return hashlib.sha256(canonical_json(obj).encode()).hexdigest()[:chars]
+
+
+def run_key(identity: Any) -> str:
+    """Key of a run's identity: its :func:`fingerprint` (32 hex characters)."""
+    return fingerprint(identity)
+
+
+class StreamingHash:
+    """Fingerprint of a stream of frames, fed chunk by chunk.
+
+    The digest depends on the frames' values (as ``dtype``), their shape and their number, not on how the
+    stream was cut into chunks: ``update(stack)`` equals ``update(stack[:3]); update(stack[3:])`` equals one
+    ``update(frame)`` per frame.
+
+    Parameters
+    ----------
+    frame_ndim : int
+        Dimensions of one frame (2 for (rows, cols) images). An array with ``frame_ndim`` dimensions is one
+        frame; one with ``frame_ndim + 1`` is a chunk of frames along axis 0.
+    dtype : numpy dtype or None
+        Frames are converted to it before hashing (default float64, the dtype the renderers compute in), so
+        a float32 and a float64 copy of the same values hash alike. None hashes the given dtype's bytes.
+    """
+
+    def __init__(self, frame_ndim: int = 2, dtype: Any = np.float64) -> None:
+        self.frame_ndim = int(frame_ndim)
+        self.dtype = None if dtype is None else np.dtype(dtype)
+        self._sha = hashlib.sha256()
+        self.n_frames = 0
+        self.frame_shape: tuple[int, ...] | None = None
+        self.frame_dtype: str | None = None
+
+    def update(self, frames: np.ndarray) -> StreamingHash:
+        """Add one frame or a chunk of frames; return ``self``."""
+        arr = np.asarray(frames)
+        if arr.ndim == self.frame_ndim:
+            arr = arr[None]
+        if arr.ndim != self.frame_ndim + 1:
+            raise ValueError(
+                f"expected a frame with {self.frame_ndim} dimensions or a chunk with {self.frame_ndim + 1}, "
+                f"got shape {arr.shape}"
+            )
+        if self.dtype is not None:
+            arr = arr.astype(self.dtype, copy=False)
+        if arr.dtype.hasobject:
+            raise TypeError("cannot hash frames of object dtype")
+        shape, dtype = tuple(arr.shape[1:]), arr.dtype.str
+        if self.frame_shape is None:
+            self.frame_shape, self.frame_dtype = shape, dtype
+        elif shape != self.frame_shape or dtype != self.frame_dtype:
+            raise ValueError(
+                f"frame of shape {shape} ({dtype}) after frames of shape {self.frame_shape} ({self.frame_dtype}); "
+                "all frames of a stream must have one shape"
+            )
+        self._sha.update(np.ascontiguousarray(arr).data)
+        self.n_frames += len(arr)
+        return self
+
+    def hexdigest(self, chars: int = FINGERPRINT_CHARS) -> str:
+        """Fingerprint of the frames so far (number, shape, dtype and values)."""
+        summary = {"n_frames": self.n_frames, "frame_shape": list(self.frame_shape or ()),
+                   "dtype": self.frame_dtype, "content": self._sha.hexdigest()}
+        return fingerprint({"__type__": "FrameStream", **summary}, chars)
+
+
+def frames_fingerprint(frames: np.ndarray | Iterable[np.ndarray], frame_ndim: int = 2, chunk: int = 64) -> str:
+    """:class:`StreamingHash` digest of a frame stack, an iterable of frames or an iterable of chunks."""
+    h = StreamingHash(frame_ndim)
+    if isinstance(frames, np.ndarray):
+        stack = frames if frames.ndim == frame_ndim + 1 else frames[None]
+        for i in range(0, len(stack), chunk):
+            h.update(stack[i : i + chunk])
+    else:
+        for item in frames:
+            h.update(item)
+    return h.hexdigest()
+
+
+def library_versions() -> dict[str, str]:
+    """Installed versions of the libraries whose changes can change the numbers (without importing them)."""
+    versions = {}
+    for dist in VERSIONED_LIBRARIES:
+        try:
+            versions[dist] = importlib.metadata.version(dist)
+        except importlib.metadata.PackageNotFoundError:
+            versions[dist] = "not installed"
+    return versions
+
+
+def _leaf(value: Any) -> str:
+    text = json.dumps(value, sort_keys=True)
+    return text if len(text) <= 24 else text[:21] + "..."
+
+
+def diff_identities(old: Any, new: Any, depth: int = 2, prefix: str = "") -> list[str]:
+    """What differs between two canonical identities, as short phrases (``"seed 0 -> 1"``, ``"masks"``).
+
+    Parameters
+    ----------
+    old, new : object
+        Canonical forms (:func:`canonical`) of two identities.
+    depth : int
+        How many levels of nested dicts to name (``budget.samples_per_texel``); deeper differences are named
+        by their parent.
+    """
+    if old == new:
+        return []
+    if isinstance(old, dict) and isinstance(new, dict) and depth > 0:
+        out = []
+        for key in sorted(set(old) | set(new)):
+            name = f"{prefix}{key}"
+            if key not in old:
+                out.append(f"{name} (new)")
+            elif key not in new:
+                out.append(f"{name} (gone)")
+            else:
+                out.extend(diff_identities(old[key], new[key], depth - 1, f"{name}."))
+        return out
+    name = prefix.rstrip(".") or "identity"
+    scalar = (str, int, float, bool, type(None))
+    if isinstance(old, scalar) and isinstance(new, scalar) and not (_digest_like(old) or _digest_like(new)):
+        return [f"{name} {_leaf(old)} -> {_leaf(new)}"]
+    return [name]
+
+
+def _digest_like(value: Any) -> bool:
+    return isinstance(value, str) and len(value) >= 16 and all(c in "0123456789abcdef" for c in value)
+
+
+__all__ = [
+    "FINGERPRINT_CHARS",
+    "StreamingHash",
+    "array_digest",
+    "canonical",
+    "canonical_json",
+    "diff_identities",
+    "fingerprint",
+    "frames_fingerprint",
+    "library_versions",
+    "run_key",
+]

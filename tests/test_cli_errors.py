@@ -1,0 +1,418 @@
+"""Bad inputs give one line ``error: ...`` on stderr, exit code 2, no traceback; good ones still work.
+
+``CASES`` is a table of bad (and a few good) inputs a new user might give. The fast tests run a selection
+in-process (typer's CliRunner) and a few through the real ``mincam-sim`` executable; the whole table runs as a
+slow test. ``python tests/test_cli_errors.py [--pythonpath DIR]`` counts the outcomes for the code at ``DIR``
+(default: this checkout), e.g. to compare with an older version extracted elsewhere.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+BASE = {"run": {"samples_per_texel": "16", "out_dir": '"out"'}, "frames": {"n": "2"},
+        "screen": {"resolution": "[32, 18]"}}
+
+
+def toml(tail: str = "", head: str = "", drop: tuple[str, ...] = (), **sections: dict) -> str:
+    """A small valid config (32 x 18 screen, 2 frames) with keys overridden (value None removes a key)."""
+    merged = {name: dict(keys) for name, keys in BASE.items()}
+    for name, keys in sections.items():
+        merged.setdefault(name, {}).update(keys)
+    text = head
+    for name in ("run", "mincam", "screen", "frames"):
+        if name in merged and name not in drop:
+            text += f"[{name}]\n" + "".join(f"{k} = {v}\n" for k, v in merged[name].items() if v is not None)
+    return text + tail
+
+
+CUSTOM = {"layout": '"custom"'}
+
+
+def mixel(**keys: str) -> str:
+    keys = {"mask": '"ramp:x"', **keys}
+    return "[[mixel]]\n" + "".join(f"{k} = {v}\n" for k, v in keys.items())
+
+
+@dataclass
+class Case:
+    """One input: files to create, commands to run first, the command, and what must come out."""
+
+    name: str
+    argv: list[str]
+    files: dict[str, str | bytes | Callable[[Path], None]] = field(default_factory=dict)
+    expect: str = "error"  # "error": one clear line, rc 2; "ok": rc 0
+    keywords: tuple[str, ...] = ()  # one of them must be in the error line (case-insensitive)
+    pre: list[list[str]] = field(default_factory=list)
+    between: Callable[[Path], None] | None = None  # after ``pre``, before ``argv``
+    env: dict[str, str] = field(default_factory=dict)
+
+
+def _npy(array, **kw) -> Callable[[Path], None]:
+    def write(path: Path) -> None:
+        np.save(path, array, **kw)
+
+    return write
+
+
+def _npz_named_npy(path: Path) -> None:
+    with open(path, "wb") as fh:
+        np.savez(fh, frames=np.zeros((1, 18, 32)))
+
+
+def _png(path: Path) -> None:
+    from PIL import Image
+
+    Image.fromarray((np.linspace(0, 255, 64)[None, :] * np.ones((64, 1))).astype(np.uint8)).save(path)
+
+
+def _write(rel: str, data: bytes | Callable[[Path], None]) -> Callable[[Path], None]:
+    def act(tmp: Path) -> None:
+        path = tmp / rel
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if callable(data):
+            data(path)
+        else:
+            path.write_bytes(data)
+
+    return act
+
+
+def _both(*acts: Callable[[Path], None]) -> Callable[[Path], None]:
+    def act(tmp: Path) -> None:
+        for a in acts:
+            a(tmp)
+
+    return act
+
+
+def _unlink(rel: str) -> Callable[[Path], None]:
+    return lambda tmp: (tmp / rel).unlink(missing_ok=True)
+
+
+R = ["render", "c.toml"]
+SINE = '{kind = "sinusoid", omega_rad_per_m = 3000.0, a0 = 0.5, a1 = 0.5, phase_rad = %s}'
+
+CASES: list[Case] = [
+    # --- config documents that are not the schema's shape
+    Case("section_not_a_table", R, {"c.toml": toml(head="run = 5\n", drop=("run",))}, keywords=("[run]",)),
+    Case("out_dir_integer", R, {"c.toml": toml(run={"out_dir": "5"})}, keywords=("out_dir",)),
+    Case("mincam_d_f_string", R, {"c.toml": toml(mincam={"d_f_m": '"2mm"'})}, keywords=("d_f_m",)),
+    Case("mixel_d_f_string", R, {"c.toml": toml(mixel(d_f_m='"2mm"'), mincam=CUSTOM)}, keywords=("d_f_m",)),
+    Case("seed_boolean", R, {"c.toml": toml(run={"seed": "true"})}, keywords=("seed",)),
+    Case("seed_negative", R, {"c.toml": toml(run={"seed": "-1"})}, keywords=("seed",)),
+    Case("resolution_fractional", R, {"c.toml": toml(screen={"resolution": "[32.5, 18]"})},
+         keywords=("resolution",)),
+    Case("resolution_string", R, {"c.toml": toml(screen={"resolution": '"32x18"'})}, keywords=("resolution",)),
+    Case("mixel_given_as_table", R, {"c.toml": toml('[mixel]\nmask = "ramp:x"\n', mincam=CUSTOM)},
+         keywords=("[[mixel]]",)),
+    Case("mixel_entries_not_tables", R, {"c.toml": toml(head="mixel = [1, 2]\n", mincam=CUSTOM)},
+         keywords=("mixel",)),
+    Case("aspect_strings", R, {"c.toml": toml(screen={"aspect": '["16", 9]'})}, keywords=("aspect",)),
+    Case("n_fractional", R, {"c.toml": toml(frames={"n": "2.5"})}, keywords=("n ",)),
+    Case("start_m_string", R, {"c.toml": toml(frames={"start_m": '[0, "a"]'})}, keywords=("start_m",)),
+    Case("form_integer", R, {"c.toml": toml(run={"form": "3"})}, keywords=("form",)),
+    Case("layout_list", R, {"c.toml": toml(mincam={"layout": '["pair"]'})}, keywords=("layout",)),
+    Case("variant_integer", R, {"c.toml": toml(run={"variant": "1"})}, keywords=("variant",)),
+    Case("mixel_mask_integer", R, {"c.toml": toml(mixel(mask="5"), mincam=CUSTOM)}, keywords=("mask",)),
+    Case("sinusoid_omega_string", R,
+         {"c.toml": toml(mixel(mask='{kind = "sinusoid", omega_rad_per_m = "fast"}'), mincam=CUSTOM)},
+         keywords=("omega",)),
+    Case("sinusoid_a0_boolean", R,
+         {"c.toml": toml(mixel(mask='{kind = "sinusoid", omega_rad_per_m = 1000.0, a0 = true}'), mincam=CUSTOM)},
+         keywords=("a0",)),
+    Case("constant_not_a_number", R, {"c.toml": toml(mixel(mask='"constant:abc"'), mincam=CUSTOM)},
+         keywords=("constant",)),
+    Case("file_mask_empty_path", R, {"c.toml": toml(mixel(mask='"file:"'), mincam=CUSTOM)}, keywords=("file",)),
+    Case("file_mask_missing", R, {"c.toml": toml(mixel(mask='"file:nope.png"'), mincam=CUSTOM)},
+         keywords=("nope.png",)),
+    Case("file_mask_not_an_image", R,
+         {"c.toml": toml(mixel(mask='"file:junk.png"'), mincam=CUSTOM), "junk.png": "not a png"},
+         keywords=("junk.png",)),
+    Case("file_mask_relative_to_config", ["render", "sub/c.toml"],
+         {"sub/c.toml": toml(mixel(mask='"file:m.png"'), mincam=CUSTOM), "sub/m.png": _png}, expect="ok"),
+    Case("mask_resolution_huge", R, {"c.toml": toml(mincam={"mask_resolution": "1000000000"})},
+         keywords=("mask_resolution",)),
+    Case("frames_n_huge", R, {"c.toml": toml(frames={"n": "100000000"})}, keywords=("n =", "frames")),
+    Case("screen_resolution_huge", R, {"c.toml": toml(screen={"resolution": "[100000, 100000]"})},
+         keywords=("resolution",)),
+    Case("spp_float", R, {"c.toml": toml(run={"spp": "1e6"})}, keywords=("spp",)),
+    Case("spp_zero", R, {"c.toml": toml(run={"spp": "0"})}, keywords=("spp",)),
+    Case("replicates_boolean", R, {"c.toml": toml(run={"replicates": "true"})}, keywords=("replicates",)),
+    Case("target_string", R, {"c.toml": toml(run={"target_rel_stderr": '"0.1"'})},
+         keywords=("target_rel_stderr",)),
+    Case("target_nan", R, {"c.toml": toml(run={"target_rel_stderr": "nan"})}, keywords=("target_rel_stderr",)),
+    Case("form_unknown", R, {"c.toml": toml(run={"form": '"magic"'})}, keywords=("form",)),
+    Case("run_nested_table", R, {"c.toml": toml("[run.extra]\na = 1\n")}, keywords=("extra",)),
+    Case("spacing_list", R, {"c.toml": toml(mincam={"spacing_m": "[1]"})}, keywords=("spacing_m",)),
+    Case("mixel_position_two_numbers", R, {"c.toml": toml(mixel(position_m="[0, 0]"), mincam=CUSTOM)},
+         keywords=("position_m",)),
+    Case("mixel_forward_zero", R, {"c.toml": toml(mixel(forward="[0, 0, 0]"), mincam=CUSTOM)},
+         keywords=("forward",)),
+    Case("mixel_up_parallel", R, {"c.toml": toml(mixel(up="[0, 0, -1]"), mincam=CUSTOM)}, keywords=("up",)),
+    Case("mixel_duplicate_names", R,
+         {"c.toml": toml(mixel(name='"a"') + mixel(name='"a"', position_m="[0.01, 0, 0]"), mincam=CUSTOM)},
+         keywords=("unique",)),
+    Case("mixel_name_integer", R, {"c.toml": toml(mixel(name="5"), mincam=CUSTOM)}, keywords=("name",)),
+    Case("mixel_detector_larger_than_mask", R, {"c.toml": toml(mixel(detector_size_m="0.01"), mincam=CUSTOM)},
+         keywords=("detector",)),
+    Case("mixel_facing_away", R, {"c.toml": toml(mixel(forward="[0, 0, 1]"), mincam=CUSTOM)},
+         keywords=("field of view", "behind")),
+    Case("grid_nx_zero", R, {"c.toml": toml(frames={"kind": '"grid_sweep"', "nx": "0"})}, keywords=("nx",)),
+    Case("out_dir_empty", R, {"c.toml": toml(run={"out_dir": '""'})}, keywords=("out_dir",)),
+    # --- frame files
+    Case("npy_path_empty", R, {"c.toml": toml(frames={"kind": '"npy"'})}, keywords=("path",)),
+    Case("npy_path_integer", R, {"c.toml": toml(frames={"kind": '"npy"', "path": "5"})}, keywords=("path",)),
+    Case("npy_zero_bytes", R, {"c.toml": toml(frames={"kind": '"npy"', "path": '"f.npy"'}), "f.npy": b""},
+         keywords=("f.npy",)),
+    Case("npy_text_file", R, {"c.toml": toml(frames={"kind": '"npy"', "path": '"f.npy"'}), "f.npy": "1 2 3\n"},
+         keywords=("f.npy",)),
+    Case("npy_wrong_shape", R, {"c.toml": toml(frames={"kind": '"npy"', "path": '"f.npy"'}),
+                                "f.npy": _npy(np.zeros((2, 5, 5)))}, keywords=("shape",)),
+    Case("npy_nan", R, {"c.toml": toml(frames={"kind": '"npy"', "path": '"f.npy"'}),
+                        "f.npy": _npy(np.full((1, 18, 32), np.nan))}, keywords=("nan",)),
+    Case("npy_pickled_objects", R, {"c.toml": toml(frames={"kind": '"npy"', "path": '"f.npy"'}),
+                                    "f.npy": _npy(np.array([{"a": 1}], dtype=object), allow_pickle=True)},
+         keywords=("f.npy",)),
+    Case("npy_is_an_npz", R, {"c.toml": toml(frames={"kind": '"npy"', "path": '"f.npy"'}), "f.npy": _npz_named_npy},
+         keywords=("f.npy",)),
+    Case("npy_one_dimensional", R, {"c.toml": toml(frames={"kind": '"npy"', "path": '"f.npy"'}),
+                                    "f.npy": _npy(np.zeros(5))}, keywords=("shape",)),
+    # --- config files themselves
+    Case("config_is_a_directory", ["render", "d.toml"], {"d.toml/x": "x"}, keywords=("directory",)),
+    Case("config_missing", ["render", "missing.toml"], keywords=("missing.toml",)),
+    Case("config_not_utf8", R, {"c.toml": b"\xff\xfe\x00[run]\n"}, keywords=("utf-8",)),
+    Case("config_invalid_toml", R, {"c.toml": "a = = 1\n"}, keywords=("toml",)),
+    Case("config_named_txt", ["render", "c.txt"], {"c.txt": toml()}, expect="ok"),
+    # --- options and output locations
+    Case("variant_option_bogus", ["--variant", "bogus", *R], {"c.toml": toml()}, keywords=("bogus",)),
+    Case("variant_cuda_without_gpu", R, {"c.toml": toml(run={"variant": '"cuda_ad_mono"'})}, keywords=("cuda",)),
+    Case("variant_env_bogus", R, {"c.toml": toml()}, env={"MINCAM_VARIANT": "bogus"}, keywords=("bogus",)),
+    Case("out_is_a_file", [*R, "--out", "afile"], {"c.toml": toml(), "afile": "x"}, keywords=("afile",)),
+    Case("out_parent_is_a_file", [*R, "--out", "afile/sub"], {"c.toml": toml(), "afile": "x"},
+         keywords=("afile",)),
+    Case("render_unknown_option", [*R, "--bogus"], {"c.toml": toml()}, keywords=("bogus",)),
+    Case("render_missing_argument", ["render"], keywords=("config",)),
+    Case("reproduce_unknown_experiment", ["reproduce", "bogus"], keywords=("bogus",)),
+    Case("reproduce_negative_spacing", ["reproduce", "intrusion", "--quick", "--spacing-m", "-1"],
+         keywords=("spacing",)),
+    Case("reproduce_out_is_a_file", ["reproduce", "intrusion", "--quick", "--out", "afile"], {"afile": "x"},
+         keywords=("afile",)),
+    Case("study_unknown", ["study", "bogus"], keywords=("bogus",)),
+    Case("masks_export_unknown_ramp", ["masks", "export", "ramp:z", "--out", "x.png"], keywords=("ramp",)),
+    Case("masks_export_out_parent_is_a_file", ["masks", "export", "ramp:x", "--out", "afile/x.png"],
+         {"afile": "x"}, keywords=("afile",)),
+    Case("masks_generate_resolution_zero", ["masks", "generate", "--resolution", "0", "--out", "lib"],
+         keywords=("resolution",)),
+    Case("masks_generate_out_is_a_file", ["masks", "generate", "--resolution", "8", "--out", "afile"],
+         {"afile": "x"}, keywords=("afile",)),
+    # --- reruns into the same output directory
+    Case("rerun_other_seed", ["render", "c2.toml"], {"c.toml": toml(), "c2.toml": toml(run={"seed": "1"})},
+         pre=[R], keywords=("seed",)),
+    Case("rerun_changed_mask_phase", ["render", "c2.toml"],
+         {"c.toml": toml(mixel(mask=SINE % "0.0"), mincam=CUSTOM),
+          "c2.toml": toml(mixel(mask=SINE % "1.0"), mincam=CUSTOM)}, pre=[R], keywords=("mask",)),
+    Case("rerun_same_config_with_target_noise", R, {"c.toml": toml(run={"target_rel_stderr": "0.05"})},
+         pre=[R], expect="ok"),
+    Case("rerun_after_torn_run_json", R, {"c.toml": toml()}, pre=[R],
+         between=_both(_unlink("out/measurements.npz"), _write("out/run/run.json", b"")), keywords=("run.json",)),
+    Case("rerun_after_empty_values_npy", R, {"c.toml": toml()}, pre=[R],
+         between=_both(_unlink("out/measurements.npz"), _write("out/run/values.npy", b"")),
+         keywords=("values.npy",)),
+    Case("rerun_after_text_values_npy", R, {"c.toml": toml()}, pre=[R],
+         between=_both(_unlink("out/measurements.npz"), _write("out/run/values.npy", b"hello\n")),
+         keywords=("values.npy",)),
+    Case("rerun_after_wrong_shape_values_npy", R, {"c.toml": toml()}, pre=[R],
+         between=_both(_unlink("out/measurements.npz"), _write("out/run/values.npy", _npy(np.zeros((5, 5))))),
+         keywords=("values.npy",)),
+]
+
+_PROGRESS = re.compile(r"(\d+%\||it/s\]|\d+it \[|s/it\])")
+
+
+def _prepare(case: Case, tmp: Path) -> None:
+    for rel, data in case.files.items():
+        path = tmp / rel
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if callable(data):
+            data(path)
+        elif isinstance(data, bytes):
+            path.write_bytes(data)
+        else:
+            path.write_text(data)
+
+
+def _message_lines(stderr: str) -> list[str]:
+    """Lines of stderr that are not progress bars."""
+    parts = re.split(r"[\r\n]+", stderr)
+    return [p.strip() for p in parts if p.strip() and not _PROGRESS.search(p)]
+
+
+def classify(case: Case, rc: int, stderr: str) -> str:
+    """"ok" (the expected outcome), or "traceback", "silent", "unclear", "failed" (an ok case that failed)."""
+    if "Traceback" in stderr:
+        return "traceback"
+    if case.expect == "ok":
+        return "ok" if rc == 0 else "failed"
+    if rc == 0:
+        return "silent"
+    lines = _message_lines(stderr)
+    clear = (rc == 2 and len(lines) == 1 and lines[0].startswith("error: ")
+             and (not case.keywords or any(k.lower() in lines[0].lower() for k in case.keywords)))
+    return "ok" if clear else "unclear"
+
+
+def run_case(case: Case, tmp: Path, pythonpath: Path | None = None, timeout: float = 300) -> tuple[str, int, str]:
+    """Run ``case`` through ``python -m mincam_sim.cli`` in ``tmp``; return (verdict, rc, stderr)."""
+    env = {**os.environ, **case.env, "PYTHONPATH": str(pythonpath or ROOT), "COLUMNS": "200"}
+    env.pop("MINCAM_DEBUG", None)
+    if "MINCAM_VARIANT" not in case.env:
+        env.pop("MINCAM_VARIANT", None)
+    _prepare(case, tmp)
+    cmd = [sys.executable, "-m", "mincam_sim.cli"]
+    for argv in case.pre:
+        subprocess.run([*cmd, *argv], cwd=tmp, env=env, capture_output=True, timeout=timeout, check=False)
+    if case.between is not None:
+        case.between(tmp)
+    proc = subprocess.run([*cmd, *case.argv], cwd=tmp, env=env, capture_output=True, text=True, timeout=timeout,
+                          check=False)
+    return classify(case, proc.returncode, proc.stderr), proc.returncode, proc.stderr
+
+
+# ---------------------------------------------------------------------------------------------------- tests
+
+
+def _cli(argv: list[str], cwd: Path):
+    from typer.testing import CliRunner
+
+    from mincam_sim.cli import app
+
+    old = Path.cwd()
+    os.chdir(cwd)
+    try:
+        return CliRunner().invoke(app, argv)
+    finally:
+        os.chdir(old)
+
+
+FAST = [c for c in CASES if not c.pre and c.argv[0] in ("render", "--variant", "study", "masks")
+        and "reproduce" not in c.argv and not c.env and c.expect == "error"
+        and c.name not in ("variant_cuda_without_gpu", "masks_generate_out_is_a_file")]
+
+
+def _stderr(result) -> str:
+    try:
+        return result.stderr
+    except ValueError:  # older click: stderr mixed into output
+        return result.output
+
+
+@pytest.mark.parametrize("case", FAST, ids=lambda c: c.name)
+def test_bad_input_is_one_line_in_process(case, tmp_path):
+    _prepare(case, tmp_path)
+    result = _cli(case.argv, tmp_path)
+    assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
+    verdict = classify(case, result.exit_code, _stderr(result))
+    assert verdict == "ok", f"{case.name}: rc {result.exit_code}, stderr {_stderr(result)!r}"
+
+
+def test_debug_flag_shows_the_traceback(tmp_path):
+    (tmp_path / "c.toml").write_text(toml(run={"seed": "true"}))
+    result = _cli(["--debug", "render", "c.toml"], tmp_path)
+    from mincam_sim.errors import ConfigError
+
+    assert isinstance(result.exception, ConfigError)
+
+
+def test_help_keeps_units(tmp_path):
+    result = _cli(["reproduce", "--help"], tmp_path)
+    assert result.exit_code == 0
+    assert "[m]" in result.output
+
+
+def test_render_check_validates_without_rendering(tmp_path):
+    (tmp_path / "c.toml").write_text(toml())
+    result = _cli(["render", "c.toml", "--check"], tmp_path)
+    assert result.exit_code == 0, _stderr(result)
+    for word in ("mixel x", "screen:", "frames: 2", "form: response_map", "out dir:"):
+        assert word in result.output
+    assert not (tmp_path / "out").exists()
+
+
+def test_quiet_silences_progress(tmp_path):
+    (tmp_path / "c.toml").write_text(toml())
+    loud = _cli(["render", "c.toml"], tmp_path)
+    quiet = _cli(["--quiet", "render", "c.toml", "--overwrite"], tmp_path)
+    assert loud.exit_code == 0 and quiet.exit_code == 0
+    assert "frames" in _stderr(loud)  # the bar's label
+    assert _stderr(quiet).strip() == ""
+
+
+@pytest.mark.parametrize("name", ["seed_boolean", "npy_zero_bytes", "variant_cuda_without_gpu", "out_is_a_file"])
+def test_bad_input_is_one_line_in_a_real_process(name, tmp_path):
+    case = next(c for c in CASES if c.name == name)
+    verdict, rc, stderr = run_case(case, tmp_path)
+    if name == "variant_cuda_without_gpu" and rc == 0:
+        pytest.skip("this machine has a CUDA GPU")
+    assert verdict == "ok", f"rc {rc}, stderr {stderr!r}"
+    assert rc == 2 and "Traceback" not in stderr
+
+
+def test_real_executable_exit_code(tmp_path):
+    exe = Path(sys.executable).with_name("mincam-sim")
+    if not exe.exists():
+        pytest.skip("mincam-sim console script not installed beside this Python")
+    (tmp_path / "c.toml").write_text(toml(screen={"resolution": "[32.5, 18]"}))
+    proc = subprocess.run([str(exe), "render", "c.toml"], cwd=tmp_path, capture_output=True, text=True, check=False)
+    assert proc.returncode == 2
+    assert proc.stderr.count("\n") == 1 and proc.stderr.startswith("error: [screen] resolution")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", CASES, ids=lambda c: c.name)
+def test_every_case(case, tmp_path):
+    verdict, rc, stderr = run_case(case, tmp_path)
+    if case.name == "variant_cuda_without_gpu" and rc == 0:
+        pytest.skip("this machine has a CUDA GPU")
+    assert verdict == "ok", f"{case.name}: {verdict}, rc {rc}, stderr {stderr[-2000:]!r}"
+
+
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+    import tempfile
+
+    parser = argparse.ArgumentParser(description="Count clear errors over CASES for the code at --pythonpath.")
+    parser.add_argument("--pythonpath", type=Path, default=ROOT)
+    parser.add_argument("--only", nargs="*", default=None)
+    args = parser.parse_args(argv)
+    counts: dict[str, int] = {}
+    for case in CASES:
+        if args.only and case.name not in args.only:
+            continue
+        with tempfile.TemporaryDirectory() as tmp:
+            try:
+                verdict, rc, stderr = run_case(case, Path(tmp), args.pythonpath)
+            except subprocess.TimeoutExpired:
+                verdict, rc, stderr = "timeout", -1, ""
+        counts[verdict] = counts.get(verdict, 0) + 1
+        lines = _message_lines(stderr)
+        shown = lines[-1] if lines else ""
+        print(f"{verdict:9s} rc={rc:<3d} {case.name:40s} {shown[:150]}", flush=True)
+    total = sum(counts.values())
+    print(f"# {total} cases: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
