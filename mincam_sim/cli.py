@@ -290,7 +290,7 @@ def config_identity(cfg: Any, variant: str | None = None) -> dict:
         frames_fp = fingerprint({"kind": cfg.frames_kind, "positions_m": np.asarray(cfg.frame_positions_m),
                                  "shape": list(cfg.frames.shape), **recipe})
     else:
-        frames_fp = frames_fingerprint(cfg.frames)
+        frames_fp = frames_fingerprint(iter(cfg.frames))
     return {"form": run.form, "seed": run.seed, "budget": budget, "mincam": fingerprint(cfg.mincam),
             "mixels": cfg.mincam.names, "masks": [fingerprint(m.mask) for m in cfg.mincam],
             "screen": fingerprint(cfg.screen), "frames": frames_fp, "variant": variant or "automatic",
@@ -377,8 +377,11 @@ def _summary_lines(cfg: Any, variant: str | None) -> list[str]:
     lines.append(f"screen: {screen.width_m:.4f} x {screen.height_m:.4f} m, {screen.resolution[0]} x "
                  f"{screen.resolution[1]} texels, {-screen.pose.position_m[2]:g} m from the mincam")
     f = cfg.frames
+    lo = min(float(x.min()) for x in f)
+    hi = max(float(x.max()) for x in f)
     lines.append(f"frames: {len(f)} ({cfg.frames_kind}), {f.shape[2]} x {f.shape[1]} texels, radiance "
-                 f"{f.min():g} .. {f.max():g} W m^-2 sr^-1, {f.nbytes / 2**20:.1f} MiB")
+                 f"{lo:g} .. {hi:g} W m^-2 sr^-1, {len(f) * f.nbytes_per_frame / 2**20:.1f} MiB if held at once "
+                 "(streamed in chunks)")
     if run.form == "response_map":
         budget = (f"target relative stderr {run.target_rel_stderr:g}" if run.target_rel_stderr > 0
                   else f"{run.samples_per_texel} samples per texel")

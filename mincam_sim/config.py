@@ -24,6 +24,7 @@ from .errors import ConfigError
 from .geometry import Pose
 from .masks import Mask
 from .optics import DEFAULT_D_F_M, DEFAULT_DETECTOR_SIZE_M, PAPER_SPACING_M, Mincam, Mixel, layout
+from .scene.display import FrameSource
 from .screen import Screen, Sweep, check_visible, diagonal_to_size, grid_sweep, line_sweep
 
 EXAMPLE_TOML = """\
@@ -100,6 +101,7 @@ _SCHEMA: dict[str, dict[str, Any]] = {
 _MIXEL_KEYS = {"name": None, "mask": None, "position_m": [0.0, 0.0, 0.0], "forward": [0.0, 0.0, -1.0],
                "up": [0.0, 1.0, 0.0], "d_f_m": None, "detector_size_m": None}
 _SINUSOID_KEYS = {"omega_rad_per_m": None, "a0": 0.5, "a1": 0.5, "phase_rad": 0.0, "direction_deg": 0.0}
+MAX_FRAMES = 10_000_000  # frames stream through the renderer; this bounds run time and the result files
 _FORMS = ("response_map", "fast", "reference")
 _LAYOUTS = ("pair", "cross", "custom")
 _FRAME_KINDS = ("line_sweep", "grid_sweep", "npy")
@@ -107,7 +109,6 @@ _VARIANTS = ("", "cuda_ad_mono", "llvm_ad_mono", "scalar_rgb")
 
 MAX_MASK_RESOLUTION = 8192  # texels per side (masks.MAX_TEXELS = 8192^2)
 MAX_SCREEN_TEXELS = 4096 * 4096  # Screen's own limit
-MAX_FRAME_STACK_BYTES = 8 * 2**30  # [bytes] the frames are built in memory (float64)
 MAX_REPLICATES = 4096
 MAX_INT = 2**63 - 1
 
@@ -400,17 +401,7 @@ def _build_screen(cfg: dict) -> Screen:
         raise ConfigError(f"[screen]: {err}") from None
 
 
-def _check_stack_size(n: int, screen: Screen, what: str) -> None:
-    rows, cols = screen.shape
-    nbytes = n * rows * cols * 8
-    if nbytes > MAX_FRAME_STACK_BYTES:
-        raise ConfigError(
-            f"[frames] {what} gives {n} frames of {cols} x {rows} texels = {nbytes / 2**30:.1f} GiB in memory "
-            f"(limit {MAX_FRAME_STACK_BYTES / 2**30:.0f} GiB); use fewer frames or a lower [screen] resolution"
-        )
-
-
-def load_frames_npy(path: Path, screen: Screen) -> np.ndarray:
+def load_frames_npy(path: Path, screen: Screen) -> FrameSource:
     """Frames (n, rows, cols) [W m^-2 sr^-1] from a ``.npy`` file, validated; ConfigError names the file."""
     where = f"[frames] path {str(path)!r}"
     if not path.is_file():
@@ -441,17 +432,15 @@ def load_frames_npy(path: Path, screen: Screen) -> np.ndarray:
     if frames.shape[1:] != screen.shape:
         raise ConfigError(f"{where}: frames of shape {frames.shape[1:]} (rows, cols) do not match the screen's "
                           f"{screen.shape}; set [screen] resolution = [{frames.shape[2]}, {frames.shape[1]}]")
-    _check_stack_size(len(frames), screen, f"path {str(path)!r}")
-    out = np.asarray(frames, dtype=np.float64)
-    for i, f in enumerate(out):
+    for i in range(len(frames)):  # validated frame by frame from the memory map (bounded memory)
         try:
-            screen.check_frame(f, f"frame {i} of {path}")
+            screen.check_frame(frames[i], f"frame {i} of {path}")
         except ValueError as err:
             raise ConfigError(f"[frames]: {err}") from None
-    return out
+    return FrameSource.from_array(frames)
 
 
-def _build_frames(cfg: dict, screen: Screen, base: Path) -> tuple[np.ndarray, np.ndarray | None]:
+def _build_frames(cfg: dict, screen: Screen, base: Path) -> tuple[FrameSource, np.ndarray | None]:
     kind = _choice("frames", "kind", cfg["kind"], _FRAME_KINDS)
     if kind == "npy":
         if not isinstance(cfg["path"], str) or not cfg["path"]:
@@ -464,19 +453,19 @@ def _build_frames(cfg: dict, screen: Screen, base: Path) -> tuple[np.ndarray, np
     sweep: Sweep
     try:
         if kind == "line_sweep":
-            n = _integer("frames", "n", cfg["n"])
+            n = _integer("frames", "n", cfg["n"], maximum=MAX_FRAMES)
             start = _vector("frames", "start_m", cfg["start_m"], 2)
             end = _vector("frames", "end_m", cfg["end_m"], 2)
-            _check_stack_size(n, screen, f"n = {n}")
             sweep = line_sweep(start, end, n, square, radiance)
         else:
-            nx = _integer("frames", "nx", cfg["nx"])
-            ny = _integer("frames", "ny", cfg["ny"])
+            nx = _integer("frames", "nx", cfg["nx"], maximum=MAX_FRAMES)
+            ny = _integer("frames", "ny", cfg["ny"], maximum=MAX_FRAMES)
+            if nx * ny > MAX_FRAMES:
+                raise ConfigError(f"[frames] nx x ny = {nx * ny} frames; at most {MAX_FRAMES} per run")
             x_range = _vector("frames", "x_range_m", cfg["x_range_m"], 2)
             y_range = _vector("frames", "y_range_m", cfg["y_range_m"], 2)
-            _check_stack_size(nx * ny, screen, f"nx x ny = {nx} x {ny}")
             sweep = grid_sweep(x_range, y_range, nx, ny, square, radiance)
-        frames = sweep.frame_stack(screen) + background
+        frames = sweep.frame_source(screen, background)  # made on demand: streams whatever the number
     except ConfigError:
         raise
     except ValueError as err:

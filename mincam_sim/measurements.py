@@ -57,9 +57,11 @@ class Measurements:
 
     def save_npz(self, path: str | Path) -> Path:
         """Write arrays + JSON metadata to an ``.npz`` file."""
+        from .atomic import atomic_save_npz
+
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        np.savez(
+        atomic_save_npz(
             path,
             irradiance_w_m2=self.irradiance_w_m2,
             stderr_w_m2=self.stderr_w_m2,
@@ -80,9 +82,11 @@ class Measurements:
 
     def save_csv(self, path: str | Path) -> Path:
         """Write one row per frame: frame, <mixel>_w_m2, <mixel>_stderr_w_m2 ...; metadata in a ``#`` header."""
+        from .atomic import atomic_open
+
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        with path.open("w", newline="") as fh:
+        with atomic_open(path, "w") as fh:
             fh.write("# " + json.dumps(self.meta, default=_json_default) + "\n")
             writer = csv.writer(fh)
             header = ["frame"]

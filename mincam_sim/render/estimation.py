@@ -11,9 +11,12 @@
 
 from __future__ import annotations
 
+import warnings
 import zlib
 
 import numpy as np
+
+from ..measurements import Measurements
 
 TARGET_MARGIN = 1.5  # samples beyond the extrapolated need: a pilot's noise estimate (few replicates) is itself noisy
 
@@ -66,3 +69,21 @@ def samples_for_target(pilot_samples: int, pilot_rel: float, target_rel: float, 
         return int(pilot_samples)
     need = pilot_samples * TARGET_MARGIN * (pilot_rel / target_rel) ** (1.0 / exponent)
     return int(min(cap, max(pilot_samples, np.ceil(need))))
+
+
+def warn_unreached(m: Measurements) -> None:
+    """Warn when a mixel's value is 0 with standard error 0: no sample reached anything bright, which is not
+    a measurement of exactly zero (and its relative error is undefined)."""
+    dark = (m.irradiance_w_m2 == 0) & (m.stderr_w_m2 == 0)
+    if dark.any():
+        frames = np.flatnonzero(dark.any(axis=1))
+        names = [n for k, n in enumerate(m.mixel_names) if dark[:, k].any()]
+        warnings.warn(
+            f"no sample of mixel(s) {', '.join(names)} reached a lit part of the scene in {len(frames)} frame(s) "
+            f"(first: {frames[0]}): 0 +/- 0 W/m^2 there means 'not seen', not a certain zero; check that the "
+            "frames show something inside the mixels' fields of view, or raise the samples",
+            UnseenWarning, stacklevel=3)
+
+
+class UnseenWarning(UserWarning):
+    """A measurement that no Monte Carlo sample reached."""

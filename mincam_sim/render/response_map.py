@@ -28,10 +28,13 @@ from pathlib import Path
 
 import numpy as np
 
+from ..atomic import atomic_path, atomic_save_npz
+from ..identity import fingerprint, library_versions
 from ..measurements import Measurements
 from ..optics import Mincam
 from ..progress import progress
 from ..screen import Screen
+from ..store import ContentCache
 from . import backend
 from .estimation import derive_seed
 from .mask_eval import MaskEvaluator, local_to_mask_xy, mask_model_meta
@@ -86,15 +89,16 @@ class ResponseMaps:
         for k, name in enumerate(self.mixel_names):
             path = directory / f"response_{_safe(name)}.exr"
             img = np.stack([self.weights_sr[k], np.sqrt(self.variance_sr2[k])], axis=-1)
-            write_exr(path, img, channels=("W", "sigma"), metadata={"units": "sr", "mixel": name, **self.meta})
+            with atomic_path(path) as tmp:
+                write_exr(tmp, img, channels=("W", "sigma"), metadata={"units": "sr", "mixel": name, **self.meta})
             paths.append(path)
         return paths
 
     def save_npz(self, path: str | Path) -> Path:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        np.savez(path, weights_sr=self.weights_sr, variance_sr2=self.variance_sr2,
-                 mixel_names=np.array(self.mixel_names), meta_json=np.array(json.dumps(self.meta, default=str)))
+        atomic_save_npz(path, weights_sr=self.weights_sr, variance_sr2=self.variance_sr2,
+                        mixel_names=np.array(self.mixel_names), meta_json=np.array(json.dumps(self.meta, default=str)))
         return path
 
     @classmethod
@@ -117,6 +121,7 @@ def response_maps(
     max_lanes: int = MAX_LANES,
     replicates: int = 4,
     show_progress: bool = False,
+    cache: ContentCache | None = None,
 ) -> ResponseMaps:
     """Trace each mixel's response map over the display's texels (see the module docstring).
 
@@ -128,6 +133,10 @@ def response_maps(
         Independent blocks per texel (>= 2), whose spread gives each weight's variance.
     show_progress : bool
         A progress bar over (mixel, texel chunk) launches on stderr.
+    cache : ContentCache, optional
+        Each mixel's map is stored under a key derived from everything it depends on (the whole mincam, whose
+        bodies occlude, the screen, the sampling, the seed, the backend and library versions), as soon as it is
+        traced: an interrupted tracing resumes mixel by mixel, and any run that needs the same map reuses it.
     """
     backend.require_jit("Response maps")
     if isinstance(samples_per_texel, bool) or int(samples_per_texel) != samples_per_texel or samples_per_texel < 2:
@@ -153,9 +162,21 @@ def response_maps(
     weights = np.zeros((len(indices), n_tex))
     variance = np.zeros((len(indices), n_tex))
     sampler = mi.load_dict({"type": "independent"})
-    launches = [(out_k, k, start) for out_k, k in enumerate(indices) for start in range(0, n_tex, texels_per_chunk)]
-    evaluators = {k: MaskEvaluator(mincam[k].mask) for k in indices}
-    for out_k, k, start in progress(launches, desc="response maps", disable=not show_progress):
+    keys = {k: _mixel_key(mincam, k, screen, spt, replicates, seed, max_lanes) for k in indices}
+    cached = {}
+    if cache is not None:
+        for k in indices:
+            entry = cache.get(keys[k])
+            if entry is not None and entry.arrays["weights_sr"].shape == (n_tex,):
+                cached[k] = entry.arrays
+    for out_k, k in enumerate(indices):
+        if k in cached:
+            weights[out_k], variance[out_k] = cached[k]["weights_sr"], cached[k]["variance_sr2"]
+    launches = [(out_k, k, start) for out_k, k in enumerate(indices) if k not in cached
+                for start in range(0, n_tex, texels_per_chunk)]
+    evaluators = {k: MaskEvaluator(mincam[k].mask) for k in indices if k not in cached}
+    for out_k, k, start in progress(launches, desc=f"response maps ({spt} samples/texel)", disable=not show_progress,
+                                    unit="chunk"):
         mixel = mincam[k]
         to_world = mixel.pose.matrix()
         rot = mi.Matrix3f(to_world[:3, :3].tolist())
@@ -206,6 +227,9 @@ def response_maps(
         blocks = np.asarray(dr.block_sum(g, block), dtype=np.float64).reshape(count, replicates) / block
         weights[out_k, start : start + count] = blocks.mean(axis=1)
         variance[out_k, start : start + count] = blocks.var(axis=1, ddof=1) / replicates
+        if cache is not None and start + count == n_tex:  # this mixel is complete
+            cache.put(keys[k], {"weights_sr": weights[out_k], "variance_sr2": variance[out_k]},
+                      {"mixel": mincam[k].name, "samples_per_texel": spt})
     names = [mincam[k].name for k in indices]
     meta = {
         "form": "response_map",
@@ -221,5 +245,13 @@ def response_maps(
         **geometry_meta(Mincam(tuple(mincam[k] for k in indices), allow_overlap=True), screen),
         "mixel_bodies": "occluding" if mincam.occluding_bodies else "ignored (idealised overlapping mincam)",
     }
+    meta["cache_keys"] = {mincam[k].name: keys[k] for k in indices}
     return ResponseMaps(weights.reshape(len(indices), rows, cols), variance.reshape(len(indices), rows, cols),
                         names, meta)
+
+
+def _mixel_key(mincam: Mincam, k: int, screen: Screen, spt: int, replicates: int, seed: int, max_lanes: int) -> str:
+    """Content key of one mixel's map: everything its numbers depend on."""
+    return fingerprint({"kind": "response_map", "mincam": mincam, "mixel_index": k, "screen": screen,
+                        "samples_per_texel": spt, "replicates": replicates, "seed": int(seed),
+                        "max_lanes": int(max_lanes), "variant": backend.variant(), "versions": library_versions()})

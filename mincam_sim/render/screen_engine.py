@@ -15,19 +15,27 @@ keeps the documented entry points: :class:`ScreenRenderer`, :func:`response_maps
 
 from __future__ import annotations
 
-import hashlib
 from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
 
+from ..identity import StreamingHash, fingerprint, library_versions, run_key
 from ..measurements import Measurements
 from ..optics import Mincam
 from ..progress import progress
+from ..scene.display import FrameSource, as_frame_source
 from ..screen import Screen
-from ..store import ResultStore
+from ..store import ContentCache, ResultStore
 from . import backend
-from .estimation import check_counts, derive_seed, replicate_mean_stderr, samples_for_target
+from .estimation import (
+    UnseenWarning,
+    check_counts,
+    derive_seed,
+    replicate_mean_stderr,
+    samples_for_target,
+    warn_unreached,
+)
 from .estimation import worst_relative_stderr as _worst
 from .mask_eval import mask_model_meta
 from .mincam_scene import MincamScene, geometry_meta
@@ -35,6 +43,7 @@ from .response_map import ResponseMaps, response_maps
 
 __all__ = [
     "ResponseMaps",
+    "UnseenWarning",
     "ScreenRenderer",
     "derive_seed",
     "geometry_meta",
@@ -135,24 +144,44 @@ class ScreenRenderer:
 
 MAX_SAMPLES_PER_TEXEL = 1 << 14
 MAX_SPP = 1 << 28
+FRAME_CHUNK_BYTES = 1 << 27  # frames measured per chunk: at most 128 MiB of frame data in memory
+
+
+def measure_stream(maps: ResponseMaps, frames: FrameSource, indices=None, show_progress: bool = False,
+                   desc: str = "frames") -> Measurements:
+    """Measurements of (some of) a frame source through response maps, chunk by chunk (bounded memory)."""
+    indices = np.arange(len(frames)) if indices is None else np.asarray(indices)
+    n_mix = len(maps.mixel_names)
+    values = np.empty((len(indices), n_mix))
+    errors = np.empty_like(values)
+    step = frames.chunk_size(FRAME_CHUNK_BYTES)
+    for lo in progress(range(0, len(indices), step), desc=desc, disable=not show_progress):
+        idx = indices[lo : lo + step]
+        m = maps.measure(frames[idx])
+        values[lo : lo + len(idx)], errors[lo : lo + len(idx)] = m.irradiance_w_m2, m.stderr_w_m2
+    return Measurements(values, errors, list(maps.mixel_names), {**maps.meta, "form": "response_map"})
 
 
 def response_maps_to_target(
-    mincam: Mincam, screen: Screen, frames: np.ndarray, target_rel_stderr: float, seed: int = 0,
-    max_samples_per_texel: int = MAX_SAMPLES_PER_TEXEL,
+    mincam: Mincam, screen: Screen, frames, target_rel_stderr: float, seed: int = 0,
+    max_samples_per_texel: int = MAX_SAMPLES_PER_TEXEL, cache: ContentCache | None = None,
+    show_progress: bool = False,
 ) -> tuple[ResponseMaps, list[dict]]:
     """Response maps whose measurements of ``frames`` all reach ``target_rel_stderr`` (if the cap allows).
 
     Two pilots (16 and 64 samples per texel) give the empirical convergence rate ``rel ~ n^-a`` (stratified
     sampling converges faster than ``n^-1/2``); the sample count is extrapolated with it, then checked and, if
-    needed, raised again assuming the plain Monte Carlo rate. Returns the maps and the trail of
+    needed, raised again assuming the plain Monte Carlo rate. Every attempt's maps go to ``cache`` (so a rerun
+    or a resumed run repeats the search in milliseconds). Returns the maps and the trail of
     (samples_per_texel, worst relative stderr) tried.
     """
+    frames = as_frame_source(frames)
     trail: list[dict] = []
 
     def attempt(n: int) -> tuple[ResponseMaps, float]:
-        maps = response_maps(mincam, screen, n, seed)
-        rel = worst_relative_stderr(maps.measure(frames))
+        maps = response_maps(mincam, screen, n, seed, cache=cache, show_progress=show_progress)
+        m = measure_stream(maps, frames, show_progress=show_progress, desc=f"target search ({n} samples/texel)")
+        rel = worst_relative_stderr(m)
         trail.append({"samples_per_texel": int(maps.meta["samples_per_texel"]), "worst_rel_stderr": rel})
         return maps, rel
 
@@ -176,10 +205,25 @@ def worst_relative_stderr(m: Measurements) -> float:
     return _worst(m.irradiance_w_m2, m.stderr_w_m2)
 
 
+def frames_identity(frames: FrameSource, screen: Screen) -> dict:
+    """What determines the frames: a generated source's description, or the content hashed as it streams
+    (every frame is validated on the way)."""
+    if frames.description is not None:
+        return {"n": len(frames), "description": fingerprint(frames.description)}
+    digest = StreamingHash()
+    step = frames.chunk_size(FRAME_CHUNK_BYTES)
+    for lo in range(0, len(frames), step):
+        chunk = frames[lo : lo + step]
+        for j, f in enumerate(chunk):
+            screen.check_frame(f, f"frame {lo + j}")
+        digest.update(chunk)
+    return {"n": len(frames), "content_sha256": digest.hexdigest()}
+
+
 def render_frames(
     mincam: Mincam,
     screen: Screen,
-    frames: np.ndarray,
+    frames,
     form: str = "response_map",
     spp: int = 1 << 16,
     samples_per_texel: int = 64,
@@ -189,91 +233,99 @@ def render_frames(
     out_dir: str | Path | None = None,
     show_progress: bool = False,
     chunk: int = 64,
+    overwrite: bool = False,
 ) -> tuple[Measurements, ResponseMaps | None]:
-    """Measure a stack of frames with any form, optionally to a target noise, resumably.
+    """Measure a stack (or a stream) of frames with any form, optionally to a target noise, resumably.
 
     Parameters
     ----------
-    frames : (n, rows, cols) ndarray
-        Display radiance [W m^-2 sr^-1].
+    frames : (n, rows, cols) ndarray, FrameSource or list of frames
+        Display radiance [W m^-2 sr^-1]. A :class:`~mincam_sim.scene.display.FrameSource` (e.g.
+        ``Sweep.frame_source(screen)``) or a memory-mapped array streams in chunks: memory stays bounded
+        whatever the number of frames.
     form : {"response_map", "fast", "reference"}
     spp, samples_per_texel : int
         Sample counts when ``target_rel_stderr`` is 0.
     target_rel_stderr : float
-        If > 0, a pilot run measures the noise and the sample count is extrapolated (variance ~ 1/samples) so
-        that the worst non-zero measurement reaches this relative standard error; the reached value is in
-        ``meta["reached_rel_stderr"]``.
+        If > 0, pilots measure the noise and the sample count is extrapolated so that the worst non-zero
+        measurement reaches this relative standard error; the reached value is in ``meta["reached_rel_stderr"]``.
     out_dir : path, optional
-        If given, per-frame results are written as they are computed and an interrupted run resumes there.
+        Per-frame results are written as they are computed (``out_dir/values.npy`` ..., locked while running)
+        and response maps are cached by content in ``out_dir/cache``: an interrupted run resumes there, a
+        rerun of the same run reuses everything, a different run (any mask, frame, geometry, budget, seed,
+        form or library version changed) is refused with what changed, unless ``overwrite``.
 
     Returns
     -------
     (Measurements, ResponseMaps or None)
     """
-    frames = np.asarray(frames, dtype=np.float64)
-    if frames.ndim == 2:
-        frames = frames[None]
     if form not in ("response_map", "fast", "reference"):
         raise ValueError(f"form must be 'response_map', 'fast' or 'reference', got {form!r}")
     if not (np.isfinite(target_rel_stderr) and target_rel_stderr >= 0):
         raise ValueError(f"target_rel_stderr must be >= 0 (0 = use the given sample counts), got {target_rel_stderr}")
-    for i, f in enumerate(frames):
-        screen.check_frame(f, f"frame {i}")
+    frames = as_frame_source(frames)
+    if tuple(frames.frame_shape) != tuple(screen.shape):
+        raise ValueError(f"frames have shape {frames.frame_shape} but this screen's frames are {screen.shape} "
+                         "(rows, cols)")
+    frames_id = frames_identity(frames, screen)
+    cache = ContentCache(Path(out_dir) / "cache") if out_dir is not None else None
     budget: dict = {"target_rel_stderr": target_rel_stderr}
+    provenance: dict = {}
     maps = None
-    renderer = None
     if form == "response_map":
-        maps_path = Path(out_dir) / "response_maps.npz" if out_dir else None
-        if maps_path is not None and maps_path.exists():
-            maps = ResponseMaps.load_npz(maps_path)
+        if target_rel_stderr > 0:
+            maps, trail = response_maps_to_target(mincam, screen, frames, target_rel_stderr, seed, cache=cache,
+                                                  show_progress=show_progress)
+            provenance["budget_trail"] = trail
         else:
-            if target_rel_stderr > 0:
-                maps, trail = response_maps_to_target(mincam, screen, frames, target_rel_stderr, seed)
-                samples_per_texel = int(maps.meta["samples_per_texel"])
-                budget.update(budget_trail=trail)
-            else:
-                maps = response_maps(mincam, screen, samples_per_texel, seed)
-            if maps_path is not None:
-                maps.save_npz(maps_path)
-        measure = maps.measure
+            maps = response_maps(mincam, screen, samples_per_texel, seed, cache=cache, show_progress=show_progress)
+        budget["samples_per_texel"] = int(maps.meta["samples_per_texel"])
         meta = dict(maps.meta)
+
+        def measure(idx):
+            return measure_stream(maps, frames, idx)
     else:
         renderer = ScreenRenderer(mincam, screen, form, replicates)
         if target_rel_stderr > 0:
             pilot_spp = replicates * 2048
-            pilot = renderer.render(frames[: min(len(frames), 4)], spp=pilot_spp, seed=derive_seed(seed, "pilot"))
+            pilot_idx = np.unique(np.linspace(0, len(frames) - 1, min(4, len(frames))).astype(int))
+            pilot = renderer.render(frames[pilot_idx], spp=pilot_spp, seed=derive_seed(seed, "pilot"))
             rel = worst_relative_stderr(pilot)
             spp = samples_for_target(pilot_spp, rel, target_rel_stderr, MAX_SPP)
-            budget.update(pilot_spp=pilot_spp, pilot_rel_stderr=rel)
+            provenance.update(pilot_spp=pilot_spp, pilot_rel_stderr=rel)
+        budget["spp"] = int(spp)
+        budget["replicates"] = int(replicates)
 
-        def measure(stack):
-            return renderer.render(stack, spp=spp, seed=seed)
+        def measure(idx):
+            return renderer.render(frames[idx], spp=spp, seed=seed)
 
         meta = {"form": form, "seed": seed, "replicates": replicates, **backend.describe(),
                 **geometry_meta(mincam, screen)}
-    budget.update(spp=spp if form != "response_map" else None,
-                  samples_per_texel=samples_per_texel if form == "response_map" else None)
-    store = None
-    if out_dir is not None:
-        identity = {"form": form, "seed": seed, "replicates": replicates, "budget": budget,
-                    "frames_sha256": hashlib.sha256(np.ascontiguousarray(frames).tobytes()).hexdigest()[:16],
-                    "geometry": geometry_meta(mincam, screen)}
-        store = ResultStore(out_dir, len(frames), mincam.names, identity)
-        todo = store.pending()
-    else:
-        todo = np.arange(len(frames))
+    identity = {"form": form, "seed": int(seed), "budget": budget, "mincam": fingerprint(mincam),
+                "screen": fingerprint(screen), "frames": frames_id, "variant": backend.variant(),
+                "versions": library_versions()}
     values = np.full((len(frames), len(mincam)), np.nan)
     errors = np.full_like(values, np.nan)
-    if store is not None:
-        values[:] = store.values
-        errors[:] = store.stderr
-    step = chunk if form == "response_map" else 1
-    batches = [todo[i : i + step] for i in range(0, len(todo), step)]
-    for idx in progress(batches, desc=f"{form}: frames", disable=not show_progress, total=len(batches)):
-        m = measure(frames[idx])
-        values[idx], errors[idx] = m.irradiance_w_m2, m.stderr_w_m2
+    store = None
+    todo = np.arange(len(frames))
+    if out_dir is not None:
+        store = ResultStore(out_dir, len(frames), mincam.names, identity, overwrite=overwrite)
+        values[:], errors[:] = store.values, store.stderr
+        todo = store.pending()
+    try:
+        step = max(1, min(chunk, frames.chunk_size(FRAME_CHUNK_BYTES))) if form == "response_map" else 1
+        batches = [todo[i : i + step] for i in range(0, len(todo), step)]
+        for idx in progress(batches, desc=f"{form}: frames", disable=not show_progress, total=len(batches),
+                            unit="chunk" if step > 1 else "frame"):
+            m = measure(idx)
+            values[idx], errors[idx] = m.irradiance_w_m2, m.stderr_w_m2
+            if store is not None:
+                store.write(idx, m.irradiance_w_m2, m.stderr_w_m2)
+    finally:
         if store is not None:
-            store.write(idx, m.irradiance_w_m2, m.stderr_w_m2)
-    result = Measurements(values, errors, mincam.names, {**meta, **budget})
+            store.close()
+    result = Measurements(values, errors, mincam.names, {**meta, **budget, **provenance,
+                                                           "frames": frames_id, "identity_key": run_key(identity)})
     result.meta["reached_rel_stderr"] = worst_relative_stderr(result)
+    warn_unreached(result)
     return result, maps

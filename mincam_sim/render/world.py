@@ -14,13 +14,14 @@ from pathlib import Path
 
 import numpy as np
 
+from ..identity import fingerprint, library_versions
 from ..measurements import Measurements
 from ..optics import Mincam
 from ..progress import progress
 from ..store import ResultStore
 from . import backend
 from .elements import transform_update, vertex_update
-from .estimation import derive_seed, samples_for_target, worst_relative_stderr
+from .estimation import derive_seed, samples_for_target, warn_unreached, worst_relative_stderr
 from .mask_eval import mask_model_meta
 from .mincam_scene import CAMERA_KEY, SENSOR_KEY, MincamScene, geometry_meta
 
@@ -58,6 +59,8 @@ class WorldRenderer:
         self.sensor = self.world.sensor(SENSOR_KEY)
         self.camera = self.world.sensor(CAMERA_KEY)
         self.params = self.world.params
+        self._content_key: str | None = None
+        self._content_key = self.content_fingerprint()  # before any update: the scene as built
 
     def update(self, updates: Updates) -> None:
         """Set scene parameters (numpy arrays or Mitsuba values) and apply them without reloading."""
@@ -77,6 +80,7 @@ class WorldRenderer:
         out_dir: str | Path | None = None,
         show_progress: bool = False,
         target_rel_stderr: float = 0.0,
+        overwrite: bool = False,
     ) -> tuple[Measurements, Measurements]:
         """Measure each frame's change from the background: ``dP = P(frame) - P(background)``.
 
@@ -89,7 +93,8 @@ class WorldRenderer:
         correlated : bool
             True: each frame uses the background's seed (noise cancels in dP). False: independent seeds.
         out_dir : path, optional
-            Write results per frame as they come; a rerun resumes there.
+            Write results per frame as they come; a rerun of the same run (scene content, mincam, frames,
+            budget, seed, versions) resumes there, a different one is refused unless ``overwrite``.
         target_rel_stderr : float
             If > 0, ``spp`` is only the pilot: up to 4 frames spread over the sequence are measured with it,
             and the sample count is extrapolated (variance ~ 1/samples, x 1.5 margin, at most ``MAX_SPP``)
@@ -120,12 +125,38 @@ class WorldRenderer:
         store = None
         todo = np.arange(len(frames))
         if out_dir is not None:
-            identity = {"spp": spp, "seed": seed, "correlated": correlated, "replicates": self.replicates,
+            identity = {"spp": int(spp), "seed": int(seed), "correlated": correlated, "replicates": self.replicates,
                         "n_frames": len(frames), "frames": _fingerprint(frames),
-                        "background": _fingerprint([background]), "geometry": geometry_meta(self.mincam)}
-            store = ResultStore(out_dir, len(frames), columns, identity)
+                        "background": _fingerprint([background]), "mincam": fingerprint(self.mincam),
+                        "scene": self.content_fingerprint(), "variant": backend.variant(),
+                        "versions": library_versions()}
+            store = ResultStore(out_dir, len(frames), columns, identity, overwrite=overwrite)
             values[:], errors[:] = store.values, store.stderr
             todo = store.pending()
+        try:
+            self._measure_into(frames, background, todo, spp, seed, correlated, bg, values, errors, store,
+                               show_progress)
+        finally:
+            if store is not None:
+                store.close()
+        self.update(background)
+
+        meta = {"form": "fast_world", "spp_per_mixel_per_frame": int(spp), "seed": seed, "correlated_seeds": correlated,
+                "replicates": self.replicates, "background_w_m2": bg.mean(0).tolist(),
+                "masks": {m.name: mask_model_meta(m.mask) for m in self.mincam},
+                "background_stderr_w_m2": (bg.std(0, ddof=1) / np.sqrt(self.replicates)).tolist(),
+                **backend.describe(), **geometry_meta(self.mincam)}
+        meta.update(budget)
+        reached = worst_relative_stderr(values[:, :n], errors[:, :n], significance=3.0)
+        meta["reached_rel_stderr"] = reached if np.isfinite(reached) else None
+        names = self.mincam.names
+        warn_unreached(Measurements(values[:, n:], errors[:, n:], names))
+        dp = Measurements(values[:, :n], errors[:, :n], names, {**meta, "quantity": "dP = P(frame) - P(background)"})
+        p = Measurements(values[:, n:], errors[:, n:], names, {**meta, "quantity": "P(frame)"})
+        return dp, p
+
+    def _measure_into(self, frames, background, todo, spp, seed, correlated, bg, values, errors, store,
+                      show_progress) -> None:
         for i in progress(todo, desc="frames", disable=not show_progress):
             self.update(background)
             self.update(frames[i])
@@ -138,19 +169,18 @@ class WorldRenderer:
             values[i], errors[i] = row_v, row_e
             if store is not None:
                 store.write([i], row_v[None], row_e[None])
-        self.update(background)
-        meta = {"form": "fast_world", "spp_per_mixel_per_frame": int(spp), "seed": seed, "correlated_seeds": correlated,
-                "replicates": self.replicates, "background_w_m2": bg.mean(0).tolist(),
-                "masks": {m.name: mask_model_meta(m.mask) for m in self.mincam},
-                "background_stderr_w_m2": (bg.std(0, ddof=1) / np.sqrt(self.replicates)).tolist(),
-                **backend.describe(), **geometry_meta(self.mincam)}
-        meta.update(budget)
-        reached = worst_relative_stderr(values[:, :n], errors[:, :n], significance=3.0)
-        meta["reached_rel_stderr"] = reached if np.isfinite(reached) else None
-        names = self.mincam.names
-        dp = Measurements(values[:, :n], errors[:, :n], names, {**meta, "quantity": "dP = P(frame) - P(background)"})
-        p = Measurements(values[:, n:], errors[:, n:], names, {**meta, "quantity": "P(frame)"})
-        return dp, p
+
+    def content_fingerprint(self) -> str:
+        """Content key of the scene as Mitsuba holds it: every traversable parameter's value (meshes,
+        textures, transforms, radiances), the element names and plugin types, and the path depth."""
+        if self._content_key is None:
+            params = self.params
+            parts = {key: np.asarray(params[key]) for key in sorted(params.keys())
+                     if not key.startswith(SENSOR_KEY)}
+            types = {name: (value.get("type") if isinstance(value, dict) else type(value).__name__)
+                     for name, value in self.world.elements.items()}
+            self._content_key = fingerprint({"params": parts, "types": types, "max_depth": self.world.max_depth})
+        return self._content_key
 
     def camera_image(self, spp: int = 64, seed: int = 0) -> np.ndarray:
         """Image (rows, cols) of the ground-truth pinhole camera [W m^-2 sr^-1], row 0 at the top."""

@@ -8,7 +8,7 @@ the screen. Screen coordinates ``(x_m, y_m)`` [m] are centred on the screen, +x 
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -157,11 +157,96 @@ class Sweep:
             yield white_square(screen, tuple(p), self.size_m, self.radiance)
 
     def frame_stack(self, screen: Screen) -> np.ndarray:
-        """All frames as one (n, rows, cols) array."""
+        """All frames as one (n, rows, cols) array (memory grows with n: prefer :meth:`frame_source`)."""
         stack = np.empty((len(self), *screen.shape))
         for i, frame in enumerate(self.frames(screen)):
             stack[i] = frame
         return stack
+
+    def frame_source(self, screen: Screen, background_w_m2_sr: float = 0.0) -> FrameSource:
+        """The frames, made on demand (bounded memory whatever their number)."""
+        positions = np.asarray(self.positions_m, dtype=np.float64)
+
+        def make(i: int) -> np.ndarray:
+            return white_square(screen, tuple(positions[i]), self.size_m, self.radiance) + background_w_m2_sr
+
+        description = {"kind": "white_square_sweep", "positions_m": positions, "size_m": float(self.size_m),
+                       "radiance_w_m2_sr": float(self.radiance), "background_w_m2_sr": float(background_w_m2_sr),
+                       "screen_resolution": list(screen.resolution), "screen_size_m": [screen.width_m, screen.height_m]}
+        return FrameSource(len(self), screen.shape, make, description)
+
+
+class FrameSource:
+    """A sequence of frames (radiance [W m^-2 sr^-1], (rows, cols) each) produced on demand.
+
+    Long sweeps and videos stream through the renderer chunk by chunk instead of living in memory as one
+    stack. ``description`` (JSON-friendly, arrays allowed) determines the frames completely: it is what a run's
+    identity records for generated frames; sources wrapping arrays are identified by their content.
+
+    Parameters
+    ----------
+    n : int
+        Number of frames.
+    frame_shape : (rows, cols)
+    make : callable
+        ``make(i) -> (rows, cols)`` array for frame ``i``.
+    description : dict or None
+        What the frames are; ``None`` means "identify by content" (hashed as they stream).
+    """
+
+    def __init__(self, n: int, frame_shape: tuple[int, int], make: Callable[[int], np.ndarray],
+                 description: dict | None = None) -> None:
+        self.n, self.frame_shape, self._make, self.description = int(n), tuple(frame_shape), make, description
+
+    @classmethod
+    def from_array(cls, frames: np.ndarray) -> FrameSource:
+        """Wrap an (n, rows, cols) array (a memory map streams from disk)."""
+        arr = frames if frames.ndim == 3 else np.asarray(frames)[None]
+        return cls(arr.shape[0], arr.shape[1:], lambda i: np.asarray(arr[i], dtype=np.float64), None)
+
+    def __len__(self) -> int:
+        return self.n
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return (self.n, *self.frame_shape)
+
+    @property
+    def nbytes_per_frame(self) -> int:
+        return 8 * self.frame_shape[0] * self.frame_shape[1]
+
+    def __getitem__(self, index) -> np.ndarray:
+        """Frame ``i`` (rows, cols), or a stack (k, rows, cols) for a slice or an index array."""
+        if isinstance(index, int | np.integer):
+            if not -self.n <= index < self.n:
+                raise IndexError(f"frame {index} out of range (0..{self.n - 1})")
+            return np.asarray(self._make(int(index) % self.n), dtype=np.float64)
+        idx = np.arange(self.n)[index]
+        out = np.empty((len(idx), *self.frame_shape))
+        for j, i in enumerate(idx):
+            out[j] = self._make(int(i))
+        return out
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        for i in range(self.n):
+            yield self[i]
+
+    def __array__(self, dtype=None, copy=None) -> np.ndarray:
+        stack = self[:]
+        return stack if dtype is None else stack.astype(dtype)
+
+    def chunk_size(self, budget_bytes: int = 1 << 27) -> int:
+        """Frames per chunk so that one chunk stays under ``budget_bytes`` (at least 1)."""
+        return max(1, min(self.n, budget_bytes // self.nbytes_per_frame))
+
+
+def as_frame_source(frames) -> FrameSource:
+    """A :class:`FrameSource` from a source, an (n, rows, cols) / (rows, cols) array, or a list of frames."""
+    if isinstance(frames, FrameSource):
+        return frames
+    if isinstance(frames, np.ndarray):
+        return FrameSource.from_array(frames if frames.ndim == 3 else frames[None])
+    return FrameSource.from_array(np.stack([np.asarray(f, dtype=np.float64) for f in frames]))
 
 
 def line_sweep(

@@ -1,0 +1,107 @@
+"""Runs that never lie (render side): content-addressed identity and map cache, resume after a kill,
+streaming frames, no silent 0 +/- 0."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mincam_sim import Mincam, Mixel, Pose, Screen, masks, pair_layout
+from mincam_sim.errors import StaleResultError
+from mincam_sim.render import response_map as rm
+from mincam_sim.render.screen_engine import UnseenWarning, render_frames
+from mincam_sim.scene.display import FrameSource, line_sweep
+
+SCREEN = Screen(resolution=(64, 36))
+
+
+def _sinusoid_cam(phase_rad: float) -> Mincam:
+    mask = masks.sinusoid(2 * np.pi / 0.5e-3, 0.5, 0.4, phase_rad=phase_rad, resolution=64)
+    return Mincam((Mixel(mask, name="sin"), Mixel(masks.ramp("x", 64), pose=Pose((0.01, 0, 0), (0, 0, -1)),
+                                                  name="x")))
+
+
+def _frames(n: int = 6) -> np.ndarray:
+    return line_sweep((-0.2, 0.0), (0.2, 0.0), n, 0.05).frame_stack(SCREEN)
+
+
+@pytest.mark.parametrize("form", ["response_map", "fast"])
+def test_changed_mask_content_is_refused_not_reused(form, tmp_path):
+    """Same mask name and shape, different phase: the old code returned the old numbers (rc 0)."""
+    kw = {"spp": 1 << 12, "samples_per_texel": 16, "seed": 1, "out_dir": tmp_path}
+    render_frames(_sinusoid_cam(0.0), SCREEN, _frames(), form, **kw)
+    with pytest.raises(StaleResultError, match=r"different run.*mincam.*--overwrite|different run.*overwrite"):
+        render_frames(_sinusoid_cam(1.0), SCREEN, _frames(), form, **kw)
+    fresh, _ = render_frames(_sinusoid_cam(1.0), SCREEN, _frames(), form, **{**kw, "out_dir": None})
+    replaced, _ = render_frames(_sinusoid_cam(1.0), SCREEN, _frames(), form, overwrite=True, **kw)
+    np.testing.assert_array_equal(replaced.irradiance_w_m2, fresh.irradiance_w_m2)
+
+
+def test_changed_frame_content_is_refused(tmp_path):
+    frames = _frames()
+    render_frames(pair_layout(), SCREEN, frames, samples_per_texel=16, out_dir=tmp_path)
+    frames[2, 0, 0] += 0.5
+    with pytest.raises(StaleResultError, match="frames"):
+        render_frames(pair_layout(), SCREEN, frames, samples_per_texel=16, out_dir=tmp_path)
+
+
+def test_rerun_with_target_noise_reuses_cached_maps(tmp_path, monkeypatch):
+    """The README's example twice: the second run finds its maps in the content cache and traces nothing."""
+    cam, frames = pair_layout(), _frames()
+    first, _ = render_frames(cam, SCREEN, frames, target_rel_stderr=3e-3, seed=2, out_dir=tmp_path)
+
+    def no_tracing(*args, **kwargs):
+        raise AssertionError("maps were traced again although they are cached")
+
+    monkeypatch.setattr(rm, "MaskEvaluator", no_tracing)
+    second, _ = render_frames(cam, SCREEN, frames, target_rel_stderr=3e-3, seed=2, out_dir=tmp_path)
+    np.testing.assert_array_equal(first.irradiance_w_m2, second.irradiance_w_m2)
+    assert second.meta["samples_per_texel"] == first.meta["samples_per_texel"]
+
+
+def test_killed_map_tracing_resumes_mixel_by_mixel(tmp_path, monkeypatch):
+    cam, frames = _sinusoid_cam(0.3), _frames()
+    reference, _ = render_frames(cam, SCREEN, frames, samples_per_texel=16, seed=4)
+    original_put = rm.ContentCache.put
+    calls = []
+
+    def dying_put(self, key, arrays, meta=None):
+        calls.append(key)
+        original_put(self, key, arrays, meta)
+        if len(calls) == 1:
+            raise KeyboardInterrupt  # killed after the first mixel's map was stored
+
+    monkeypatch.setattr(rm.ContentCache, "put", dying_put)
+    with pytest.raises(KeyboardInterrupt):
+        render_frames(cam, SCREEN, frames, samples_per_texel=16, seed=4, out_dir=tmp_path)
+    monkeypatch.setattr(rm.ContentCache, "put", original_put)
+    traced = []
+    original_eval = rm.MaskEvaluator
+
+    def counting_eval(mask):
+        traced.append(mask.name)
+        return original_eval(mask)
+
+    monkeypatch.setattr(rm, "MaskEvaluator", counting_eval)
+    resumed, _ = render_frames(cam, SCREEN, frames, samples_per_texel=16, seed=4, out_dir=tmp_path)
+    assert traced == [cam[1].mask.name]  # only the mixel whose map was not stored
+    np.testing.assert_array_equal(resumed.irradiance_w_m2, reference.irradiance_w_m2)
+
+
+def test_streamed_frames_equal_the_stack(tmp_path):
+    sweep = line_sweep((-0.2, -0.05), (0.2, 0.05), 40, 0.04)
+    source = sweep.frame_source(SCREEN)
+    assert isinstance(source, FrameSource) and source.shape == (40, *SCREEN.shape)
+    stacked, _ = render_frames(pair_layout(), SCREEN, sweep.frame_stack(SCREEN), samples_per_texel=16, seed=5)
+    streamed, _ = render_frames(pair_layout(), SCREEN, source, samples_per_texel=16, seed=5, out_dir=tmp_path,
+                                chunk=7)
+    np.testing.assert_array_equal(stacked.irradiance_w_m2, streamed.irradiance_w_m2)
+    np.testing.assert_array_equal(stacked.stderr_w_m2, streamed.stderr_w_m2)
+
+
+def test_a_measurement_no_sample_reached_warns():
+    dark = np.zeros((2, *SCREEN.shape))
+    dark[1] = 1.0
+    with pytest.warns(UnseenWarning, match="not seen"):
+        m, _ = render_frames(pair_layout(), SCREEN, dark, samples_per_texel=16)
+    assert np.all(m.irradiance_w_m2[0] == 0)
