@@ -169,11 +169,11 @@ def response_maps_to_target(
 ) -> tuple[ResponseMaps, list[dict]]:
     """Response maps whose measurements of ``frames`` all reach ``target_rel_stderr`` (if the cap allows).
 
-    Two pilots (16 and 64 samples per texel) give the empirical convergence rate ``rel ~ n^-a`` (stratified
-    sampling converges faster than ``n^-1/2``); the sample count is extrapolated with it, then checked and, if
-    needed, raised again assuming the plain Monte Carlo rate. Every attempt's maps go to ``cache`` (so a rerun
-    or a resumed run repeats the search in milliseconds). Returns the maps and the trail of
-    (samples_per_texel, worst relative stderr) tried.
+    Starting from 16 samples per texel, each attempt extrapolates the sample count from the convergence rate
+    ``rel ~ n^-a`` measured on the last two attempts (stratified sampling converges faster than ``n^-1/2``;
+    ``a = 1/2`` until two attempts exist), by at most 8x per step, until the target is reached. Every
+    attempt's maps go to ``cache`` (so a rerun or a resumed run repeats the search in milliseconds). Returns
+    the maps and the trail of (samples_per_texel, worst relative stderr) tried.
     """
     frames = as_frame_source(frames)
     trail: list[dict] = []
@@ -185,17 +185,16 @@ def response_maps_to_target(
         trail.append({"samples_per_texel": int(maps.meta["samples_per_texel"]), "worst_rel_stderr": rel})
         return maps, rel
 
-    n1, n2 = 16, 64
-    maps, rel1 = attempt(n1)
-    if not rel1 > target_rel_stderr:
-        return maps, trail
-    maps, rel2 = attempt(n2)
-    rate = float(np.clip(np.log(rel1 / rel2) / np.log(n2 / n1), 0.5, 1.5)) if rel2 > 0 else 0.5
-    n, rel = n2, rel2
+    n, step_cap = 16, 8
+    maps, rel = attempt(n)
+    rate = 0.5  # plain Monte Carlo until two attempts measure the stratified rate
     while rel > target_rel_stderr and n < max_samples_per_texel:
-        exponent = rate if len(trail) == 2 else 0.5
-        n = max(min(2 * n, max_samples_per_texel),
-                samples_for_target(n, rel, target_rel_stderr, max_samples_per_texel, exponent))
+        if len(trail) >= 2:
+            (n_a, r_a), (n_b, r_b) = ((t["samples_per_texel"], t["worst_rel_stderr"]) for t in trail[-2:])
+            if r_a > 0 and r_b > 0 and n_b > n_a:
+                rate = float(np.clip(np.log(r_a / r_b) / np.log(n_b / n_a), 0.5, 1.5))
+        need = samples_for_target(n, rel, target_rel_stderr, max_samples_per_texel, rate)
+        n = int(min(max_samples_per_texel, max(2 * n, min(need, step_cap * n))))  # at most x8 per step
         maps, rel = attempt(n)
     return maps, trail
 

@@ -175,7 +175,7 @@ class WorldRenderer:
         textures, transforms, radiances), the element names and plugin types, and the path depth."""
         if self._content_key is None:
             params = self.params
-            parts = {key: np.asarray(params[key]) for key in sorted(params.keys())
+            parts = {key: _param_array(params[key]) for key in sorted(params.keys())
                      if not key.startswith(SENSOR_KEY)}
             types = {name: (value.get("type") if isinstance(value, dict) else type(value).__name__)
                      for name, value in self.world.elements.items()}
@@ -185,6 +185,15 @@ class WorldRenderer:
     def camera_image(self, spp: int = 64, seed: int = 0) -> np.ndarray:
         """Image (rows, cols) of the ground-truth pinhole camera [W m^-2 sr^-1], row 0 at the top."""
         return self.world.camera_image(spp, seed)
+
+
+def _param_array(value) -> np.ndarray:
+    """A traversed Mitsuba parameter as a numeric array (transforms by their matrix)."""
+    matrix = getattr(value, "matrix", None)
+    arr = np.asarray(matrix if matrix is not None else value)
+    if arr.dtype.hasobject:
+        arr = np.frombuffer(repr(value).encode(), dtype=np.uint8)
+    return arr
 
 
 def _fingerprint(updates: Sequence[Updates]) -> list:
