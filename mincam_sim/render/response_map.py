@@ -162,7 +162,7 @@ def response_maps(
     weights = np.zeros((len(indices), n_tex))
     variance = np.zeros((len(indices), n_tex))
     sampler = mi.load_dict({"type": "independent"})
-    keys = {k: _mixel_key(mincam, k, screen, spt, replicates, seed, max_lanes) for k in indices}
+    keys = {k: _mixel_key(mincam, k, screen, spt, replicates, seed, max_lanes) for k in indices} if cache else {}
     cached = {}
     if cache is not None:
         for k in indices:
@@ -245,7 +245,8 @@ def response_maps(
         **geometry_meta(Mincam(tuple(mincam[k] for k in indices), allow_overlap=True), screen),
         "mixel_bodies": "occluding" if mincam.occluding_bodies else "ignored (idealised overlapping mincam)",
     }
-    meta["cache_keys"] = {mincam[k].name: keys[k] for k in indices}
+    if keys:
+        meta["cache_keys"] = {mincam[k].name: keys[k] for k in indices}
     return ResponseMaps(weights.reshape(len(indices), rows, cols), variance.reshape(len(indices), rows, cols),
                         names, meta)
 

@@ -157,9 +157,20 @@ def measure_stream(maps: ResponseMaps, frames: FrameSource, indices=None, show_p
     step = frames.chunk_size(FRAME_CHUNK_BYTES)
     for lo in progress(range(0, len(indices), step), desc=desc, disable=not show_progress):
         idx = indices[lo : lo + step]
-        m = maps.measure(frames[idx])
+        stack = frames[idx]
+        _check_radiance(stack, idx)
+        m = maps.measure(stack)
         values[lo : lo + len(idx)], errors[lo : lo + len(idx)] = m.irradiance_w_m2, m.stderr_w_m2
     return Measurements(values, errors, list(maps.mixel_names), {**maps.meta, "form": "response_map"})
+
+
+def _check_radiance(stack: np.ndarray, indices: np.ndarray) -> None:
+    """Refuse NaN, infinite or negative radiance, naming the first bad frame."""
+    bad = ~(stack >= 0).all(axis=(1, 2)) | ~np.isfinite(stack.sum(axis=(1, 2)))  # NaN fails ">= 0"
+    if bad.any():
+        i = int(indices[np.argmax(bad)])
+        raise ValueError(f"frame {i} contains NaN, infinite or negative radiance; frames must be finite and >= 0 "
+                         "W m^-2 sr^-1")
 
 
 def response_maps_to_target(
@@ -185,8 +196,8 @@ def response_maps_to_target(
         trail.append({"samples_per_texel": int(maps.meta["samples_per_texel"]), "worst_rel_stderr": rel})
         return maps, rel
 
-    n, step_cap = 16, 8
-    maps, rel = attempt(n)
+    maps, rel = attempt(16)
+    n, step_cap = int(maps.meta["samples_per_texel"]), 8
     rate = 0.5  # plain Monte Carlo until two attempts measure the stratified rate
     while rel > target_rel_stderr and n < max_samples_per_texel:
         if len(trail) >= 2:
@@ -196,6 +207,7 @@ def response_maps_to_target(
         need = samples_for_target(n, rel, target_rel_stderr, max_samples_per_texel, rate)
         n = int(min(max_samples_per_texel, max(2 * n, min(need, step_cap * n))))  # at most x8 per step
         maps, rel = attempt(n)
+        n = int(maps.meta["samples_per_texel"])  # what was traced (rounded to replicates x k^2)
     return maps, trail
 
 
@@ -213,8 +225,7 @@ def frames_identity(frames: FrameSource, screen: Screen) -> dict:
     step = frames.chunk_size(FRAME_CHUNK_BYTES)
     for lo in range(0, len(frames), step):
         chunk = frames[lo : lo + step]
-        for j, f in enumerate(chunk):
-            screen.check_frame(f, f"frame {lo + j}")
+        _check_radiance(chunk, np.arange(lo, lo + len(chunk)))
         digest.update(chunk)
     return {"n": len(frames), "content_sha256": digest.hexdigest()}
 
@@ -266,7 +277,7 @@ def render_frames(
     if tuple(frames.frame_shape) != tuple(screen.shape):
         raise ValueError(f"frames have shape {frames.frame_shape} but this screen's frames are {screen.shape} "
                          "(rows, cols)")
-    frames_id = frames_identity(frames, screen)
+    frames_id = frames_identity(frames, screen) if out_dir is not None else None  # identity: only for a store
     cache = ContentCache(Path(out_dir) / "cache") if out_dir is not None else None
     budget: dict = {"target_rel_stderr": target_rel_stderr}
     provenance: dict = {}

@@ -197,12 +197,15 @@ class FrameSource:
     def __init__(self, n: int, frame_shape: tuple[int, int], make: Callable[[int], np.ndarray],
                  description: dict | None = None) -> None:
         self.n, self.frame_shape, self._make, self.description = int(n), tuple(frame_shape), make, description
+        self._array: np.ndarray | None = None  # set by from_array: chunks are then slices of it
 
     @classmethod
     def from_array(cls, frames: np.ndarray) -> FrameSource:
         """Wrap an (n, rows, cols) array (a memory map streams from disk)."""
         arr = frames if frames.ndim == 3 else np.asarray(frames)[None]
-        return cls(arr.shape[0], arr.shape[1:], lambda i: np.asarray(arr[i], dtype=np.float64), None)
+        source = cls(arr.shape[0], arr.shape[1:], lambda i: np.asarray(arr[i], dtype=np.float64), None)
+        source._array = arr
+        return source
 
     def __len__(self) -> int:
         return self.n
@@ -222,6 +225,10 @@ class FrameSource:
                 raise IndexError(f"frame {index} out of range (0..{self.n - 1})")
             return np.asarray(self._make(int(index) % self.n), dtype=np.float64)
         idx = np.arange(self.n)[index]
+        if self._array is not None:
+            if len(idx) and np.all(np.diff(idx) == 1):  # a contiguous chunk: a view, no copy
+                return np.asarray(self._array[idx[0] : idx[-1] + 1], dtype=np.float64)
+            return np.asarray(self._array[idx], dtype=np.float64)
         out = np.empty((len(idx), *self.frame_shape))
         for j, i in enumerate(idx):
             out[j] = self._make(int(i))
