@@ -152,3 +152,21 @@ def test_analytic_masks_are_exact_where_textures_lose_contrast():
     raster_value, raster_sigma, raster_meta = results["raster"]
     assert raster_meta["mixel"]["discretisation_error"] is None
     assert abs(raster_value - expected) > Z * raster_sigma, "the raster reading should be visibly biased here"
+
+
+@pytest.mark.parametrize("form", ["fast", "reference"])
+def test_fast_and_reference_sigma_match_spread_over_seeds(form):
+    """The replicate standard error of the ray-traced forms equals the spread over independent seeds."""
+    cam = Mincam((_tilted_mixel(SINUSOID_30),))
+    renderer = ScreenRenderer(cam, TILT_SCREEN, form, replicates=8)
+    frames = [_square_frame(TILT_SCREEN, radiance=2.0), _square_frame(TILT_SCREEN, (0.0, 0.1, -0.05, 0.1))]
+    values, sigmas = [], []
+    for seed in range(10):
+        m = renderer.render(frames, spp=1 << 14, seed=200 + seed)
+        values.append(m.irradiance_w_m2[:, 0])
+        sigmas.append(m.stderr_w_m2[:, 0])
+    values, sigmas = np.array(values), np.array(sigmas)
+    n = len(values)
+    chi2 = np.sum((n - 1) * values.var(axis=0, ddof=1) / np.mean(sigmas**2, axis=0))
+    dof = len(frames) * (n - 1)
+    assert abs(chi2 - dof) < Z * np.sqrt(2 * dof), f"{form}: chi2 {chi2:.1f} for {dof} dof"
