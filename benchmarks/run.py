@@ -227,6 +227,28 @@ def bench_memory_10k_frames() -> dict:
             "goal_peak_gib": 1.0, "finite": bool(np.isfinite(m.irradiance_w_m2).all())}
 
 
+def bench_study_scaling() -> dict:
+    """Issue 12: the spacing study (full points, a 4 x 2 grid) on an embedded dask cluster with 1 and with 2
+    process workers, side by side: scaling efficiency = T1 / (2 T2); both warm (Dr.Jit caches per worker)."""
+    import tempfile
+
+    from mincam_sim.studies import load_study, run_study
+
+    raw = {"study": {"name": "bench", "experiment": "intrusion", "seed": 0},
+           "grid": {"spacing_m": [0.0, 0.02, 0.033, 0.06], "depth_m": [0.5, 1.0]}}
+    spec = load_study(raw)
+    seconds = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for workers in (1, 2):
+            run_study(spec, workers=workers, out_dir=f"{tmp}/warm{workers}", show_progress=False)  # warm-up
+            t = time.perf_counter()
+            _, summary = run_study(spec, workers=workers, out_dir=f"{tmp}/w{workers}", show_progress=False)
+            seconds[workers] = time.perf_counter() - t
+    return {"points": len(spec.points), "seconds_1_worker": seconds[1], "seconds_2_workers": seconds[2],
+            "scaling_efficiency_1_to_2_workers": seconds[1] / (2 * seconds[2]),
+            "includes": "cluster start-up, point computation, Zarr writes"}
+
+
 BENCHMARKS = {
     "baseline": bench_baseline,
     "sweep": bench_sweep,
@@ -234,6 +256,7 @@ BENCHMARKS = {
     "moving_object": bench_moving_object,
     "memory_sweep_1080p": bench_memory_sweep_1080p,
     "memory_10k_frames": bench_memory_10k_frames,
+    "study_scaling": bench_study_scaling,
 }
 
 
@@ -279,6 +302,9 @@ def main() -> int:
         summary["frames_per_second"] = moving["frames_per_second"]
     summary["memory_peak_mib"] = {k: v["peak_memory_mib"] for k, v in results.items() if isinstance(v, dict)
                                   and "peak_memory_mib" in v}
+    if "study_scaling" in results:
+        scaling = results["study_scaling"]
+        summary["study_scaling_efficiency_1_to_2_workers"] = scaling["scaling_efficiency_1_to_2_workers"]
     for name in ("memory_sweep_1080p", "memory_10k_frames"):
         if name in results:
             summary[f"{name}_peak_gib"] = results[name]["peak_memory_mib"] / 1024

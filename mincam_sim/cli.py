@@ -128,6 +128,9 @@ app = typer.Typer(cls=_MincamGroup, add_completion=False, no_args_is_help=True, 
 masks_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None,
                         help="Generate the mask library or export print-ready masks.")
 app.add_typer(masks_app, name="masks")
+study_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None,
+                        help="Parameter studies: `run STUDY.toml` on dask (xarray/Zarr results), `spacing`.")
+app.add_typer(study_app, name="study")
 
 
 @app.callback()
@@ -567,18 +570,33 @@ def reproduce(
     typer.echo(f"# results.json and plots in {out_dir}")
 
 
-@app.command()
+@study_app.command("run")
+def study_run(
+    study_file: Annotated[Path, typer.Argument(help="study TOML (see scenes/studies/*.toml)")],
+    workers: Annotated[int | None, typer.Option(help="process workers of the embedded dask cluster "
+                                                     "(default min(2, cores); 0 = serial in this process)")] = None,
+    scheduler: Annotated[str | None, typer.Option(help="address of an existing dask scheduler, e.g. "
+                                                       "tcp://host:8786 (a dask-jobqueue cluster)")] = None,
+    out_dir: Annotated[Path | None, typer.Option("--out", help="output folder (default: [study] out_dir)")] = None,
+    quick: Annotated[bool, typer.Option("--quick", help="the study's [quick] lists, fast points (~1 min)")] = False,
+    overwrite: Annotated[bool, typer.Option("--overwrite", help="replace a different study's results")] = False,
+) -> None:
+    """Run a parameter study on dask.distributed: results.zarr (xarray), summary.json and study.png in --out."""
+    from .studies.cli import run_study_command
+
+    check_variant()
+    run_study_command(study_file, workers, scheduler, out_dir, quick, overwrite, quiet=not _show_progress())
+
+
+@study_app.command("spacing")
 def study(
-    what: Annotated[str, typer.Argument(help="spacing")] = "spacing",
     out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out/study"),
     quick: Annotated[bool, typer.Option("--quick", help="fewer spacings and depths")] = False,
 ) -> None:
-    """Studies: `spacing` = intrusion error against mixel spacing (0-10 cm) and depth, before/after calibration."""
+    """Intrusion error against mixel spacing (0-10 cm) and depth, before/after calibration (serial)."""
     from .experiments import spacing as spacing_study
     from .store import lock_out_dir
 
-    if what != "spacing":
-        raise ConfigError(f"unknown study {what!r}: the available study is 'spacing'")
     check_variant()
     check_out_dir(out_dir)
     _announce_variant()
