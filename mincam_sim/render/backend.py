@@ -130,6 +130,15 @@ def require_jit(what: str) -> None:
         )
 
 
+def cap_threads(threads: int) -> None:
+    """Limit Dr.Jit's thread pool in this process (several worker processes share the cores)."""
+    configure_libllvm()
+    import drjit as dr
+
+    if dr.thread_count() != int(threads):
+        dr.set_thread_count(int(threads))
+
+
 def describe() -> dict[str, str]:
     """Metadata recorded with every output: variant and library versions."""
     import drjit as dr

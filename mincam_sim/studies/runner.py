@@ -37,15 +37,12 @@ def point_seed(study_seed: int, params: dict) -> int:
 
 def compute_point(experiment: str, params: dict, seed: int, quick: bool) -> dict:
     """Run one point (on a worker or here). Caps Dr.Jit's threads first when the runner asked for it."""
-    from ..render.backend import configure_libllvm
+    from ..render import backend
 
-    configure_libllvm()  # before Dr.Jit is first imported in this process (Debian's LLVM 15 crashes it)
+    backend.configure_libllvm()  # before Dr.Jit is first imported in this process (Debian's LLVM 15 crashes it)
     threads = os.environ.get(ENV_THREADS)
     if threads:
-        import drjit as dr
-
-        if dr.thread_count() != int(threads):
-            dr.set_thread_count(int(threads))
+        backend.cap_threads(int(threads))
     result = STUDY_EXPERIMENTS[experiment].point(dict(params), int(seed), bool(quick))
     return {k: float(v) for k, v in result.items()}
 
