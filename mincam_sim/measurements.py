@@ -66,7 +66,7 @@ class Measurements:
             irradiance_w_m2=self.irradiance_w_m2,
             stderr_w_m2=self.stderr_w_m2,
             mixel_names=np.array(self.mixel_names),
-            meta_json=np.array(json.dumps(self.meta, default=_json_default)),
+            meta_json=np.array(json.dumps(self.meta, default=json_default)),
         )
         return path
 
@@ -87,7 +87,7 @@ class Measurements:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_open(path, "w") as fh:
-            fh.write("# " + json.dumps(self.meta, default=_json_default) + "\n")
+            fh.write("# " + json.dumps(self.meta, default=json_default) + "\n")
             writer = csv.writer(fh)
             header = ["frame"]
             for name in self.mixel_names:
@@ -101,7 +101,8 @@ class Measurements:
         return path
 
 
-def _json_default(obj):
+def json_default(obj):
+    """``json.dumps(default=...)`` for numpy scalars and arrays and paths."""
     if isinstance(obj, np.generic):
         return obj.item()
     if isinstance(obj, np.ndarray):

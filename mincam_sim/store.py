@@ -37,6 +37,7 @@ import numpy as np
 from .atomic import atomic_open, atomic_path, atomic_write_json, fsync_dir
 from .errors import OutDirLockedError, StaleResultError, StoreError
 from .identity import canonical, diff_identities, fingerprint, run_key
+from .measurements import json_default
 
 STORE_FORMAT = "mincam_sim.result_store"
 STORE_VERSION = 2
@@ -565,7 +566,7 @@ class ContentCache:
             raise ValueError(f"cache array names must be identifiers other than {_RESERVED}, got {bad}")
         arrays = {name: np.asarray(a) for name, a in arrays.items()}
         payload = {**arrays, "__key__": np.array(key), "__digest__": np.array(_arrays_digest(arrays)),
-                   "__meta__": np.array(json.dumps(meta or {}, default=_json_default, sort_keys=True))}
+                   "__meta__": np.array(json.dumps(meta or {}, default=json_default, sort_keys=True))}
         try:
             self.directory.mkdir(parents=True, exist_ok=True)
             with atomic_open(path, "wb") as fh:
@@ -585,16 +586,6 @@ class ContentCache:
         arrays, meta = compute()
         self.put(key, arrays, meta)
         return CacheEntry(key, {k: np.asarray(v) for k, v in arrays.items()}, dict(meta or {})), False
-
-
-def _json_default(obj: Any) -> Any:
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, Path):
-        return str(obj)
-    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
 
 
 __all__ = [
