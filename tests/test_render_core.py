@@ -112,10 +112,23 @@ def test_mixels_shadow_each_other(form):
         spp = 1 << 20 if form == "fast" else 1 << 23
         m = ScreenRenderer(cam, FRONT_SCREEN, form, replicates=16).render(frame, spp=spp, seed=3)
     value, sigma = m.irradiance_w_m2[0, 0], m.stderr_w_m2[0, 0]
-    assert sigma / expected < 0.001, f"{form}: sigma {sigma / expected:.1e} too large to see a 0.4 % offset bias"
+    assert sigma / expected < 1e-3, f"{form}: sigma {sigma / expected:.1e} too large"
     assert_close_mc(value, expected, sigma, what=f"{form}: shadowed mixel vs view-factor oracle")
     front_alone = open_aperture_view_factor_irradiance(cam[1], FRONT_SCREEN, radiance)
     assert_close_mc(m.irradiance_w_m2[0, 1], front_alone, m.stderr_w_m2[0, 1], what=f"{form}: front mixel")
+
+
+@pytest.mark.slow
+def test_reference_form_has_no_ray_offset_bias_near_an_occluder():
+    """Scene units of metres put geometry ~90 um closer after the mask: with the occluder 1 cm away that read
+    -0.25 % (5.9 sigma at this sample count); the millimetre scene around each mixel must not."""
+    cam = _shadowing_pair()
+    expected, _ = _shadow_oracle(cam, 2.0)
+    m = ScreenRenderer(cam, FRONT_SCREEN, "reference", replicates=16).render(
+        np.full(FRONT_SCREEN.shape, 2.0), spp=1 << 25, seed=11)
+    value, sigma = m.irradiance_w_m2[0, 0], m.stderr_w_m2[0, 0]
+    assert sigma / expected < 4e-4
+    assert_close_mc(value, expected, sigma, what="reference near an occluder")
 
 
 def test_intersecting_bodies_are_refused_unless_idealised():
