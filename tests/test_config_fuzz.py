@@ -86,8 +86,8 @@ def _check(doc, tmp_path) -> None:
         assert str(err)
         return
     assert isinstance(cfg, RenderConfig)
-    assert cfg.frames.ndim == 3 and len(cfg.frames) >= 1
-    assert all(math.isfinite(v) for v in cfg.frames.reshape(-1)[:10])
+    assert len(cfg.frames.shape) == 3 and len(cfg.frames) >= 1
+    assert all(math.isfinite(v) for v in cfg.frames[0].reshape(-1)[:10])
 
 
 @settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow,
