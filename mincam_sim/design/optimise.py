@@ -1,0 +1,103 @@
+"""Build the tracking design problem from traced samples and run the optimiser (Dr.Jit AD in
+:mod:`mincam_sim.render.differentiable`), from the paper's ramps as the starting point."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..masks import Mask
+from . import parameterization as par
+from . import tracking as tr
+
+
+@dataclass
+class Design:
+    """The outcome of an optimisation.
+
+    Attributes
+    ----------
+    printer_masks : list of Mask
+        Printer input (grey values on the dot grid, nearest) per mixel; print with the task's film.
+    loss_rms : (iterations,) ndarray
+        Training RMS position error per step [fraction of the field].
+    initial_rms, final_rms : float
+        Training RMS error of the starting (paper-ramp) masks and of the result [fraction of the field].
+    n_train : int
+        Training objects.
+    """
+
+    printer_masks: list[Mask]
+    loss_rms: np.ndarray
+    initial_rms: float
+    final_rms: float
+    n_train: int
+
+
+def training_set(task: tr.TrackingTask) -> tuple[list, np.ndarray]:
+    """Square scenes per training depth and their targets (normalised field coordinates, (n, 2))."""
+    from ..render.differentiable import SquareScenes
+
+    rng = np.random.default_rng([task.seed, 11])
+    scenes, targets = [], []
+    for depth in task.train_depths_m:
+        q, sizes, radiance = tr.random_objects(rng, task.frames_per_depth)
+        scenes.append(SquareScenes(depth, tr.to_metres(q, depth), sizes, radiance))
+        targets.append(q)
+    return scenes, np.concatenate(targets)
+
+
+def build_problem(task: tr.TrackingTask, show_progress: bool = False):
+    """Trace the training samples through the mincam geometry and bin them into per-mixel linear models."""
+    from ..progress import progress
+    from ..render import differentiable as dz
+
+    dots = task.dot_shape()
+    film = task.film()
+    scenes, targets = training_set(task)
+    cam = tr.mincam(tr.paper_masks(8))  # the geometry; masks are the design variables
+    bodies = dz._bodies_scene(cam)
+    matrices = []
+    for k in progress(range(len(cam)), desc="tracing training samples", disable=not show_progress, unit="mixel"):
+        rows = []
+        for i, sc in enumerate(scenes):
+            smp = dz.mixel_samples(cam, k, sc, strata=task.strata, seed=task.seed * 1000 + i, bodies=bodies)
+            rows.append(dz.design_matrix(smp, dots))
+        matrices.append(np.concatenate(rows))
+    # Fixed exposure: the brightest training reading of a fully clear print fills EXPOSURE_FILL of the range.
+    peak = max(float((a * film.t_max).sum(axis=1).max()) for a in matrices)
+    s = tr.sensor().auto_exposed(peak, tr.EXPOSURE_FILL)
+    gain = float(s.expected(1.0) - s.expected(0.0))
+    index, weight = par.bilinear_upsample(task.grid, dots)
+    problem = dz.DesignProblem(
+        matrices=matrices, upsample_index=index, upsample_weight=weight, targets=targets,
+        features=tr.features, n_params=task.grid**2, t_min=film.t_min, t_max=film.t_max, gamma=film.gamma,
+        levels=film.levels, dn_per_w_m2=gain, noise_dn=lambda irr: tr.change_sigma_dn(s, irr))
+    return problem
+
+
+def initial_logits(task: tr.TrackingTask) -> list[np.ndarray]:
+    """Logits of the paper's ramps at the grid nodes (the optimiser's starting point)."""
+    return [par.logits_of(par.grid_values(m, task.grid)) for m in tr.paper_masks(256)]
+
+
+def design(task: tr.TrackingTask, show_progress: bool = False) -> Design:
+    """Optimise the four masks (and the calibration in the loop) for the tracking task."""
+    from ..render import differentiable as dz
+
+    problem = build_problem(task, show_progress)
+    start = initial_logits(task)
+    result = dz.optimise_masks(problem, start, iterations=task.iterations, learning_rate=task.learning_rate,
+                               seed=task.seed, show_progress=show_progress)
+    index, weight = problem.upsample_index, problem.upsample_weight
+    dots = task.dot_shape()
+    film = task.film()
+    printer = [par.printable_mask(par.dots_from_logits(t, index, weight, film), dots, tr.MASK_SIZE_M,
+                                  f"designed_{name}", task="tracking", grid=task.grid)
+               for t, name in zip(result.logits, tr.NAMES, strict=True)]
+    return Design(printer, result.loss_history, float(result.loss_history[0]), float(result.loss_history[-1]),
+                  len(problem.targets))
+
+
+__all__ = ["Design", "build_problem", "design", "initial_logits", "training_set"]
