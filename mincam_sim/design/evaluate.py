@@ -6,11 +6,12 @@ by ``depth / 0.5`` at other depths (:mod:`.tracking` for the coordinates)."""
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..calibration import Calibration2D, error_rates
+from ..calibration import Calibration2D, ExtrapolationWarning, error_rates
 from ..geometry import Pose
 from ..optics import Mincam
 from ..progress import progress
@@ -74,16 +75,26 @@ def evaluate(cam: Mincam, task: tr.TrackingTask, held_out: HeldOut, show_progres
     peak = max(float(b.max()) for b in blocks)
     s = tr.sensor().auto_exposed(peak, tr.EXPOSURE_FILL)
     rng = np.random.default_rng([task.seed, 5])
-    dn = [tr.read_out(b, s, rng) for b in blocks]
+    noisy = _locate(cal_xy, [tr.read_out(b, s, rng) for b in blocks], held_out)
+    noiseless = _locate(cal_xy, [s.expected(b) - s.expected(0.0) for b in blocks], held_out)
+    return {**noisy, "exposure_s": s.exposure_s,
+            "noiseless": {k: v for k, v in noiseless.items() if k in ("avg_error_pct", "max_error_pct", "n")}}
+
+
+def _locate(cal_xy: np.ndarray, dn: list, held_out: HeldOut) -> dict:
+    """Fit the calibration on ``dn[0]`` (the sweep at 0.5 m) and locate the held-out objects ``dn[1:]``."""
     obs_cal = np.column_stack(tr.features(dn[0].T))
     ok = np.all(np.isfinite(obs_cal), axis=1)
     cal = Calibration2D.fit(obs_cal[ok], cal_xy[ok], degree=3, metadata={"task": "tracking design",
                                                                        "depth_m": tr.CALIBRATION_DEPTH_M})
-    predicted, truth, depth_of = [], [], []
+    predicted, truth, depth_of, n_extrapolated = [], [], [], 0
     for i, depth in enumerate(held_out.depths_m):
         obs = np.column_stack(tr.features(dn[i + 1].T))
-        pred_m = cal.apply(obs) * depth / tr.CALIBRATION_DEPTH_M
-        predicted.append(tr.to_field(pred_m, depth))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ExtrapolationWarning)  # counted below instead
+            pred_m, extrapolated = cal.apply(obs, return_extrapolated=True)
+        n_extrapolated += int(np.sum(extrapolated))
+        predicted.append(tr.to_field(pred_m * depth / tr.CALIBRATION_DEPTH_M, depth))
         truth.append(held_out.q[i])
         depth_of.append(np.full(len(obs), depth))
     predicted, truth, depth_of = np.concatenate(predicted), np.concatenate(truth), np.concatenate(depth_of)
@@ -97,9 +108,9 @@ def evaluate(cam: Mincam, task: tr.TrackingTask, held_out: HeldOut, show_progres
         "rms_error_pct": rates["rms_error_pct"],
         "n": int(finite.sum()),
         "n_without_estimate": int((~finite).sum()),
+        "n_outside_calibrated_range": n_extrapolated,
         "per_depth_avg_error_pct": dict(zip([f"{d:.3f}" for d in held_out.depths_m], per_depth, strict=True)),
         "calibration_rms_residual_m": np.asarray(cal.rms_residual_m).tolist(),
-        "exposure_s": s.exposure_s,
         "arrays": {"predicted_q": predicted, "truth_q": truth, "depth_m": depth_of, "error_pct": err},
     }
 

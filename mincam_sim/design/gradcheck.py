@@ -46,7 +46,8 @@ def check_gradients(seed: int = 0, strata: int = 48, n_texels: int = 3) -> dict:
         smp = dz.mixel_samples(cam, k, scenes, strata=strata, seed=seed, d_f=d_f, position=position, bodies=bodies)
         return dz.irradiance(smp, texels, shape)
 
-    def values(texels=texels0.ravel(), d_f=cam[k].d_f_m, position=pos0):
+    def values(texels=None, d_f=cam[k].d_f_m, position=pos0):
+        texels = texels0.ravel() if texels is None else texels
         return np.asarray(measure(mi.Float(texels), mi.Float(d_f), point(position)), dtype=np.float64)
 
     # texels that the objects are seen through: reverse-mode influence of each texel on the summed irradiance
