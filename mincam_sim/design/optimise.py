@@ -10,6 +10,7 @@ import numpy as np
 from ..masks import Mask
 from . import parameterization as par
 from . import tracking as tr
+from .decoder import Decoder, poly_terms
 
 
 @dataclass
@@ -26,6 +27,10 @@ class Design:
         Training RMS error of the starting (paper-ramp) masks and of the result [fraction of the field].
     n_train : int
         Training objects.
+    decoder : Decoder
+        The polynomial decoder refitted on the final printed masks (training set, noisy read-out).
+    ramp_decoder : Decoder
+        The same decoder fitted for the paper's printed ramps (a reference that isolates the masks' share).
     """
 
     printer_masks: list[Mask]
@@ -33,6 +38,8 @@ class Design:
     initial_rms: float
     final_rms: float
     n_train: int
+    decoder: Decoder
+    ramp_decoder: Decoder
 
 
 def training_set(task: tr.TrackingTask) -> tuple[list, np.ndarray]:
@@ -72,7 +79,7 @@ def build_problem(task: tr.TrackingTask, show_progress: bool = False):
     index, weight = par.bilinear_upsample(task.grid, dots)
     problem = dz.DesignProblem(
         matrices=matrices, upsample_index=index, upsample_weight=weight, targets=targets,
-        features=tr.features, n_params=task.grid**2, t_min=film.t_min, t_max=film.t_max, gamma=film.gamma,
+        features=tr.FEATURES[task.decoder], n_params=task.grid**2, t_min=film.t_min, t_max=film.t_max, gamma=film.gamma,
         levels=film.levels, dn_per_w_m2=gain, noise_dn=lambda irr: tr.change_sigma_dn(s, irr))
     return problem
 
@@ -96,8 +103,25 @@ def design(task: tr.TrackingTask, show_progress: bool = False) -> Design:
     printer = [par.printable_mask(par.dots_from_logits(t, index, weight, film), dots, tr.MASK_SIZE_M,
                                   f"designed_{name}", task="tracking", grid=task.grid)
                for t, name in zip(result.logits, tr.NAMES, strict=True)]
+    decoder = fit_decoder(problem, [film.print(m).transmission.ravel() for m in printer], task)
+    ramps = [film.print(m).transmission.ravel() for m in tr.paper_masks()]
     return Design(printer, result.loss_history, float(result.loss_history[0]), float(result.loss_history[-1]),
-                  len(problem.targets))
+                  len(problem.targets), decoder, fit_decoder(problem, ramps, task))
 
 
-__all__ = ["Design", "build_problem", "design", "initial_logits", "training_set"]
+def fit_decoder(problem, transmissions: list[np.ndarray], task: tr.TrackingTask, draws: int = 4) -> Decoder:
+    """Least-squares polynomial decoder for printed masks (flat dot transmissions) on the training set, from
+    ``draws`` noisy read-outs of every object (NumPy, the optimiser's linear model)."""
+    irr = np.array([a @ t for a, t in zip(problem.matrices, transmissions, strict=True)])
+    rng = np.random.default_rng([task.seed, 23])
+    sigma = problem.noise_dn(irr)
+    dn = np.concatenate([problem.dn_per_w_m2 * irr + sigma * rng.standard_normal(irr.shape)
+                         for _ in range(draws)], axis=1)
+    targets = np.tile(problem.targets, (draws, 1))
+    design_matrix = poly_terms(list(tr.FEATURES[task.decoder](dn)), 3)
+    ok = np.all(np.isfinite(design_matrix), axis=1)
+    coef = np.stack([np.linalg.lstsq(design_matrix[ok], targets[ok, i], rcond=None)[0] for i in range(2)])
+    return Decoder(task.decoder, 3, coef)
+
+
+__all__ = ["Design", "build_problem", "design", "fit_decoder", "initial_logits", "training_set"]

@@ -63,6 +63,10 @@ class TrackingTask:
         Squares per axis of the calibration sweep at 0.5 m (clipped to the 50 cm disc).
     dpi : float
         Printer resolution [dots per inch] of the film.
+    decoder : {"learned", "eq7"}
+        ``learned``: a cubic polynomial of :func:`features_learned`, fitted in the design loop on the training
+        depths and used as is at inference; ``eq7``: the paper's ratios with a cubic calibration on the
+        physical sweep at 0.5 m (the baseline's protocol).
     seed : int
     """
 
@@ -78,7 +82,12 @@ class TrackingTask:
     samples_per_texel: int = 36
     calibration_grid: int = 15
     dpi: float = 600.0
+    decoder: str = "learned"
     seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.decoder not in FEATURES:
+            raise ValueError(f"TrackingTask.decoder must be one of {', '.join(FEATURES)}, got {self.decoder!r}")
 
     @classmethod
     def quick(cls, seed: int = 0) -> TrackingTask:
@@ -149,6 +158,17 @@ def features(dn, xp=np):
     return 2.0 * (fx - 0.5), 2.0 * (fy - 0.5)
 
 
+def features_learned(dn, xp=np):
+    """Decoder inputs of the learned decoder: all four changes normalised by their sum (three independent
+    ratios, so the balance between the x and y pairs, which moves with depth through the field-of-view
+    offsets, is available to the decoder). Gain-free, like Eq. 7."""
+    total = dn[0] + dn[1] + dn[2] + dn[3]
+    return (dn[0] - dn[1]) / total, (dn[2] - dn[3]) / total, (dn[0] + dn[1] - dn[2] - dn[3]) / total
+
+
+FEATURES = {"eq7": features, "learned": features_learned}
+
+
 def sensor() -> SensorModel:
     """The paper's 12-bit mixel read-out (48 x 48 pixels averaged)."""
     return SensorModel.paper_prototype(bit_depth=BIT_DEPTH)
@@ -175,7 +195,9 @@ __all__ = [
     "TrackingTask",
     "calibration_positions",
     "change_sigma_dn",
+    "FEATURES",
     "features",
+    "features_learned",
     "mincam",
     "paper_masks",
     "random_objects",

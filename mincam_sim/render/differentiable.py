@@ -289,7 +289,7 @@ class DesignProblem:
     targets : (n_frames, 2) ndarray
         True positions (normalised field coordinates, :mod:`mincam_sim.design.tracking`).
     features : callable
-        ``features(dn, xp)`` -> list of decoder inputs from the (n_mixels,) list of DN arrays, written with
+        ``features(dn, xp)`` -> tuple of decoder inputs from the (n_mixels,) list of DN arrays, written with
         the array namespace ``xp`` (``drjit`` inside the optimiser, ``numpy`` at inference).
     n_params : int
         G * G logits per mask.
@@ -314,9 +314,18 @@ class DesignProblem:
     noise_dn: Callable
 
 
-def poly_terms(x, y, degree: int = 3) -> list:
-    """Monomials ``x^i y^j`` with ``i + j <= degree`` (works on NumPy and Dr.Jit arrays)."""
-    return [x ** (d - j) * y**j for d in range(degree + 1) for j in range(d + 1)]
+def poly_terms(*variables, degree: int = 3) -> list:
+    """All monomials of the variables of total degree <= ``degree``, constant first (NumPy or Dr.Jit arrays)."""
+    from itertools import combinations_with_replacement
+
+    terms = [variables[0] * 0 + 1.0]
+    for d in range(1, degree + 1):
+        for combo in combinations_with_replacement(range(len(variables)), d):
+            t = variables[combo[0]]
+            for i in combo[1:]:
+                t = t * variables[i]
+            terms.append(t)
+    return terms
 
 
 @dataclass
@@ -392,14 +401,14 @@ def optimise_masks(
             sigma = problem.noise_dn(irr_np)
             eps = np.random.default_rng([int(seed), it]).standard_normal(sigma.shape)
             dn = [problem.dn_per_w_m2 * irr[k] + mi.Float(sigma[k] * eps[k]) for k in range(len(irr))]
-            fx, fy = problem.features(dn, dr)
-            terms = poly_terms(fx, fy)
+            terms = poly_terms(*problem.features(dn, dr))
             design = np.stack([np.asarray(dr.detach(t), dtype=np.float64) for t in terms], axis=1)
             ok = np.all(np.isfinite(design), axis=1)
             coef = np.stack([np.linalg.lstsq(design[ok], problem.targets[ok, i], rcond=None)[0]
                              for i in range(2)])
-            px = sum(float(c) * t for c, t in zip(coef[0], terms, strict=True))
-            py = sum(float(c) * t for c, t in zip(coef[1], terms, strict=True))
+            c_x, c_y = (mi.Float(c) for c in coef.astype(np.float32))  # arrays, not literals: one kernel
+            px = sum(dr.gather(mi.Float, c_x, i) * t for i, t in enumerate(terms))
+            py = sum(dr.gather(mi.Float, c_y, i) * t for i, t in enumerate(terms))
             loss = dr.mean(dr.square(px - tx) + dr.square(py - ty))
             dr.backward(loss)
             opt.step()
