@@ -66,8 +66,12 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
     baseline = evaluate(tr.mincam(hand), task, held_out, show_progress=show_progress)
     ours = evaluate(tr.mincam(designed), task, held_out, decoder=learned, show_progress=show_progress)
     # references that split the gain between the masks and the decoder
+    swapped = [film.print(m) for m in tr.paper_masks_swapped_x()]
     references = {"paper_ramps_with_learned_decoder": evaluate(tr.mincam(hand), task, held_out,
-                                                                decoder=result.ramp_decoder),
+                                                                decoder=result.reference_decoders["paper"]),
+                  "paper_ramps_x_pair_swapped": evaluate(tr.mincam(swapped), task, held_out),
+                  "paper_ramps_x_pair_swapped_with_learned_decoder": evaluate(
+                      tr.mincam(swapped), task, held_out, decoder=result.reference_decoders["x pair swapped"]),
                   "designed_masks_with_paper_calibration": evaluate(tr.mincam(designed), task, held_out)}
     t_eval = time.perf_counter() - start - t_check - t_design
 
@@ -101,6 +105,8 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
         "goal": {"designed_over_baseline_avg": ratio, "met": bool(ratio <= 0.5),
                  "statement": "designed average error <= half the baseline's, held-out scenes, physical form"},
         "training": {"rms_error_start_pct": 100 * result.initial_rms, "rms_error_end_pct": 100 * result.final_rms,
+                     "start_kept": result.start,
+                     "starts": {k: {kk: 100 * vv for kk, vv in v.items()} for k, v in result.starts.items()},
                      "objects": result.n_train, "iterations": task.iterations,
                      "loss": "mean squared position error, noisy 12-bit read-out, cubic fitted per step"},
         "setup": {"spacing_m": tr.SPACING_M, "d_f_m": tr.D_F_M, "detector_size_m": tr.DETECTOR_SIZE_M,

@@ -116,6 +116,13 @@ def paper_masks(resolution: int = 256) -> list[Mask]:
     return [masks_mod.ramp(k, resolution, MASK_SIZE_M) for k in NAMES]
 
 
+def paper_masks_swapped_x(resolution: int = 256) -> list[Mask]:
+    """The paper's ramps with the x pair exchanged (1 - x on the left mixel, x on the right): then, as for the
+    y pair, each ramp is brightest on its own mixel's side, where that mixel sees objects nearest its axis
+    (a hand-made reference, not the paper's layout as this package builds it)."""
+    return [masks_mod.ramp(k, resolution, MASK_SIZE_M) for k in ("1-x", "x", "y", "1-y")]
+
+
 def to_metres(q: np.ndarray, depth_m: float) -> np.ndarray:
     """Plane position [m] of normalised field coordinates at ``depth_m``."""
     return np.asarray(q) * FIELD_M * depth_m / CALIBRATION_DEPTH_M
@@ -200,6 +207,7 @@ __all__ = [
     "features_learned",
     "mincam",
     "paper_masks",
+    "paper_masks_swapped_x",
     "random_objects",
     "read_out",
     "sensor",
