@@ -273,6 +273,91 @@ def check_inside_fov(mincam: Mincam, scenes: SquareScenes, margin: float = 0.02)
 
 
 # ----------------------------------------------------------------------------------------------------------
+# Gradient checks (forward-mode AD against central differences with the same samples)
+
+
+class GradientProbe:
+    """Irradiances of mixel ``k`` for ``scenes`` as a function of its (bilinear) mask texels, ``d_f`` and its
+    position, with the samples fixed by ``seed``: the values, forward-mode derivatives and central differences.
+    """
+
+    def __init__(self, mincam: Mincam, k: int, scenes: SquareScenes, texels: np.ndarray, strata: int = 48,
+                 seed: int = 0) -> None:
+        self.mincam, self.k, self.scenes, self.strata, self.seed = mincam, k, scenes, strata, seed
+        self.texels = np.asarray(texels, dtype=np.float64)
+        self.d_f_m = float(mincam[k].d_f_m)
+        self.position_m = np.asarray(mincam[k].pose.position_m, dtype=np.float64)
+        self._bodies = _bodies_scene(mincam)
+
+    def _measure(self, texels, d_f, position):
+        smp = mixel_samples(self.mincam, self.k, self.scenes, strata=self.strata, seed=self.seed, d_f=d_f,
+                            position=position, bodies=self._bodies)
+        return irradiance(smp, texels, self.texels.shape)
+
+    def _inputs(self, texels=None, d_f=None, position=None):
+        mi = _mi()
+        t = self.texels.ravel() if texels is None else texels
+        p = self.position_m if position is None else position
+        return (mi.Float(np.asarray(t, dtype=np.float32)), mi.Float(self.d_f_m if d_f is None else d_f),
+                mi.Point3f(*(float(c) for c in p)))
+
+    def values(self, texels=None, d_f=None, position=None) -> np.ndarray:
+        """Irradiance per frame [W/m^2] (float64 copy of the float32 estimate)."""
+        return np.asarray(self._measure(*self._inputs(texels, d_f, position)), dtype=np.float64)
+
+    def influence(self) -> np.ndarray:
+        """Reverse-mode derivative of the summed irradiance with respect to every texel (H*W,)."""
+        import drjit as dr
+
+        texels, d_f, position = self._inputs()
+        dr.enable_grad(texels)
+        dr.backward(dr.sum(self._measure(texels, d_f, position)))
+        return np.asarray(dr.grad(texels), dtype=np.float64)
+
+    def forward(self, parameter: str, index: int = 0) -> np.ndarray:
+        """Forward-mode derivative per frame with respect to ``texel`` [index], ``d_f_m`` or ``position_m``
+        [axis index] [W/m^2 per unit, per m, per m]."""
+        mi = _mi()
+        import drjit as dr
+
+        texels, d_f, position = self._inputs()
+        if parameter == "texel":
+            dr.enable_grad(texels)
+            e = self._measure(texels, d_f, position)
+            tangent = np.zeros(self.texels.size, dtype=np.float32)
+            tangent[index] = 1.0
+            dr.set_grad(texels, mi.Float(tangent))
+        elif parameter == "d_f_m":
+            dr.enable_grad(d_f)
+            e = self._measure(texels, d_f, position)
+            dr.set_grad(d_f, 1.0)
+        elif parameter == "position_m":
+            dr.enable_grad(position)
+            e = self._measure(texels, d_f, position)
+            unit = [0.0, 0.0, 0.0]
+            unit[index] = 1.0
+            dr.set_grad(position, mi.Vector3f(*unit))
+        else:
+            raise ValueError(f"parameter must be 'texel', 'd_f_m' or 'position_m', got {parameter!r}")
+        dr.forward_to(e)
+        return np.asarray(dr.grad(e), dtype=np.float64)
+
+    def central_difference(self, parameter: str, index: int, step: float) -> np.ndarray:
+        """``(E(p + h) - E(p - h)) / 2h`` with the same samples."""
+        if parameter == "texel":
+            plus, minus = self.texels.ravel().copy(), self.texels.ravel().copy()
+            plus[index] += step
+            minus[index] -= step
+            return (self.values(texels=plus) - self.values(texels=minus)) / (2 * step)
+        if parameter == "d_f_m":
+            return (self.values(d_f=self.d_f_m + step) - self.values(d_f=self.d_f_m - step)) / (2 * step)
+        plus, minus = self.position_m.copy(), self.position_m.copy()
+        plus[index] += step
+        minus[index] -= step
+        return (self.values(position=plus) - self.values(position=minus)) / (2 * step)
+
+
+# ----------------------------------------------------------------------------------------------------------
 # Optimisation of masks and decoder through the linear model
 
 
@@ -423,6 +508,7 @@ def optimise_masks(
 __all__ = [
     "DesignProblem",
     "DesignResult",
+    "GradientProbe",
     "Samples",
     "SquareScenes",
     "check_inside_fov",
