@@ -200,7 +200,7 @@ def test_cli_design_tracking_quick(tmp_path):
         again = error_rates(data[f"{key}_predicted_q"], data[f"{key}_truth_q"], 1.0)
         assert again["avg_error_pct"] == pytest.approx(d[key]["avg_error_pct"])
     dots = tr.TrackingTask.quick().dot_shape()
-    for name in ("x", "1minus_x", "y", "1minus_y"):
+    for name in tr.POSITIONS:
         with Image.open(out / f"mask_designed_{name}.png") as im:
             assert im.size == (dots[1], dots[0]) and round(im.info["dpi"][0]) == 600
     for fig in ("loss.png", "masks.png", "error_vs_depth.png", "decoder.json"):

@@ -58,15 +58,8 @@ def irradiances(cam: Mincam, depth_m: float, centers_m: np.ndarray, sizes_m: np.
     return maps.measure(_frames(screen, centers_m, sizes_m, radiance)).irradiance_w_m2
 
 
-def evaluate(cam: Mincam, task: tr.TrackingTask, held_out: HeldOut, decoder=None, show_progress: bool = False) -> dict:
-    """Locate every held-out object; errors as % of the field (paper's definition).
-
-    Without ``decoder``: the paper's protocol (Eq. 7 ratios, cubic calibration on the physical sweep at 0.5 m,
-    scaled by depth / 0.5). With a :class:`~.decoder.Decoder`: its prediction, with no physical calibration.
-
-    Returns a dict with ``avg_error_pct``, ``max_error_pct``, ``n`` (evaluated objects), per-depth averages,
-    the number of objects without a finite estimate, and per-object arrays (``arrays``) for plots.
-    """
+def measure(cam: Mincam, task: tr.TrackingTask, held_out: HeldOut, show_progress: bool = False) -> list:
+    """Irradiances [W/m^2]: the calibration sweep at 0.5 m, then each held-out depth's objects (response maps)."""
     cal_xy = tr.calibration_positions(task.calibration_grid)
     n_cal = len(cal_xy)
     blocks = [irradiances(cam, tr.CALIBRATION_DEPTH_M, cal_xy, np.full(n_cal, tr.CALIBRATION_SQUARE_M),
@@ -74,6 +67,19 @@ def evaluate(cam: Mincam, task: tr.TrackingTask, held_out: HeldOut, decoder=None
     for i, depth in enumerate(progress(held_out.depths_m, desc="held-out depths", disable=not show_progress)):
         blocks.append(irradiances(cam, float(depth), tr.to_metres(held_out.q[i], depth), held_out.sizes_m[i],
                                   held_out.radiance[i], task, seed=task.seed + 1 + i))
+    return blocks
+
+
+def score(blocks: list, task: tr.TrackingTask, held_out: HeldOut, decoder=None) -> dict:
+    """Read the irradiances out with the 12-bit sensor and locate every held-out object; errors as % of the
+    field (paper's definition).
+
+    Without ``decoder``: the paper's protocol (Eq. 7 ratios, cubic calibration on the physical sweep at 0.5 m,
+    scaled by depth / 0.5). With a :class:`~.decoder.Decoder`: its prediction, with no physical calibration.
+    Returns ``avg_error_pct``, ``max_error_pct``, ``n`` (evaluated objects), per-depth averages, the noiseless
+    read-out's errors, and per-object arrays (``arrays``) for plots.
+    """
+    cal_xy = tr.calibration_positions(task.calibration_grid)
     # one exposure for the whole session: the brightest reading fills EXPOSURE_FILL of the range
     peak = max(float(b.max()) for b in blocks)
     s = tr.sensor().auto_exposed(peak, tr.EXPOSURE_FILL)
@@ -82,6 +88,11 @@ def evaluate(cam: Mincam, task: tr.TrackingTask, held_out: HeldOut, decoder=None
     noiseless = _locate(cal_xy, [s.expected(b) - s.expected(0.0) for b in blocks], held_out, decoder)
     return {**noisy, "exposure_s": s.exposure_s,
             "noiseless": {k: v for k, v in noiseless.items() if k in ("avg_error_pct", "max_error_pct", "n")}}
+
+
+def evaluate(cam: Mincam, task: tr.TrackingTask, held_out: HeldOut, decoder=None, show_progress: bool = False) -> dict:
+    """:func:`measure` then :func:`score`."""
+    return score(measure(cam, task, held_out, show_progress), task, held_out, decoder)
 
 
 def _locate(cal_xy: np.ndarray, dn: list, held_out: HeldOut, decoder=None) -> dict:
@@ -124,4 +135,4 @@ def _locate(cal_xy: np.ndarray, dn: list, held_out: HeldOut, decoder=None) -> di
     }
 
 
-__all__ = ["HeldOut", "evaluate", "irradiances"]
+__all__ = ["HeldOut", "evaluate", "irradiances", "measure", "score"]

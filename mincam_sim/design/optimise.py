@@ -123,7 +123,7 @@ def design(task: tr.TrackingTask, show_progress: bool = False) -> Design:
     film = task.film()
     printer = [par.printable_mask(par.dots_from_logits(t, index, weight, film), dots, tr.MASK_SIZE_M,
                                   f"designed_{name}", task="tracking", grid=task.grid)
-               for t, name in zip(result.logits, tr.NAMES, strict=True)]
+               for t, name in zip(result.logits, tr.POSITIONS, strict=True)]
     decoder = fit_decoder(problem, [film.print(m).transmission.ravel() for m in printer], task)
     ramps = tr.paper_masks()
     references = {}

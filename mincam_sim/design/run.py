@@ -38,7 +38,7 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
     """
     from dataclasses import asdict, replace
 
-    from .evaluate import HeldOut, evaluate
+    from .evaluate import HeldOut, measure, score
     from .gradcheck import check_gradients
     from .optimise import design
     from .report import plot_error_vs_depth, plot_loss, plot_masks
@@ -63,27 +63,34 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
     hand = [film.print(m) for m in tr.paper_masks()]
     designed = [film.print(m) for m in result.printer_masks]
     learned = result.decoder if task.decoder == "learned" else None
-    baseline = evaluate(tr.mincam(hand), task, held_out, show_progress=show_progress)
-    ours = evaluate(tr.mincam(designed), task, held_out, decoder=learned, show_progress=show_progress)
-    # references that split the gain between the masks and the decoder
     swapped = [film.print(m) for m in tr.paper_masks_swapped_x()]
-    references = {"paper_ramps_with_learned_decoder": evaluate(tr.mincam(hand), task, held_out,
-                                                                decoder=result.reference_decoders["paper"]),
-                  "paper_ramps_x_pair_swapped": evaluate(tr.mincam(swapped), task, held_out),
-                  "paper_ramps_x_pair_swapped_with_learned_decoder": evaluate(
-                      tr.mincam(swapped), task, held_out, decoder=result.reference_decoders["x pair swapped"]),
-                  "designed_masks_with_paper_calibration": evaluate(tr.mincam(designed), task, held_out)}
+    readings = {label: measure(tr.mincam(masks), task, held_out, show_progress=show_progress)
+                for label, masks in (("hand", hand), ("swapped", swapped), ("designed", designed))}
+    baseline = score(readings["hand"], task, held_out)
+    ours = score(readings["designed"], task, held_out, decoder=learned)
+    # references that split the gain between the masks and the decoder
+    references = {
+        "paper_ramps_with_learned_decoder": score(readings["hand"], task, held_out,
+                                                  decoder=result.reference_decoders["paper"]),
+        "paper_ramps_x_pair_swapped": score(readings["swapped"], task, held_out),
+        "paper_ramps_x_pair_swapped_with_learned_decoder": score(
+            readings["swapped"], task, held_out, decoder=result.reference_decoders["x pair swapped"]),
+        "designed_masks_with_paper_calibration": score(readings["designed"], task, held_out),
+    }
     t_eval = time.perf_counter() - start - t_check - t_design
 
-    for mask, name in zip(result.printer_masks, tr.NAMES, strict=True):
-        path = out / f"mask_designed_{name.replace('-', 'minus_')}.png"
+    for mask, name in zip(result.printer_masks, tr.POSITIONS, strict=True):
+        path = out / f"mask_designed_{name}.png"
         with atomic_path(path) as tmp:
             export_print_png(mask, tmp, dpi=dpi, film=film)
     if learned is not None:
         result.decoder.to_json(out / "decoder.json")
     plot_loss(result.loss_rms, out / "loss.png")
-    plot_masks({"paper ramps": hand, "designed": designed}, list(tr.NAMES), out / "masks.png")
-    plot_error_vs_depth({"paper ramps": baseline, "designed": ours}, out / "error_vs_depth.png")
+    labels = [f"{p} ({n})" for p, n in zip(tr.POSITIONS, tr.NAMES, strict=True)]
+    plot_masks({"paper ramps": hand, "designed": designed}, labels, out / "masks.png")
+    plot_error_vs_depth({"paper ramps": baseline, "designed": ours,
+                         "ramps, x pair swapped": references["paper_ramps_x_pair_swapped"]},
+                        out / "error_vs_depth.png")
     atomic_save_npz(out / "design_data.npz", printer_input=np.stack([m.transmission for m in result.printer_masks]),
                     printed_transmission=np.stack([m.transmission for m in designed]), loss_rms=result.loss_rms,
                     **{f"{who}_{k}": v for who, r in (("baseline", baseline), ("designed", ours))

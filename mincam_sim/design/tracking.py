@@ -33,6 +33,7 @@ OBJECT_SIZE_RANGE_M = (0.02, 0.05)  # [m] side of the square objects
 BIT_DEPTH = 12
 EXPOSURE_FILL = 0.7
 NAMES = ("x", "1-x", "y", "1-y")  # roles of the four mixels in Eq. 7 (left, right, top, bottom)
+POSITIONS = ("left", "right", "top", "bottom")  # where each mixel sits, seen from behind the mincam
 OFFSETS_M = ((-SPACING_M, 0.0), (SPACING_M, 0.0), (0.0, SPACING_M), (0.0, -SPACING_M))
 
 
@@ -199,6 +200,7 @@ __all__ = [
     "DEPTH_RANGE_M",
     "FIELD_M",
     "NAMES",
+    "POSITIONS",
     "TrackingTask",
     "calibration_positions",
     "change_sigma_dn",
