@@ -70,7 +70,7 @@ def build_problem(task: tr.TrackingTask, show_progress: bool = False):
     film = task.film()
     scenes, targets = training_set(task)
     cam = tr.mincam(tr.paper_masks(8))  # the geometry; masks are the design variables
-    bodies = dz._bodies_scene(cam)
+    bodies = dz.bodies_scene(cam)
     matrices = []
     for k in progress(range(len(cam)), desc="tracing training samples", disable=not show_progress, unit="mixel"):
         rows = []

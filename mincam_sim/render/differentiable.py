@@ -104,7 +104,8 @@ def _mi():
     return backend.mitsuba()
 
 
-def _bodies_scene(mincam: Mincam):
+def bodies_scene(mincam: Mincam):
+    """Mitsuba scene of the mincam's bodies (housings and back plates) for the visibility rays."""
     from .scene_dicts import mincam_body_shapes
 
     mi = _mi()
@@ -188,7 +189,7 @@ def mixel_samples(
     v = 0.5 - my / mixel.mask.height_m
     valid &= (u >= 0) & (u <= 1) & (v >= 0) & (v <= 1)  # the housing blocks the rest
     if bodies is None:
-        bodies = _bodies_scene(mincam)
+        bodies = bodies_scene(mincam)
     p_start = dr.detach(p_det + direction * (t_mask + START_OFFSET_M))
     dist_after = dr.detach(dr.sqrt(r2) - t_mask - START_OFFSET_M)
     shadow = mi.Ray3f(p_start, dr.detach(direction), dist_after * (1 - 1e-5), 0.0, [])
@@ -287,7 +288,7 @@ class GradientProbe:
         self.texels = np.asarray(texels, dtype=np.float64)
         self.d_f_m = float(mincam[k].d_f_m)
         self.position_m = np.asarray(mincam[k].pose.position_m, dtype=np.float64)
-        self._bodies = _bodies_scene(mincam)
+        self._bodies = bodies_scene(mincam)
 
     def _measure(self, texels, d_f, position):
         smp = mixel_samples(self.mincam, self.k, self.scenes, strata=self.strata, seed=self.seed, d_f=d_f,
@@ -415,6 +416,8 @@ def poly_terms(*variables, degree: int = 3) -> list:
 
 @dataclass
 class DesignResult:
+    """Output of :func:`optimise_masks` (NumPy arrays)."""
+
     logits: list  # per mixel (G*G,) ndarray
     transmission: list  # per mixel (D,) ndarray: the printed transmission on the dot grid
     loss_history: np.ndarray  # (iterations,) training RMS error [fraction of the field]
@@ -497,7 +500,7 @@ def optimise_masks(
             loss = dr.mean(dr.square(px - tx) + dr.square(py - ty))
             dr.backward(loss)
             opt.step()
-            history.append(float(np.sqrt(loss.numpy()[0] if hasattr(loss, "numpy") else loss)))
+            history.append(float(np.sqrt(np.asarray(loss, dtype=np.float64).ravel()[0])))
             b.update(1)
             b.set_postfix_str(f"rms {100 * history[-1]:.2f} % of field")
     logits_np = [np.asarray(opt[f"theta{k}"], dtype=np.float64) for k in range(len(initial_logits))]
@@ -511,6 +514,7 @@ __all__ = [
     "GradientProbe",
     "Samples",
     "SquareScenes",
+    "bodies_scene",
     "check_inside_fov",
     "design_matrix",
     "irradiance",
