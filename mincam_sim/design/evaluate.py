@@ -30,10 +30,13 @@ class HeldOut:
 
     @classmethod
     def draw(cls, task: tr.TrackingTask) -> HeldOut:
-        """Depths uniform in the working range and objects in the working disc, from a seed of their own
-        (disjoint from the training draw)."""
+        """Depths stratified over the working range (one uniform draw in each of ``eval_depths`` equal bins, so
+        the whole range is covered) and objects in the working disc, from a seed of their own (disjoint from
+        the training draw)."""
         rng = np.random.default_rng([task.seed, 97])
-        depths = np.sort(rng.uniform(*tr.DEPTH_RANGE_M, task.eval_depths))
+        lo, hi = tr.DEPTH_RANGE_M
+        edges = np.linspace(lo, hi, task.eval_depths + 1)
+        depths = edges[:-1] + (edges[1:] - edges[:-1]) * rng.random(task.eval_depths)
         q, s, r = zip(*(tr.random_objects(rng, task.eval_frames_per_depth) for _ in depths), strict=True)
         return cls(depths, list(q), list(s), list(r))
 
