@@ -34,7 +34,8 @@ class Design:
         The same decoder fitted for the printed paper ramps under each start's assignment (:data:`STARTS`):
         references that separate the masks' share of the gain from the decoder's.
     start : str
-        The starting assignment kept (:data:`STARTS`), ``starts`` the training RMS of every start.
+        The starting assignment kept (:data:`STARTS`), ``starts`` the training RMS of every start and
+        ``histories`` their loss curves.
     """
 
     printer_masks: list[Mask]
@@ -46,6 +47,7 @@ class Design:
     reference_decoders: dict
     start: str
     starts: dict
+    histories: dict
 
 
 def training_set(task: tr.TrackingTask) -> tuple[list, np.ndarray]:
@@ -132,7 +134,8 @@ def design(task: tr.TrackingTask, show_progress: bool = False) -> Design:
         references[label] = fit_decoder(problem, [film.print(ramps[i]).transmission.ravel() for i in order], task)
     return Design(printer, result.loss_history, float(runs["paper"].loss_history[0]),
                   scores[chosen], len(problem.targets), decoder, references, chosen,
-                  {k: {"start_rms": float(r.loss_history[0]), "end_rms": scores[k]} for k, r in runs.items()})
+                  {k: {"start_rms": float(r.loss_history[0]), "end_rms": scores[k]} for k, r in runs.items()},
+                  {k: r.loss_history for k, r in runs.items()})
 
 
 def fit_decoder(problem, transmissions: list[np.ndarray], task: tr.TrackingTask, draws: int = 4) -> Decoder:

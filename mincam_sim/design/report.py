@@ -21,10 +21,13 @@ def _save(fig, path: Path) -> Path:
     return path
 
 
-def plot_loss(loss_rms: np.ndarray, path: Path) -> Path:
-    """Training RMS position error against the optimiser step."""
-    fig, ax = plt.subplots(figsize=(5.5, 3.4), layout="constrained")
-    ax.plot(np.arange(1, len(loss_rms) + 1), 100 * np.asarray(loss_rms), lw=1.2)
+def plot_loss(histories: dict[str, np.ndarray], kept: str, path: Path) -> Path:
+    """Training RMS position error against the optimiser step, one curve per start (the kept one bold)."""
+    fig, ax = plt.subplots(figsize=(6.0, 3.6), layout="constrained")
+    for label, loss in histories.items():
+        ax.plot(np.arange(1, len(loss) + 1), 100 * np.asarray(loss), lw=1.8 if label == kept else 0.8,
+                label=f"start: {label}" + (" (kept)" if label == kept else ""))
+    ax.legend(fontsize=8)
     ax.set_xlabel("optimiser step")
     ax.set_ylabel("training RMS position error [% of field]")
     ax.set_title("mask design: loss (noisy read-out, calibration in the loop)")

@@ -85,7 +85,7 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
             export_print_png(mask, tmp, dpi=dpi, film=film)
     if learned is not None:
         result.decoder.to_json(out / "decoder.json")
-    plot_loss(result.loss_rms, out / "loss.png")
+    plot_loss(result.histories, result.start, out / "loss.png")
     labels = [f"{p} ({n})" for p, n in zip(tr.POSITIONS, tr.NAMES, strict=True)]
     plot_masks({"paper ramps": hand, "designed": designed}, labels, out / "masks.png")
     plot_error_vs_depth({"paper ramps": baseline, "designed": ours,
