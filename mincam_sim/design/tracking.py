@@ -92,7 +92,7 @@ class TrackingTask:
 
     @classmethod
     def quick(cls, seed: int = 0) -> TrackingTask:
-        return cls(train_depths_m=(0.35, 0.45, 0.57, 0.7), frames_per_depth=96, strata=12, grid=10,
+        return cls(train_depths_m=(0.35, 0.45, 0.57, 0.7), frames_per_depth=192, strata=12, grid=10,
                    iterations=200, eval_depths=5, eval_frames_per_depth=40, screen_texels=128,
                    samples_per_texel=16, calibration_grid=9, seed=seed)
 
