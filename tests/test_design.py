@@ -64,7 +64,7 @@ def test_forward_model_matches_response_maps():
     sizes = np.array([0.03, 0.04, 0.05])
     scenes = dz.SquareScenes(0.5, centers, sizes, 1.0)
     replicas = []
-    for rep in range(8):
+    for rep in range(16):  # 16 replicates: the t-distribution behind conftest.Z
         reps = []
         for k in range(4):
             smp = dz.mixel_samples(cam, k, scenes, strata=24, seed=100 + rep)
