@@ -8,7 +8,7 @@ import numpy as np
 
 from . import masks
 from .optics import Mixel, pair_layout
-from .plots import _save, plot_mixel_geometry, plot_response_maps, plt
+from .plots import _save, plot_mask, plot_mixel_geometry, plot_response_maps, plt
 from .screen import Screen
 
 
@@ -21,7 +21,7 @@ def make_figures(out_dir: str | Path) -> list[Path]:
     library = [masks.ramp("x"), masks.sinusoid(2 * np.pi / 0.4e-3), masks.circular_ramp()]
     fig, axes = plt.subplots(1, len(library), figsize=(4.2 * len(library), 3.4))
     for ax, mask in zip(axes, library, strict=True):
-        masks.plot_mask(mask, ax=ax, title=mask.name)
+        plot_mask(mask, ax=ax, title=mask.name)
     paths.append(_save(fig, out_dir / "masks.png"))
     screen = Screen()
     maps = response_maps(pair_layout(), screen, samples_per_texel=64, seed=0)

@@ -10,6 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .masks import Mask  # noqa: E402
 from .measurements import Measurements  # noqa: E402
 from .screen import Screen  # noqa: E402
 
@@ -216,3 +217,41 @@ def plot_spacing(study: dict, path):
     axes[0].legend(fontsize=7)
     fig.suptitle(f"1D intrusion: calibration at {study['calibration_depth_m']} m")
     return _save(fig, path)
+
+
+def plot_mask(mask: Mask, ax=None, cmap: str = "gray", colorbar: bool = True, title: str | None = None):
+    """Show a mask with physical axes in millimetres and a transmission colourbar.
+
+    Parameters
+    ----------
+    mask : Mask
+        Mask to draw (row 0 at the top, +y up, as seen from the detector).
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw into; by default a new Agg-safe ``matplotlib.figure.Figure`` (no pyplot state) is made,
+        reachable as ``ax.figure``.
+    cmap : str
+        Colormap; transmission 0 to 1 maps to its full range.
+    colorbar : bool
+        Add a colourbar labelled "transmission".
+    title : str, optional
+        Axes title; defaults to the mask name.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+    """
+    if ax is None:
+        from matplotlib.figure import Figure
+
+        ax = Figure(figsize=(4.2, 3.5), layout="constrained").subplots()
+    wmm, hmm = mask.width_m * 1e3, mask.height_m * 1e3
+    im = ax.imshow(
+        mask.transmission, cmap=cmap, vmin=0.0, vmax=1.0, origin="upper", interpolation="nearest",
+        extent=(-wmm / 2, wmm / 2, -hmm / 2, hmm / 2),
+    )
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("y [mm]")
+    ax.set_title(mask.name if title is None else title)
+    if colorbar:
+        ax.figure.colorbar(im, ax=ax, label="transmission")
+    return ax

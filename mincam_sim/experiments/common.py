@@ -17,8 +17,8 @@ from .. import objects
 from ..calibration import Calibration1D, Calibration2D
 from ..estimators import noise_threshold
 from ..geometry import Pose
-from ..mask_profiles import Band, Ramp
 from ..masks import Mask
+from ..masks.profiles import Band, Ramp
 from ..optics import Mincam, layout
 from ..scene.tabletop import Tabletop
 from ..screen import Screen, Sweep, grid_sweep, line_sweep
@@ -312,8 +312,8 @@ def locate_in_world(world, frames, background, setup: Setup, rng: np.random.Gene
     ``axis`` picks one coordinate (1D experiments); ``region`` restricts the ground truth (e.g. the boundary
     band). Returns (summary dict, per-frame arrays, ground-truth images, background image).
     """
-    from ..calibration import error_rates
     from ..estimators import detect_change
+    from ..metrics import error_rates
     from ..progress import progress
 
     dp, _ = world.measure_changes(frames, background, spp=spp, seed=setup.seed, show_progress=show_progress)

@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..calibration import error_rates
 from ..estimators import intrusion_position
 from ..geometry import Pose
+from ..metrics import error_rates
 from ..progress import progress
 from ..screen import Screen
 from .common import Setup, fit_calibration_1d, intrusion_mincam, mincam_on_screen, screen_sweep_1d

@@ -20,9 +20,9 @@ import numpy as np
 
 from .. import masks as masks_mod
 from .. import objects
-from ..calibration import speed_error_rates
 from ..estimators import scene_frequency, spectrum, speed_from_signal
 from ..geometry import Pose
+from ..metrics import speed_error_rates
 from ..optics import Mincam, Mixel
 from ..progress import progress
 from .common import PAPER, Setup

@@ -3,7 +3,7 @@
 Conventions (the only place they are coded):
 
 * A mixel's local frame has +x to the viewer's *left*, +y up, +z out through the mask (see
-  :mod:`mincam_sim.geometry`). Physical mask coordinates (:mod:`mincam_sim.mask_profiles`) have +x to the
+  :mod:`mincam_sim.geometry`). Physical mask coordinates (:mod:`mincam_sim.masks.profiles`) have +x to the
   viewer's *right*: ``x_m = -x_local``, ``y_m = y_local``.
 * Texture coordinates of the mask array (row 0 at the top, column 0 at the left): ``u = 0.5 + x_m / w``,
   ``v = 0.5 - y_m / h``.
@@ -15,15 +15,15 @@ printer dots). :func:`mask_model_meta` records which, for every output.
 
 from __future__ import annotations
 
-from ..mask_profiles import MaskProfile
 from ..masks import Mask
+from ..masks.profiles import MaskProfile
 from . import backend
 
 ANALYTIC_TEXTURE_PLUGIN = "mincam_analytic_mask"
 
 
 class DrJitOps:
-    """:class:`mincam_sim.mask_profiles.ArrayOps` on Dr.Jit arrays."""
+    """:class:`mincam_sim.masks.profiles.ArrayOps` on Dr.Jit arrays."""
 
     def __init__(self) -> None:
         import drjit as dr

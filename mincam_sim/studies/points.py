@@ -29,10 +29,10 @@ def _intrusion_point(params: dict, seed: int, quick: bool) -> dict:
     """Two-mixel intrusion (band masks y | 1 - y) calibrated on a screen at ``calibration_depth_m``, then a
     white square swept along the boundary on a screen at ``depth_m``: position errors (% of the calibrated
     range at that depth) before / after the cubic calibration, noiseless and through the sensor model."""
-    from ..calibration import error_rates
     from ..estimators import intrusion_position
     from ..experiments.common import Setup, fit_calibration_1d, intrusion_mincam, mincam_on_screen, screen_sweep_1d
     from ..geometry import Pose
+    from ..metrics import error_rates
     from ..render.screen_engine import response_maps
     from ..screen import Screen
 
