@@ -13,7 +13,7 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[dev]'
-	$(PY) -m mincam_sim.render.backend --check
+	$(PY) -m mincam_sim.render.check
 	@touch $(STAMP)
 
 demo: setup

@@ -11,6 +11,7 @@ and ``file:`` masks) resolve against the config file's directory.
 
 from __future__ import annotations
 
+import dataclasses
 import tomllib
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -563,3 +564,59 @@ def load_config(source: str | Path | dict, base_dir: str | Path | None = None) -
     run_cfg = RunConfig(form, spp, samples_per_texel, target, replicates, seed, variant or None, out_dir)
     return RenderConfig(run_cfg, mincam, screen, frames, positions, {**sections, "mixel": tables}, path,
                         sections["frames"]["kind"])
+
+
+# ------------------------------------------------------------------------------------ dataclass sections
+def read_sections(source: str | Path | dict, allowed: Sequence[str]) -> dict[str, dict]:
+    """A TOML document (file path, text or dict) whose top level holds only the tables ``allowed``.
+
+    Raises
+    ------
+    ConfigError
+        Unreadable or invalid TOML, a section that is not a table, or an unknown section (the message lists
+        the allowed ones).
+    """
+    raw, _, _ = _read_source(source, None)
+    unknown = sorted(set(raw) - set(allowed))
+    if unknown:
+        raise ConfigError(f"unknown section(s) {', '.join(f'[{u}]' for u in unknown)}; allowed sections are "
+                          f"{', '.join(f'[{a}]' for a in allowed)}")
+    return {name: _table(f"[{name}]", table) for name, table in raw.items()}
+
+
+def _typed_value(section: str, key: str, value: Any, default: Any) -> Any:
+    """``value`` checked against the type of ``default`` (bool, int, float, str, or a tuple of them)."""
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise ConfigError(f"{_where(section, key)} must be true or false, got {_describe(value)}")
+        return value
+    if isinstance(default, int):
+        return _integer(section, key, value, minimum=0)
+    if isinstance(default, float):
+        return _number(section, key, value)
+    if isinstance(default, str):
+        return _string(section, key, value)
+    if isinstance(default, tuple):
+        if not isinstance(value, list | tuple) or len(value) == 0:
+            raise ConfigError(f"{_where(section, key)} must be a non-empty list like {list(default)}, got "
+                              f"{_describe(value)}")
+        item = default[0] if default else 0.0
+        return tuple(_typed_value(section, f"{key}[{i}]", v, item) for i, v in enumerate(value))
+    raise ConfigError(f"{_where(section, key)} cannot be set from a config file")
+
+
+def dataclass_from_section(section: str, table: Any, defaults: Any) -> Any:
+    """A copy of the dataclass instance ``defaults`` with the keys of a TOML ``[section]`` table applied.
+
+    Every key must be a field of the dataclass and have the type of its default (integers stay integers,
+    numbers carry no units or quotes); the dataclass's own ``__post_init__`` then checks ranges, and its
+    ``ValueError`` comes back as a :class:`ConfigError` naming the section.
+    """
+    current = {f.name: getattr(defaults, f.name) for f in dataclasses.fields(defaults) if f.init}
+    given = _table(f"[{section}]", table)
+    _check_keys(section, given, current)
+    values = {key: _typed_value(section, key, value, current[key]) for key, value in given.items()}
+    try:
+        return dataclasses.replace(defaults, **values)
+    except ValueError as err:
+        raise ConfigError(f"[{section}]: {err}") from None

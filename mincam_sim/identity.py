@@ -27,6 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from .masks import Mask
+
 #: Default length of a fingerprint [hex characters] (128 bits).
 FINGERPRINT_CHARS = 32
 
@@ -127,8 +129,6 @@ def canonical(obj: Any) -> Any:
 
 
 def _is_mask(obj: Any) -> bool:
-    from .masks import Mask
-
     return isinstance(obj, Mask)
 
 

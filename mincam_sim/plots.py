@@ -1,4 +1,7 @@
-"""Matplotlib figures (Agg backend: no display needed). Pure numpy + matplotlib."""
+"""Matplotlib figures (Agg backend: no display needed). Pure numpy + matplotlib.
+
+Every figure uses matplotlib's constrained layout (labels never overlap), and every colourbar names its
+quantity and unit."""
 
 from __future__ import annotations
 
@@ -9,6 +12,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+
+plt.rcParams["figure.constrained_layout.use"] = True
 
 from .masks import Mask  # noqa: E402
 from .measurements import Measurements  # noqa: E402
@@ -49,7 +54,7 @@ def plot_response_maps(maps, screen: Screen, path: str | Path):
         ax.set_title(f"mixel {maps.mixel_names[k]}: W [sr]")
         ax.set_xlabel("screen x [cm]")
         ax.set_ylabel("screen y [cm]")
-    fig.colorbar(im, ax=axes[0].tolist(), shrink=0.8)
+    fig.colorbar(im, ax=axes[0].tolist(), shrink=0.8, label="response W [sr] per texel")
     return _save(fig, path)
 
 
@@ -136,20 +141,25 @@ def plot_calibration_2d(true_m, observed, calibration, path):
     return _save(fig, path)
 
 
-def plot_overlays(images, points, setup, path, boundary_x_m=None, title=""):
+def plot_overlays(images, points, half_extent_m: float, path, frame_numbers=None, boundary_x_m=None, title="",
+                  field_m: float | None = None):
     """Ground-truth camera frames with the mincam's prediction (red dot) and the ground-truth centroid (cyan +),
-    like the paper's Fig. 5/7. ``points[i] = (predicted (2,), truth (2,))`` in table metres."""
-    from .experiments.common import camera_fov_deg
-
+    like the paper's Fig. 5/7. ``points[i] = (predicted (2,), truth (2,))`` in table metres; ``half_extent_m``
+    is half the side of the table area each image covers. Each panel names its frame and the position error
+    (cm, and % of ``field_m`` when given)."""
     n = max(1, len(images))
-    fig, axes = plt.subplots(1, n, figsize=(3.6 * n, 3.6), squeeze=False)
-    half = setup.depth_m * np.tan(np.radians(camera_fov_deg(setup)) / 2) * 100
-    for ax, image, (pred, truth) in zip(axes[0], images, points, strict=False):
+    fig, axes = plt.subplots(1, n, figsize=(3.6 * n, 3.9), squeeze=False)
+    half = 100 * half_extent_m
+    numbers = list(frame_numbers) if frame_numbers is not None else list(range(len(images)))
+    for ax, image, (pred, truth), number in zip(axes[0], images, points, numbers, strict=False):
         ax.imshow(image, cmap="gray", extent=[-half, half, -half, half])
         if boundary_x_m is not None:
             ax.axvline(100 * boundary_x_m, color="lime", lw=1)
         ax.plot(100 * truth[0], 100 * truth[1], "c+", ms=12, mew=2, label="ground truth")
         ax.plot(100 * pred[0], 100 * pred[1], "o", color="red", ms=6, label="mincam")
+        error_cm = 100 * float(np.hypot(*(np.asarray(pred) - np.asarray(truth))))
+        share = f" ({error_cm / field_m:.1f} %)" if field_m else ""
+        ax.set_title(f"frame {int(number)}: error {error_cm:.1f} cm{share}", fontsize=9)
         ax.set_xlabel("x [cm]")
         ax.set_ylabel("y [cm]")
     if len(images):

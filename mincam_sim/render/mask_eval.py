@@ -18,6 +18,7 @@ from __future__ import annotations
 from ..masks import Mask
 from ..masks.profiles import MaskProfile
 from . import backend
+from .textures import bitmap_dict
 
 ANALYTIC_TEXTURE_PLUGIN = "mincam_analytic_mask"
 
@@ -56,8 +57,6 @@ def inside_aperture(x_m, y_m, mask: Mask):
 
 def raster_texture_dict(mask: Mask) -> dict:
     """A raw, clamped Mitsuba bitmap of the mask array with the mask's interpolation."""
-    from .scene_dicts import bitmap_dict
-
     return bitmap_dict(mask.transmission, filter_type=mask.interpolation)
 
 
@@ -141,8 +140,6 @@ def register_analytic_texture() -> None:
 
 def opacity_texture(mask: Mask):
     """A texture of ``1 - transmission`` for Mitsuba's ``mask`` BSDF: exact for profiles, else the raster."""
-    from .scene_dicts import bitmap_dict
-
     if mask.profile is None or not backend.is_jit():
         return bitmap_dict(1.0 - mask.transmission, filter_type=mask.interpolation)
     register_analytic_texture()

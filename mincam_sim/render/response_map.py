@@ -30,6 +30,7 @@ import numpy as np
 
 from ..atomic import atomic_path, atomic_save_npz
 from ..identity import fingerprint, library_versions
+from ..imageio import write_exr
 from ..measurements import Measurements
 from ..optics import Mincam
 from ..progress import progress
@@ -81,8 +82,6 @@ class ResponseMaps:
 
     def save_exr(self, directory: str | Path) -> list[Path]:
         """One OpenEXR per mixel (channels W and sigma), the picture of what the mixel sees."""
-        from ..imageio import write_exr
-
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         paths = []
