@@ -413,8 +413,9 @@ def _reproduce_config(config: Path | None, quick: bool, **flags: Any) -> tuple[A
 def reproduce(
     experiment: Annotated[str, typer.Argument(help="intrusion, tracking, speed or all")] = "all",
     out_dir: Annotated[Path, typer.Option("--out", help="output folder (results.json + plots)")] = Path("out/repro"),
-    config: Annotated[Path | None, typer.Option("--config", help="reproduce TOML: [setup] and one section per "
-                                                                   "experiment (see scenes/reproduce.toml)")] = None,
+    config: Annotated[Path | None, typer.Option(
+        "--config", help="reproduce TOML: [setup] and one section per experiment (scenes/experiments/reproduce.toml)"
+    )] = None,
     quick: Annotated[bool, typer.Option("--quick", help="fewer frames and samples (minutes)")] = False,
     seed: Annotated[int | None, typer.Option(help="seed of every random choice [default 0]")] = None,
     spacing_m: Annotated[float | None, typer.Option(help="mixel spacing [m] [default 0.033, the paper's]")] = None,

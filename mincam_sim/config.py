@@ -24,8 +24,16 @@ from . import masks as masks_mod
 from .errors import ConfigError
 from .geometry import Pose
 from .masks import Mask
-from .optics import DEFAULT_D_F_M, DEFAULT_DETECTOR_SIZE_M, PAPER_SPACING_M, Mincam, Mixel, layout
-from .scene.display import FrameSource
+from .optics import (
+    DEFAULT_D_F_M,
+    DEFAULT_DETECTOR_SIZE_M,
+    PAPER_SPACING_M,
+    Mincam,
+    Mixel,
+    cross_layout,
+    pair_layout,
+)
+from .scene.display import DEFAULT_SCREEN_RESOLUTION, FrameSource
 from .screen import Screen, Sweep, check_visible, diagonal_to_size, grid_sweep, line_sweep
 
 EXAMPLE_TOML = """\
@@ -92,7 +100,8 @@ _SCHEMA: dict[str, dict[str, Any]] = {
         "detector_size_m": DEFAULT_DETECTOR_SIZE_M, "mask_size_m": masks_mod.DEFAULT_MASK_SIZE_M,
         "mask_resolution": masks_mod.DEFAULT_RESOLUTION,
     },
-    "screen": {"diagonal_in": 50.0, "aspect": [16, 9], "resolution": [256, 144], "distance_m": 0.5},
+    "screen": {"diagonal_in": 50.0, "aspect": [16, 9], "resolution": list(DEFAULT_SCREEN_RESOLUTION),
+               "distance_m": 0.5},
     "frames": {
         "kind": "line_sweep", "start_m": [-0.25, 0.0], "end_m": [0.25, 0.0], "n": 26,
         "x_range_m": [-0.2, 0.2], "y_range_m": [-0.2, 0.2], "nx": 9, "ny": 9, "square_m": 0.03,
@@ -345,12 +354,9 @@ def _build_mincam(cfg: dict, mixel_tables: list, base: Path) -> Mincam:
                           "layout = \"custom\"")
     try:
         if kind == "pair":
-            return layout([masks_mod.ramp("x", res, size), masks_mod.ramp("1-x", res, size)],
-                          [(-spacing / 2, 0.0), (spacing / 2, 0.0)], ["x", "1-x"], **common)
+            return pair_layout(spacing, res, size, **common)
         if kind == "cross":
-            return layout([masks_mod.ramp(k, res, size) for k in ("x", "1-x", "y", "1-y")],
-                          [(-spacing, 0.0), (spacing, 0.0), (0.0, spacing), (0.0, -spacing)],
-                          ["x", "1-x", "y", "1-y"], **common)
+            return cross_layout(spacing, res, size, **common)
     except ValueError as err:
         raise ConfigError(f"[mincam]: {err}") from None
     if not mixel_tables:

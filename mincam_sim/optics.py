@@ -15,7 +15,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .geometry import Pose
-from .masks import Mask, constant, ramp
+from .masks import DEFAULT_MASK_SIZE_M, Mask, constant, ramp
 
 DEFAULT_DETECTOR_SIZE_M = 1e-4  # [m] 0.1 mm: the paper's 48x48-pixel region of interest
 DEFAULT_D_F_M = 2e-3  # [m] mask-to-detector distance
@@ -190,26 +190,30 @@ def layout(
     return Mincam(tuple(mixels), allow_overlap=allow_overlap)
 
 
-def pair_layout(spacing_m: float = PAPER_SPACING_M, resolution: int = 256, **kw) -> Mincam:
-    """The paper's 1D intrusion mincam: masks x (left mixel) and 1 - x (right mixel), ``spacing_m`` apart."""
+def pair_layout(spacing_m: float = PAPER_SPACING_M, resolution: int = 256, mask_size_m: float = DEFAULT_MASK_SIZE_M,
+                **kw) -> Mincam:
+    """The paper's 1D intrusion mincam: masks x (left mixel) and 1 - x (right mixel), ``spacing_m`` apart;
+    ``kw`` goes to :func:`layout` (centre pose, d_f_m, detector_size_m)."""
     _check_spacing(spacing_m)
     return layout(
-        [ramp("x", resolution), ramp("1-x", resolution)],
+        [ramp("x", resolution, mask_size_m), ramp("1-x", resolution, mask_size_m)],
         [(-spacing_m / 2, 0.0), (spacing_m / 2, 0.0)],
         names=["x", "1-x"],
         **kw,
     )
 
 
-def cross_layout(spacing_m: float = PAPER_SPACING_M, resolution: int = 256, **kw) -> Mincam:
+def cross_layout(spacing_m: float = PAPER_SPACING_M, resolution: int = 256, mask_size_m: float = DEFAULT_MASK_SIZE_M,
+                 **kw) -> Mincam:
     """The paper's tracking mincam: 4 outer mixels (x, 1 - x, y, 1 - y) around a centre camera.
 
-    The mixels sit ``spacing_m`` from the centre: x on the left, 1 - x on the right, y above, 1 - y below.
+    The mixels sit ``spacing_m`` from the centre: x on the left, 1 - x on the right, y above, 1 - y below;
+    ``kw`` goes to :func:`layout` (centre pose, d_f_m, detector_size_m).
     """
     _check_spacing(spacing_m)
     s = spacing_m
     return layout(
-        [ramp("x", resolution), ramp("1-x", resolution), ramp("y", resolution), ramp("1-y", resolution)],
+        [ramp(k, resolution, mask_size_m) for k in ("x", "1-x", "y", "1-y")],
         [(-s, 0.0), (s, 0.0), (0.0, s), (0.0, -s)],
         names=["x", "1-x", "y", "1-y"],
         **kw,

@@ -10,7 +10,7 @@ from .. import masks
 from ..geometry import Pose
 from ..masks import Mask
 from ..masks.profiles import Band, Ramp
-from ..optics import Mincam, Mixel, layout
+from ..optics import Mincam, Mixel, cross_layout, layout
 from .setup import Setup
 
 
@@ -42,16 +42,8 @@ def intrusion_mincam(setup: Setup, boundary_x_m: float, band_m: float) -> Mincam
 
 def tracking_mincam(setup: Setup) -> Mincam:
     """Four mixels (x, 1 - x, y, 1 - y) ``spacing_m`` from the centre camera (paper Eq. 5, Fig. 2)."""
-    s = setup.spacing_m
-    res, size = setup.mask_resolution, setup.mask_size_m
-    return layout(
-        [masks.ramp(k, res, size) for k in ("x", "1-x", "y", "1-y")],
-        [(-s, 0.0), (s, 0.0), (0.0, s), (0.0, -s)],
-        ["x", "1-x", "y", "1-y"],
-        center=setup.center,
-        d_f_m=setup.d_f_m,
-        detector_size_m=setup.detector_size_m,
-    )
+    return cross_layout(setup.spacing_m, setup.mask_resolution, setup.mask_size_m, center=setup.center,
+                        d_f_m=setup.d_f_m, detector_size_m=setup.detector_size_m)
 
 
 def sinusoid_mixel(setup: Setup, period_m: float, pose: Pose, name: str = "sin") -> Mixel:

@@ -15,7 +15,9 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 
 from ..geometry import Pose
-from ..scene.display import Screen
+from ..masks import DEFAULT_MASK_SIZE_M, DEFAULT_RESOLUTION
+from ..optics import DEFAULT_D_F_M, DEFAULT_DETECTOR_SIZE_M, PAPER_SPACING_M
+from ..scene.display import DEFAULT_SCREEN_RESOLUTION, Screen
 from ..sensor import SensorModel
 
 
@@ -40,15 +42,15 @@ class Setup:
     """
 
     depth_m: float = 0.5
-    spacing_m: float = 0.033
-    d_f_m: float = 2e-3
-    detector_size_m: float = 1e-4
-    mask_size_m: float = 2e-3
-    mask_resolution: int = 256
+    spacing_m: float = PAPER_SPACING_M
+    d_f_m: float = DEFAULT_D_F_M
+    detector_size_m: float = DEFAULT_DETECTOR_SIZE_M
+    mask_size_m: float = DEFAULT_MASK_SIZE_M
+    mask_resolution: int = DEFAULT_RESOLUTION
     field_m: float = 0.5
     bit_depth: int = 12
     exposure_fill: float = 0.7
-    screen_resolution: tuple[int, int] = (256, 144)
+    screen_resolution: tuple[int, int] = DEFAULT_SCREEN_RESOLUTION
     table_light_radiance_w_m2_sr: float = 20.0
     spp: int = 1 << 23  # samples per mixel per frame on the tabletop (quick mode: half)
     camera_px: int = 160
