@@ -18,7 +18,10 @@ import numpy as np
 import typer
 from typer.core import TyperGroup
 
+from .config import EXAMPLE_TOML, load_config, parse_mask
 from .errors import BackendUnavailableError, ConfigError, MincamError
+from .masks import PrintedFilm, export_print_png, generate_library, save_exr
+from .store import lock_out_dir
 
 try:  # typer >= 0.2x vendors click
     from typer._click.exceptions import ClickException
@@ -269,7 +272,6 @@ def render(
                                                                 "output directory")] = False,
 ) -> None:
     """Render the measurements a config describes; write measurements.npz/.csv (+ response maps as EXR)."""
-    from .config import load_config
     from .render_job import config_summary, run_render_config
 
     cfg = load_config(config)
@@ -302,7 +304,6 @@ def render(
 @app.command("config-example")
 def config_example() -> None:
     """Print the documented TOML schema with every default."""
-    from .config import EXAMPLE_TOML
 
     typer.echo(EXAMPLE_TOML)
 
@@ -314,7 +315,6 @@ def masks_generate(
     size_m: Annotated[float, typer.Option(help="mask side [m]")] = 2e-3,
 ) -> None:
     """Write the standard mask library (ramps, constant, sinusoid, circular ramp) as OpenEXR + PNG previews."""
-    from .masks import generate_library
 
     if not 1 <= resolution <= 8192:
         raise ConfigError(f"--resolution must be 1 to 8192 texels per side, got {resolution}")
@@ -338,8 +338,6 @@ def masks_export(
     preview: Annotated[Path | None, typer.Option(help="also write what the film will transmit (OpenEXR)")] = None,
 ) -> None:
     """Export a mask as a print-ready PNG at DPI and physical size; optionally preview the printed film."""
-    from .config import parse_mask
-    from .masks import PrintedFilm, export_print_png, save_exr
 
     if not (np.isfinite(size_m) and size_m > 0):
         raise ConfigError(f"--size-m must be a positive mask side in metres, got {size_m}")
@@ -359,7 +357,6 @@ def masks_export(
 
 
 def _render_demo(out_dir: Path) -> None:
-    from .config import load_config
     from .plots import plot_response_maps, plot_sweep
     from .render_job import run_render_config
 
@@ -425,7 +422,6 @@ def reproduce(
     """Reproduce the paper's experiments in simulation; print the error table beside the paper's."""
     from .experiments import EXPERIMENTS
     from .experiments import reproduce as run
-    from .store import lock_out_dir
 
     if experiment != "all" and experiment not in EXPERIMENTS:
         raise ConfigError(f"unknown experiment {experiment!r}: choose {', '.join(EXPERIMENTS)} or all")
@@ -467,7 +463,6 @@ def study(
 ) -> None:
     """Intrusion error against mixel spacing (0-10 cm) and depth, before/after calibration (serial)."""
     from .experiments import reproduce as run
-    from .store import lock_out_dir
 
     setup, params = _reproduce_config(config, quick)
     check_variant()
@@ -491,7 +486,6 @@ def demo(
     (the paper's three and the spacing study)."""
     from .experiments import EXPERIMENTS, REGISTRY
     from .experiments import reproduce as run
-    from .store import lock_out_dir
 
     check_variant()
     check_out_dir(out_dir)

@@ -74,18 +74,18 @@ def plot_mixel_geometry(mixel, distance_m: float, path: str | Path, n_rays: int 
     xs = np.linspace(-w / 2, w / 2, len(row))
     ax.scatter(xs * mm, np.full_like(xs, d_f * mm), c=row, cmap="gray", vmin=0, vmax=1, marker="s", s=12,
                edgecolors="none", zorder=3)
-    ax.plot([-det / 2 * mm, det / 2 * mm], [0, 0], color="tab:red", lw=5, solid_capstyle="butt", label="detector")
+    ax.plot([-det / 2 * mm, det / 2 * mm], [0, 0], color="tab:red", lw=5, solid_capstyle="butt")
     for xd in (-det / 2, det / 2):
         for xm in np.linspace(-w / 2, w / 2, n_rays):
             ax.plot([xd * mm, xm * mm], [0, d_f * mm], color="tab:orange", lw=0.5, alpha=0.6)
     ax.set_aspect("equal")
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("z [mm]")
-    ax.set_title(f"mixel: detector {det * mm:.2g} mm, mask {w * mm:.2g} mm at d_f = {d_f * mm:.2g} mm")
+    ax.set_title(f"mixel: detector {det * mm:.2g} mm, mask {w * mm:.2g} mm at d_f = {d_f * mm:.2g} mm", fontsize=10)
     ax.annotate("mask (gray = transmission)", (0, d_f * mm), xytext=(0, d_f * mm * 1.25), ha="center", fontsize=8)
-    ax.annotate("black housing", (w / 2 * mm, d_f * mm / 2), xytext=(w / 2 * mm * 1.05, d_f * mm / 2), fontsize=8)
-    ax.set_ylim(-0.1 * d_f * mm, 1.45 * d_f * mm)
-    ax.legend(loc="lower left", fontsize=8)
+    ax.text(w / 2 * mm * 0.93, d_f * mm / 2, "black housing", rotation=90, ha="right", va="center", fontsize=8)
+    ax.text(0, -0.06 * d_f * mm, "detector", color="tab:red", ha="center", va="top", fontsize=8)
+    ax.set_ylim(-0.16 * d_f * mm, 1.45 * d_f * mm)
     cm = 100
     for xd in (-det / 2, 0.0, det / 2):
         for xm in (-w / 2, w / 2):
