@@ -128,8 +128,10 @@ def separable_axis(mask: Mask) -> str | None:
     """``"x"`` or ``"y"`` if the transmission varies along that axis only, ``"xy"`` if constant, else None."""
     p = mask.profile
     if p is not None:
-        return _profile_axis(p)
-    t = mask.transmission
+        axis = _profile_axis(p)
+        if axis is not None or type(p) in _KNOWN_2D:
+            return axis
+    t = mask.transmission  # a raster, or a profile of unknown kind: judged by its texel picture
     if np.ptp(t) == 0:
         return "xy"
     if np.all(t == t[:1, :]):
@@ -137,6 +139,9 @@ def separable_axis(mask: Mask) -> str | None:
     if np.all(t == t[:, :1]):
         return "y"
     return None
+
+
+_KNOWN_2D = (prof.CircularArc,)
 
 
 def _profile_axis(p: prof.MaskProfile) -> str | None:
@@ -189,8 +194,19 @@ def transmission_on_cells(mask: Mask, nx: int, ny: int) -> np.ndarray:
     return np.sqrt(np.clip(t, 0.0, 1.0))
 
 
-def _axis_profile_1d(mask: Mask, axis: str, n: int) -> np.ndarray:
-    """Amplitude of a one-axis mask on ``n`` cells along ``axis`` (the other axis is uniform)."""
+def _axis_profile_1d(mask: Mask, axis: str, n: int, supersample: int = 16) -> np.ndarray:
+    """Amplitude of a one-axis mask on ``n`` cells along ``axis`` (the other axis is uniform).
+
+    A profile's amplitude is averaged over ``supersample`` points per cell, so that a sharp edge inside a
+    cell (a :class:`~mincam_sim.mask_profiles.Band`) lands at its true position to ``dx / (2 supersample)``.
+    """
+    if mask.profile is not None:
+        size = mask.width_m if axis == "x" else mask.height_m
+        c = _cell_centres(n * supersample, size / (n * supersample))
+        zero = np.zeros_like(c)
+        x, y = (c, zero) if axis == "x" else (zero, c)
+        t = np.broadcast_to(np.asarray(mask.profile.evaluate(x, y, prof.NUMPY_OPS), dtype=np.float64), c.shape)
+        return np.sqrt(np.clip(t, 0.0, 1.0)).reshape(n, supersample).mean(axis=1)
     if axis == "x":
         return transmission_on_cells(mask, n, 1)[0] if mask.profile is not None else \
             transmission_on_cells(mask, n, mask.shape[0])[0]
@@ -242,6 +258,7 @@ def choose_sampling(
     max_cells: int,
     feature_m: float | None = None,
     shift_m: float = 0.0,
+    align: int = 1,
 ) -> Sampling:
     """Grid for one axis: fine enough for every direction that reaches the detector, capped at ``max_cells``.
 
@@ -249,7 +266,9 @@ def choose_sampling(
     ``dx <= 1 / (2 (f_reach + |f0|))``; it is also at most ``feature_m / 8`` (printer dot pitch) when given.
     When ``max_cells`` forbids it the grid is coarser and :meth:`Sampling.band_covered` says how much of the
     band it holds (reported by :func:`angular_response` in ``info``). The domain is at least
-    ``aperture + 2 (detector/2 + shift) + 4 %`` so that no kept component wraps onto the detector.
+    ``aperture + 2 (detector/2 + shift) + 4 %`` so that no kept component wraps onto the detector. ``align``:
+    the cells across the aperture are a multiple of it (a raster's texel count, so printer dots start and end
+    on cell edges) whenever the cap allows.
     """
     reach = (aperture_m / 2 + detector_m / 2) / d_f_m
     f_reach = math.sin(math.atan(reach)) / wavelength_m
@@ -259,13 +278,16 @@ def choose_sampling(
         dx_ideal = min(dx_ideal, feature_m / 8.0)
     domain = 1.04 * (aperture_m + detector_m + 2 * abs(shift_m)) + 8 * dx_ideal
     n_ap = max(8, math.ceil(aperture_m / dx_ideal))
+    n_ap = math.ceil(n_ap / align) * align
     n_dom = math.ceil(domain / aperture_m * n_ap)
     if n_dom > max_cells:
         n_ap = max(8, math.floor(max_cells * aperture_m / domain))
+        if n_ap >= align:
+            n_ap = n_ap // align * align
         n_dom = math.ceil(domain / aperture_m * n_ap)
     n_dom = sfft.next_fast_len(n_dom)
-    if (n_dom - n_ap) % 2:
-        n_ap -= 1
+    while (n_dom - n_ap) % 2:
+        n_dom = sfft.next_fast_len(n_dom + 1)
     return Sampling(aperture_m / n_ap, n_ap, n_dom, reach)
 
 
@@ -526,7 +548,8 @@ def _separable(mixel: Mixel, axis: str, tan: np.ndarray, lam: float, max_cells: 
     dxs, cells, cov = [], [], 1.0
     for k, (size, ax) in enumerate(((mask.width_m, "x"), (mask.height_m, "y"))):
         t = tan[:, k]
-        s = choose_sampling(size, det, z, lam, float(np.max(np.abs(t))), max_cells, feature)
+        s = choose_sampling(size, det, z, lam, float(np.max(np.abs(t))), max_cells, feature,
+                            align=_align(mask, k))
         if axis in (ax,):
             amp = _axis_profile_1d(mask, ax, s.n_aperture)
         else:
@@ -544,11 +567,20 @@ def _separable(mixel: Mixel, axis: str, tan: np.ndarray, lam: float, max_cells: 
     return res[0] * res[1], tuple(dxs), tuple(cells), cov
 
 
+def _align(mask: Mask, axis: int) -> int:
+    """Texels across the aperture along ``axis`` (0: x) for a ``"nearest"`` raster (dot edges), else 1."""
+    if mask.profile is None and mask.interpolation == "nearest":
+        return int(mask.shape[1] if axis == 0 else mask.shape[0])
+    return 1
+
+
 def _two_d(mixel: Mixel, tan: np.ndarray, lam: float, max_cells: int, workers: int):
     mask, det, z = mixel.mask, mixel.detector_size_m, mixel.d_f_m
     feature = dot_pitch_m(mask)
-    sx = choose_sampling(mask.width_m, det, z, lam, float(np.max(np.abs(tan[:, 0]))), max_cells, feature)
-    sy = choose_sampling(mask.height_m, det, z, lam, float(np.max(np.abs(tan[:, 1]))), max_cells, feature)
+    sx = choose_sampling(mask.width_m, det, z, lam, float(np.max(np.abs(tan[:, 0]))), max_cells, feature,
+                         align=_align(mask, 0))
+    sy = choose_sampling(mask.height_m, det, z, lam, float(np.max(np.abs(tan[:, 1]))), max_cells, feature,
+                         align=_align(mask, 1))
     amp = transmission_on_cells(mask, sx.n_aperture, sy.n_aperture)
     r = _response_2d(amp, sx, sy, z, det, lam, tan, workers)
     cov = min(s.band_covered(lam, float(v)) for s, col in ((sx, 0), (sy, 1))
