@@ -765,6 +765,26 @@ def talbot_parameter(period_m: float, d_f_m: float, wavelength_m: float = DEFAUL
     return wavelength_m * d_f_m / period_m**2
 
 
+def rim_onset_deg(mixel: Mixel, wavelength_m: float = DEFAULT_WAVELENGTHS_M[0],
+                  tolerance: float = VALIDITY_TOLERANCE, n: int = 801) -> float:
+    """Smallest incidence angle [deg] along x at which the open aperture's wave response differs from the ray
+    model by more than ``tolerance`` (relative): the rim's Fresnel ringing, seen where the rim nears the
+    detector's view. Beyond it, every mask of this aperture is off by about as much."""
+    open_mixel = Mixel(_open_like(mixel.mask), mixel.d_f_m, mixel.detector_size_m)
+    t = np.linspace(0.0, open_mixel.half_fov_tan()[0], n)
+    pts = np.column_stack([t, 0 * t])
+    r = angular_response(open_mixel, pts, (wavelength_m,))
+    g = geometric_response(open_mixel, pts)
+    bad = np.nonzero(np.abs(r - g) > tolerance * np.maximum(g, 1e-12))[0]
+    return float(np.degrees(np.arctan(t[bad[0]]))) if len(bad) else float(np.degrees(np.arctan(t[-1])))
+
+
+def _open_like(mask: Mask) -> Mask:
+    from .masks import constant
+
+    return constant(1.0, 1, mask.width_m, mask.height_m)
+
+
 def validity(
     mixel: Mixel,
     wavelengths_m: Sequence[float] = DEFAULT_WAVELENGTHS_M,
@@ -777,9 +797,9 @@ def validity(
 
     Reports ``u`` for a periodic (sinusoid) mask, the printer dot pitch and its ``u`` for a printed film, and
     the largest relative difference ``|wave - geometric| / max(geometric)`` over ``n_tan`` directions along
-    each axis inside the fully open cone (where the aperture's rim does not cut the detector's view), plus the
-    same near the rim (the field's edge, where the rim's Fresnel ringing lives). Warns (``UserWarning``)
-    when the central difference exceeds ``tolerance``.
+    each axis inside the fully open cone (where the aperture's rim does not cut the detector's view), and
+    :func:`rim_onset_deg`, the angle beyond which the rim's Fresnel ringing exceeds ``tolerance``. Warns
+    (``UserWarning``) when the central difference exceeds ``tolerance``.
     """
     mask, z, det = mixel.mask, mixel.d_f_m, mixel.detector_size_m
     lam = float(np.min(_check_wavelengths(wavelengths_m)))
@@ -803,6 +823,7 @@ def validity(
     scale = max(float(np.max(geo)), 1e-12)
     out["max_rel_diff_central"] = float(np.max(np.abs(wave - geo)) / scale)
     out["central_half_angle_deg"] = float(np.degrees(np.arctan(0.9 * inner)))
+    out["rim_onset_deg"] = rim_onset_deg(mixel, lam, tolerance)
     out["ok"] = out["max_rel_diff_central"] <= tolerance
     if warn and not out["ok"]:
         why = []

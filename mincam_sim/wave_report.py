@@ -98,7 +98,7 @@ def print_deviation(dpi: float, n: int = 13, max_cells: int = 4096, halftone: st
             "dx_m": info.dx_m[0], "tan": t.tolist(), "wave": r.tolist(), "geometric": g.tolist()}
 
 
-def make_wave_figure(path: str | Path, halftone_dpi: float = 600, n_print: int = 41) -> Path:
+def make_wave_figure(path: str | Path, halftone_dpi: float = 600, n_print: int = 31) -> Path:
     """Wave vs geometric response: the default 0.2 mm sinusoid, the rim, and a halftone print (README figure)."""
     from .plots import _save, plt
 
@@ -118,9 +118,12 @@ def make_wave_figure(path: str | Path, halftone_dpi: float = 600, n_print: int =
     rim = rim_profile()
     ax = axes[1]
     d = np.degrees(np.arctan(rim["tan"]))
-    ok = rim["geometric"] > 0.02
+    ok = rim["geometric"] > 0.1
     ax.plot(d[ok], 100 * (rim["wave"][ok] / rim["geometric"][ok] - 1), color="C3", lw=1)
-    ax.axvline(math.degrees(math.atan(0.45)), color="0.7", ls=":")
+    inner = (mixel.mask.width_m / 2 - mixel.detector_size_m / 2) / mixel.d_f_m
+    ax.axvline(math.degrees(math.atan(inner)), color="0.6", ls=":", label="rim enters the detector's view")
+    ax.set_ylim(-30, 15)
+    ax.legend(loc="lower left", fontsize=8)
     ax.set_title("open aperture: (wave - geometric) / geometric")
     ax.set_xlabel("incidence angle θx [deg]")
     ax.set_ylabel("[%]")
@@ -155,6 +158,7 @@ def report() -> dict:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    print(json.dumps(report(), indent=1))
     if len(sys.argv) > 1:
         print(make_wave_figure(sys.argv[1]))
+    else:
+        print(json.dumps(report(), indent=1))

@@ -184,6 +184,7 @@ def test_spectral_weighting():
 def test_validity_warns_when_geometric_optics_is_off():
     ok = wave.validity(Mixel(masks.sinusoid(2 * np.pi / 0.2e-3)), warn=False)
     assert ok["ok"] and ok["u"] == pytest.approx(0.0275)
+    assert 20 < ok["rim_onset_deg"] < 25  # the rim enters the view at atan(0.475) = 25.4 deg
     with pytest.warns(UserWarning, match="optics"):
         bad = wave.validity(Mixel(masks.sinusoid(2 * np.pi / 0.08e-3), detector_size_m=0.05e-3))
     assert not bad["ok"] and bad["u"] > 0.1
