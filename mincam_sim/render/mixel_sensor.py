@@ -15,8 +15,8 @@ ray. The mask is applied as a weight, not as a surface, so no ray is wasted on t
 Masks with an analytic profile are evaluated exactly (:mod:`.mask_eval`); a mixel with ``optics = "wave"``
 weighs each ray by its wave response for the ray's direction instead of ``T`` (:class:`.mask_eval.RayWeight`).
 Rays start on the mask plane (a hair's breadth beyond it, :data:`START_OFFSET_M`, so that they never meet
-the body they leave); the other
-mixels' bodies are part of the scene (:func:`.scene_dicts.mincam_body_shapes`) and shadow what they hide.
+the body they leave); the other mixels' bodies are part of the scene (:func:`.scene_dicts.mincam_body_shapes`)
+and shadow what they hide.
 """
 
 from __future__ import annotations
