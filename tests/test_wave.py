@@ -190,6 +190,19 @@ def test_validity_warns_when_geometric_optics_is_off():
     assert not bad["ok"] and bad["u"] > 0.1
 
 
+def test_quick_check_flags_fine_periods_and_printed_dots():
+    assert wave.quick_check(Mixel(masks.sinusoid(2 * np.pi / 0.2e-3))) == []
+    assert wave.quick_check(Mixel(masks.ramp("x"))) == []
+    with pytest.warns(UserWarning, match="u = "):
+        assert len(wave.quick_check(Mixel(masks.sinusoid(2 * np.pi / 0.08e-3)))) == 1
+    printed = masks.PrintedFilm(dpi=600, halftone="ordered").print(masks.ramp("x"))
+    with pytest.warns(UserWarning, match="printed dots"):
+        assert len(wave.quick_check(Mixel(printed))) == 1
+    assert wave.quick_check(Mixel(printed, optics="wave")) == []
+    coarse = masks.PrintedFilm(dpi=100).print(masks.ramp("x"))  # 254 um dots: u = 0.017
+    assert wave.quick_check(Mixel(coarse)) == []
+
+
 def test_table_matches_direct_response_between_its_nodes():
     """The render table (1D factors on wavelength levels, bilinear between grid points) against direct solves."""
     mixel = Mixel(masks.sinusoid(2 * np.pi / 0.1e-3), detector_size_m=0.05e-3)
@@ -300,7 +313,8 @@ def test_rendered_wave_measurement_matches_quadrature_of_the_response():
     expected_geo = _quadrature(cam_geo[0], screen, frame, table.geometric, table.tan_x, table.tan_y)
     assert 0 <= spill < 1e-3 * expected_wave
     m_wave = response_maps(cam_wave, screen, samples_per_texel=64, seed=3).measure(frame)
-    m_geo = response_maps(cam_geo, screen, samples_per_texel=64, seed=3).measure(frame)
+    with pytest.warns(UserWarning, match="rendered with geometric optics"):  # u = 0.11: the quick check flags it
+        m_geo = response_maps(cam_geo, screen, samples_per_texel=64, seed=3).measure(frame)
     sigma = m_wave.stderr_w_m2[0, 0]
     assert abs(expected_wave - expected_geo) > 10 * sigma, "wave and geometric must be distinguishable here"
     assert_close_mc(m_wave.irradiance_w_m2[0, 0], expected_wave, sigma, what="wave response map")

@@ -132,6 +132,9 @@ class RayWeight:
             self._uy = (float(ty[0]), float(ty[-1]), len(ty))
             self._mask = None
         else:
+            from ..wave import quick_check
+
+            quick_check(mixel)  # warns when diffraction likely puts the ray model > 1 % off
             self._mask = MaskEvaluator(mixel.mask)
 
     def __call__(self, x_m, y_m, tan_x, tan_y, active=True):

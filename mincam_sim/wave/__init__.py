@@ -55,7 +55,7 @@ from .spectrum import (
     spectral_weights,
 )
 from .table import ResponseTable, response_table
-from .validity import VALIDITY_TOLERANCE, rim_onset_deg, talbot_parameter, validity
+from .validity import U_ONE_PERCENT, VALIDITY_TOLERANCE, quick_check, rim_onset_deg, talbot_parameter, validity
 
 __all__ = [
     "BAND_MARGIN",
@@ -67,6 +67,7 @@ __all__ = [
     "SI_COLLECTION_DEPTH_M",
     "SI_DEAD_LAYER_M",
     "SI_SURFACE_LOSS",
+    "U_ONE_PERCENT",
     "Sampling",
     "VALIDITY_TOLERANCE",
     "WaveInfo",
@@ -76,6 +77,7 @@ __all__ = [
     "dot_pitch_m",
     "geometric_response",
     "open_fraction",
+    "quick_check",
     "response_table",
     "rim_onset_deg",
     "separable_axis",
