@@ -352,3 +352,12 @@ def test_config_selects_wave_optics():
     custom = load_config('[mincam]\nlayout = "custom"\n[[mixel]]\nmask = "ramp:x"\noptics = "wave"\n'
                          '[[mixel]]\nmask = "ramp:y"\nposition_m = [0.05, 0.0, 0.0]\n')
     assert [m.optics for m in custom.mincam] == ["wave", "geometric"]
+
+
+def test_optics_enters_run_identities_only_when_not_default():
+    from mincam_sim.identity import canonical, fingerprint
+
+    geo = Mixel(masks.ramp("x"))
+    assert "optics" not in canonical(geo) and "wavelengths_m" not in canonical(geo)  # older stores stay valid
+    assert fingerprint(geo.with_optics("wave")) != fingerprint(geo)
+    assert fingerprint(geo.with_optics("wave", (500e-9,))) != fingerprint(geo.with_optics("wave"))
