@@ -504,14 +504,18 @@ def demo(
 @app.command()
 def figures(
     out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("scenes/figures"),
+    wave_figure: Annotated[bool, typer.Option("--wave", help="also the wave-vs-geometric optics figure "
+                                                             "(2-3 minutes of CPU)")] = False,
 ) -> None:
-    """Write the README's figures (mixel geometry, masks, response maps)."""
-    from .figures import make_figures
+    """Write the README's figures (mixel geometry, masks, response maps; --wave: wave optics)."""
+    from .figures import make_figures, make_wave_figure
 
     check_variant()
     check_out_dir(out_dir)
     for path in make_figures(out_dir):
         typer.echo(str(path))
+    if wave_figure:
+        typer.echo(str(make_wave_figure(out_dir / "wave_vs_geometric.png")))
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -57,6 +57,8 @@ d_f_m = 0.002              # mask-to-detector distance
 detector_size_m = 0.0001   # side of the square detector (paper: 48x48 pixels ~ 0.1 mm)
 mask_size_m = 0.002        # side of the square mask (aperture)
 mask_resolution = 256      # texels per side of generated masks
+optics = "geometric"       # "geometric" (rays) or "wave" (each mixel's scalar-wave angular response, see README)
+wavelengths_m = [550e-9]   # wavelengths of the wave response, weighted by a silicon QE curve ("wave" only)
 
 # For layout = "custom", one table per mixel:
 # [[mixel]]
@@ -65,6 +67,7 @@ mask_resolution = 256      # texels per side of generated masks
 #                          # file), or a table:
 #                          # {kind = "sinusoid", omega_rad_per_m = 15708.0, a0 = 0.5, a1 = 0.5, phase_rad = 0.0,
 #                          #  direction_deg = 0.0}
+# optics = "wave"          # optional: overrides [mincam] optics for this mixel
 # position_m = [-0.0165, 0.0, 0.0]
 # forward = [0.0, 0.0, -1.0]
 # up = [0.0, 1.0, 0.0]
@@ -98,7 +101,7 @@ _SCHEMA: dict[str, dict[str, Any]] = {
     "mincam": {
         "layout": "pair", "spacing_m": PAPER_SPACING_M, "d_f_m": DEFAULT_D_F_M,
         "detector_size_m": DEFAULT_DETECTOR_SIZE_M, "mask_size_m": masks_mod.DEFAULT_MASK_SIZE_M,
-        "mask_resolution": masks_mod.DEFAULT_RESOLUTION,
+        "mask_resolution": masks_mod.DEFAULT_RESOLUTION, "optics": "geometric", "wavelengths_m": [550e-9],
     },
     "screen": {"diagonal_in": 50.0, "aspect": [16, 9], "resolution": list(DEFAULT_SCREEN_RESOLUTION),
                "distance_m": 0.5},
@@ -109,10 +112,11 @@ _SCHEMA: dict[str, dict[str, Any]] = {
     },
 }
 _MIXEL_KEYS = {"name": None, "mask": None, "position_m": [0.0, 0.0, 0.0], "forward": [0.0, 0.0, -1.0],
-               "up": [0.0, 1.0, 0.0], "d_f_m": None, "detector_size_m": None}
+               "up": [0.0, 1.0, 0.0], "d_f_m": None, "detector_size_m": None, "optics": None}
 _SINUSOID_KEYS = {"omega_rad_per_m": None, "a0": 0.5, "a1": 0.5, "phase_rad": 0.0, "direction_deg": 0.0}
 MAX_FRAMES = 10_000_000  # frames stream through the renderer; this bounds run time and the result files
 _FORMS = ("response_map", "fast", "reference")
+_OPTICS = ("geometric", "wave")
 _LAYOUTS = ("pair", "cross", "custom")
 _FRAME_KINDS = ("line_sweep", "grid_sweep", "npy")
 _VARIANTS = ("", "cuda_ad_mono", "llvm_ad_mono", "scalar_rgb")
@@ -348,10 +352,32 @@ def _build_mincam(cfg: dict, mixel_tables: list, base: Path) -> Mincam:
     size = _number("mincam", "mask_size_m", m["mask_size_m"], positive=True)
     res = _integer("mincam", "mask_resolution", m["mask_resolution"], maximum=MAX_MASK_RESOLUTION)
     kind = _choice("mincam", "layout", m["layout"], _LAYOUTS)
+    optics = _choice("mincam", "optics", m["optics"], _OPTICS)
+    wavelengths = _wavelengths(m["wavelengths_m"])
     common = {"d_f_m": d_f, "detector_size_m": det}
     if kind != "custom" and mixel_tables:
         raise ConfigError("[[mixel]] tables are only used with [mincam] layout = \"custom\"; remove them or set "
                           "layout = \"custom\"")
+    mincam = _build_layout(kind, spacing, res, size, common, mixel_tables, base, optics, wavelengths)
+    if kind == "custom":
+        return mincam
+    mixels = tuple(mx.with_optics(optics, wavelengths) for mx in mincam)
+    return Mincam(mixels, allow_overlap=mincam.allow_overlap)
+
+
+def _wavelengths(value: Any) -> tuple[float, ...]:
+    where = "[mincam] wavelengths_m"
+    if not isinstance(value, list) or not value or not all(_is_number(v) for v in value):
+        raise ConfigError(f"{where} must be a non-empty list of wavelengths in metres like [550e-9], got "
+                          f"{_describe(value)}")
+    if not all(np.isfinite(v) and 400e-9 <= v <= 1100e-9 for v in value):
+        raise ConfigError(f"{where} = {value!r}: give wavelengths in metres between 400e-9 and 1100e-9 "
+                          "(550e-9 for 550 nm; the silicon QE curve spans 400-1100 nm)")
+    return tuple(float(v) for v in value)
+
+
+def _build_layout(kind, spacing, res, size, common, mixel_tables, base, optics, wavelengths) -> Mincam:
+    d_f, det = common["d_f_m"], common["detector_size_m"]
     try:
         if kind == "pair":
             return pair_layout(spacing, res, size, **common)
@@ -382,8 +408,10 @@ def _build_mincam(cfg: dict, mixel_tables: list, base: Path) -> Mincam:
         mixel_d_f = d_f if t["d_f_m"] is None else _number(where, "d_f_m", t["d_f_m"], positive=True)
         mixel_det = det if t["detector_size_m"] is None else _number(where, "detector_size_m",
                                                                       t["detector_size_m"], positive=True)
+        mixel_optics = optics if t["optics"] is None else _choice(where, "optics", t["optics"], _OPTICS)
         try:
-            mixels.append(Mixel(mask, mixel_d_f, mixel_det, Pose(position, forward, up), name))
+            mixels.append(Mixel(mask, mixel_d_f, mixel_det, Pose(position, forward, up), name, mixel_optics,
+                                wavelengths))
         except ValueError as err:
             raise ConfigError(f"{where}: {err}") from None
     try:
@@ -561,6 +589,11 @@ def load_config(source: str | Path | dict, base_dir: str | Path | None = None) -
     for i, table in enumerate(tables):
         _table(f"[[mixel]] #{i + 1}", table)
     mincam = _build_mincam(sections["mincam"], tables, base)
+    wave = [mx.name for mx in mincam if mx.optics == "wave"]
+    if wave and form == "reference":
+        raise ConfigError(f"[run] form = \"reference\" is the literal geometric-optics scene, but mixel(s) {wave} "
+                          "have optics = \"wave\": use form = \"fast\" or \"response_map\", or optics = "
+                          "\"geometric\"")
     screen = _build_screen(sections["screen"])
     try:
         check_visible(screen, mincam)

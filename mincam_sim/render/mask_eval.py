@@ -11,12 +11,18 @@ Conventions (the only place they are coded):
 Masks with a profile are evaluated exactly at every ray; raster masks (files, printed films, polyline ramps)
 through a Mitsuba ``bitmap`` with the mask's own interpolation (bilinear between texel centres, or nearest for
 printer dots). :func:`mask_model_meta` records which, for every output.
+
+:class:`RayWeight` is the one hook the fast forms use: a ray through the mask is weighted by ``T(x_m)``
+(``optics = "geometric"``) or, for a mixel with ``optics = "wave"``, by its tabulated wave response for the
+ray's direction divided by the open-aperture fraction (:meth:`mincam_sim.wave.ResponseTable.directional_weight`),
+which averaged over the detector gives back the wave response.
 """
 
 from __future__ import annotations
 
 from ..masks import Mask
 from ..masks.profiles import MaskProfile
+from ..optics import Mixel
 from . import backend
 from .textures import bitmap_dict
 
@@ -87,6 +93,74 @@ class MaskEvaluator:
         return dr.select(inside, value, 0.0)
 
 
+_TABLES: dict[str, object] = {}
+
+
+def wave_table(mixel: Mixel):
+    """The mixel's :class:`mincam_sim.wave.ResponseTable`, computed once per process and mixel content."""
+    from ..identity import fingerprint
+    from ..wave import response_table
+
+    key = fingerprint({"mask": mixel.mask, "d_f_m": mixel.d_f_m, "detector_size_m": mixel.detector_size_m,
+                       "wavelengths_m": list(mixel.wavelengths_m)})
+    if key not in _TABLES:
+        _TABLES[key] = response_table(mixel, mixel.wavelengths_m)
+    return _TABLES[key]
+
+
+class RayWeight:
+    """A ray's mask weight for one mixel: ``T(x_m)`` (geometric) or the wave response for its direction.
+
+    ``__call__(x_m, y_m, tan_x, tan_y, active)`` takes the mask point [m] and the direction tangents in physical
+    mask coordinates (+x right, +y up): ``tan_x = -d_local.x / d_local.z``, ``tan_y = d_local.y / d_local.z``.
+    Outside the aperture the weight is 0 either way.
+    """
+
+    def __init__(self, mixel: Mixel) -> None:
+        self.mixel = mixel
+        self.optics = mixel.optics
+        self.mi = backend.mitsuba()
+        if self.optics == "wave":
+            table = wave_table(mixel)
+            self._table = table
+            weight = table.directional_weight()
+            self._texture = self.mi.load_dict(bitmap_dict(weight, filter_type="bilinear"))
+            tx, ty = table.tan_x, table.tan_y
+            self._ux = (float(tx[0]), float(tx[-1]), len(tx))
+            self._uy = (float(ty[0]), float(ty[-1]), len(ty))
+            self._mask = None
+        else:
+            from ..wave import quick_check
+
+            quick_check(mixel)  # warns when diffraction likely puts the ray model > 1 % off
+            self._mask = MaskEvaluator(mixel.mask)
+
+    def __call__(self, x_m, y_m, tan_x, tan_y, active=True):
+        import drjit as dr
+
+        if self._mask is not None:
+            return self._mask(x_m, y_m, active)
+        mi = self.mi
+        inside = inside_aperture(x_m, y_m, self.mixel.mask) & active
+        (x0, x1, nx), (y0, y1, ny) = self._ux, self._uy
+        u = (tan_x - x0) / (x1 - x0) * ((nx - 1) / nx) + 0.5 / nx
+        v = (tan_y - y0) / (y1 - y0) * ((ny - 1) / ny) + 0.5 / ny
+        si = dr.zeros(mi.SurfaceInteraction3f)
+        si.uv = mi.Point2f(u, v)
+        value = self._texture.eval_1(si, inside)
+        return dr.select(inside, value, 0.0)
+
+
+def optics_meta(mixel: Mixel) -> dict:
+    """How the renderer weighs this mixel's rays (for outputs' metadata)."""
+    if mixel.optics == "geometric":
+        return {"optics": "geometric"}
+    table = wave_table(mixel)
+    return {"optics": "wave", "wavelengths_m": list(mixel.wavelengths_m),
+            "table": {k: v for k, v in table.meta.items() if k in ("n_tan", "method", "qe", "weights",
+                                                                    "band_covered_min")}}
+
+
 def mask_model_meta(mask: Mask) -> dict:
     """How the renderer reads this mask, and the discretisation error that adds (0 for analytic masks)."""
     if mask.profile is not None:
@@ -152,6 +226,9 @@ def opacity_texture(mask: Mask):
 __all__ = [
     "MaskEvaluator",
     "MaskProfile",
+    "RayWeight",
+    "optics_meta",
+    "wave_table",
     "inside_aperture",
     "local_to_mask_xy",
     "mask_model_meta",
