@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY      = $(VENV)/bin/python
 STAMP   = $(VENV)/.installed
 
-.PHONY: setup demo test test-all bench lint bad-inputs clean
+.PHONY: setup demo test test-all bench lint bad-inputs crosscheck clean
 
 setup: $(STAMP)
 
@@ -13,7 +13,7 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[dev]'
-	$(PY) -m mincam_sim.render.backend --check
+	$(PY) -m mincam_sim.render.check
 	@touch $(STAMP)
 
 demo: setup
@@ -35,5 +35,11 @@ lint: setup
 bad-inputs: setup
 	$(PY) tests/test_cli_errors.py
 
+# The wave-optics cross-check against diffractio, in its own environment (diffractio pins numpy < 2).
+crosscheck:
+	$(PYTHON) -m venv .venv-crosscheck
+	.venv-crosscheck/bin/python -m pip install --quiet -e '.[crosscheck]'
+	.venv-crosscheck/bin/python -m pytest -q tests/test_wave.py -k diffractio
+
 clean:
-	rm -rf $(VENV) out build *.egg-info
+	rm -rf $(VENV) .venv-crosscheck out build *.egg-info

@@ -7,8 +7,8 @@ Every user error (config, option, file, output location, a backend this machine 
 
 from __future__ import annotations
 
-import inspect
 import os
+import re
 import sys
 import traceback
 from pathlib import Path
@@ -18,7 +18,10 @@ import numpy as np
 import typer
 from typer.core import TyperGroup
 
+from .config import EXAMPLE_TOML, load_config, parse_mask
 from .errors import BackendUnavailableError, ConfigError, MincamError
+from .masks import PrintedFilm, export_print_png, generate_library, save_exr
+from .store import lock_out_dir
 
 try:  # typer >= 0.2x vendors click
     from typer._click.exceptions import ClickException
@@ -259,147 +262,6 @@ def check_out_file(path: Path, what: str = "output file") -> Path:
 # ------------------------------------------------------------------------------------------------- render
 
 
-def config_identity(cfg: Any, variant: str | None = None) -> dict:
-    """Everything a config's numbers depend on, as content fingerprints (what ``identity.json`` records).
-
-    Parameters
-    ----------
-    cfg : RenderConfig
-        The validated config.
-    variant : str, optional
-        The Mitsuba variant that renders (None: recorded as "automatic").
-
-    Returns
-    -------
-    dict
-        form, seed, the requested budget (only the counts the form uses), fingerprints of the mincam, each mask,
-        the screen and the frames (of the sweep recipe, or of the frame array for ``npy``), mixel names, the
-        variant and the library versions.
-    """
-    from .identity import fingerprint, frames_fingerprint, library_versions
-
-    run = cfg.run
-    budget: dict[str, Any] = {"target_rel_stderr": run.target_rel_stderr}
-    if run.form == "response_map":
-        if run.target_rel_stderr == 0:
-            budget["samples_per_texel"] = run.samples_per_texel
-    else:
-        budget["replicates"] = run.replicates
-        if run.target_rel_stderr == 0:
-            budget["spp"] = run.spp
-    if cfg.frame_positions_m is not None:
-        frames = cfg.raw["frames"]
-        recipe = {k: frames[k] for k in ("square_m", "radiance_w_m2_sr", "background_w_m2_sr")}
-        frames_fp = fingerprint({"kind": cfg.frames_kind, "positions_m": np.asarray(cfg.frame_positions_m),
-                                 "shape": list(cfg.frames.shape), **recipe})
-    else:
-        frames_fp = frames_fingerprint(iter(cfg.frames))
-    return {"form": run.form, "seed": run.seed, "budget": budget, "mincam": fingerprint(cfg.mincam),
-            "mixels": cfg.mincam.names, "masks": [fingerprint(m.mask) for m in cfg.mincam],
-            "screen": fingerprint(cfg.screen), "frames": frames_fp, "variant": variant or "automatic",
-            "versions": library_versions()}
-
-
-def _finished_results(out: Path, key: str, n_frames: int) -> Any:
-    """The measurements a finished run with identity ``key`` wrote to ``out``, or None."""
-    from .measurements import Measurements
-
-    path = out / "measurements.npz"
-    if not path.is_file():
-        return None
-    try:
-        m = Measurements.load_npz(path)
-    except Exception:  # torn or foreign: render again (the file is replaced atomically at the end)
-        return None
-    if m.meta.get("identity_key") != key or m.n_frames != n_frames:
-        return None
-    return m
-
-
-def run_render_config(
-    cfg: Any, show_progress: bool = False, overwrite: bool = False, reuse: bool = False
-) -> tuple[Any, Any]:
-    """Render a validated :class:`~mincam_sim.config.RenderConfig`; write outputs; return (measurements, maps).
-
-    The output directory is locked while this runs. ``identity.json`` there records the content fingerprints
-    of everything the numbers depend on (:func:`config_identity`); a rerun with different content is refused
-    (StaleResultError naming what changed) unless ``overwrite``, which first removes the previous run's store
-    and maps. With ``reuse``, a finished run with the same identity is not rendered again: its
-    ``measurements.npz`` is returned (and maps as None).
-    """
-    from .atomic import atomic_path
-    from .identity import run_key
-    from .render import backend
-    from .render.screen_engine import render_frames
-    from .store import check_identity, clear_store, lock_out_dir
-
-    out = Path(cfg.run.out_dir)
-    run_dir = out / "run"
-    identity = config_identity(cfg, backend.variant())  # the variant in use: CUDA and LLVM differ in the last bits
-    key = run_key(identity)
-    with lock_out_dir(out):
-        if overwrite:
-            clear_store(run_dir, extra=("response_maps.npz",))
-        same = check_identity(out, identity, overwrite=overwrite)
-        if same and reuse:
-            done = _finished_results(out, key, len(cfg.frames))
-            if done is not None:
-                _say(f"mincam-sim: {out} holds the finished results of this same run; shown again (--overwrite "
-                     "renders anew)")
-                return done, None
-        extra: dict[str, Any] = {}
-        if "overwrite" in inspect.signature(render_frames).parameters:
-            extra["overwrite"] = overwrite
-        m, maps = render_frames(
-            cfg.mincam, cfg.screen, cfg.frames, cfg.run.form, cfg.run.spp, cfg.run.samples_per_texel,
-            cfg.run.target_rel_stderr, cfg.run.seed, cfg.run.replicates, out_dir=run_dir,
-            show_progress=show_progress, **extra,
-        )
-        m.meta["config"] = cfg.raw
-        m.meta["identity_key"] = key
-        if cfg.frame_positions_m is not None:
-            m.meta["frame_positions_m"] = cfg.frame_positions_m.tolist()
-        if maps is not None:
-            maps.save_exr(out / "response_maps")
-        with atomic_path(out / "measurements.csv") as tmp:
-            m.save_csv(tmp)
-        with atomic_path(out / "measurements.npz") as tmp:  # last: it marks the run finished
-            m.save_npz(tmp)
-    return m, maps
-
-
-def _summary_lines(cfg: Any, variant: str | None) -> list[str]:
-    run, screen = cfg.run, cfg.screen
-    lines = [f"config: {cfg.source or 'text'} is valid"]
-    for mixel in cfg.mincam:
-        p = ", ".join(f"{v:+.4f}" for v in mixel.pose.position_m)
-        mask = mixel.mask
-        lines.append(f"mixel {mixel.name}: mask {mask.name} ({mask.shape[1]}x{mask.shape[0]} texels, "
-                     f"{1e3 * mask.width_m:g} x {1e3 * mask.height_m:g} mm) at d_f {1e3 * mixel.d_f_m:g} mm, "
-                     f"detector {1e3 * mixel.detector_size_m:g} mm, position [{p}] m")
-    lines.append(f"screen: {screen.width_m:.4f} x {screen.height_m:.4f} m, {screen.resolution[0]} x "
-                 f"{screen.resolution[1]} texels, {-screen.pose.position_m[2]:g} m from the mincam")
-    f = cfg.frames
-    lo = min(float(x.min()) for x in f)
-    hi = max(float(x.max()) for x in f)
-    lines.append(f"frames: {len(f)} ({cfg.frames_kind}), {f.shape[2]} x {f.shape[1]} texels, radiance "
-                 f"{lo:g} .. {hi:g} W m^-2 sr^-1, {len(f) * f.nbytes_per_frame / 2**20:.1f} MiB if held at once "
-                 "(streamed in chunks)")
-    if run.form == "response_map":
-        budget = (f"target relative stderr {run.target_rel_stderr:g}" if run.target_rel_stderr > 0
-                  else f"{run.samples_per_texel} samples per texel")
-    else:
-        budget = (f"target relative stderr {run.target_rel_stderr:g}" if run.target_rel_stderr > 0
-                  else f"{run.spp} samples per mixel per frame") + f", {run.replicates} replicates"
-    lines.append(f"form: {run.form}, {budget}, seed {run.seed}, variant {variant or 'automatic'}")
-    out = Path(run.out_dir)
-    state = "exists" if out.is_dir() else "will be created"
-    if (out / "identity.json").exists() or (out / "run" / "run.json").exists():
-        state += ", holds an earlier run (resumed if unchanged, refused if different unless --overwrite)"
-    lines.append(f"out dir: {out} ({state})")
-    return lines
-
-
 @app.command()
 def render(
     config: Annotated[Path, typer.Argument(help="TOML configuration (see `mincam-sim config-example`)")],
@@ -410,7 +272,7 @@ def render(
                                                                 "output directory")] = False,
 ) -> None:
     """Render the measurements a config describes; write measurements.npz/.csv (+ response maps as EXR)."""
-    from .config import load_config
+    from .render_job import config_summary, run_render_config
 
     cfg = load_config(config)
     if out_dir is not None:
@@ -422,12 +284,12 @@ def render(
                           "cuda_ad_mono); scalar_rgb renders only form = \"reference\"")
     if check:
         check_out_dir(cfg.run.out_dir, create=False)
-        for line in _summary_lines(cfg, variant):
+        for line in config_summary(cfg, variant):
             typer.echo(line)
         return
     check_out_dir(cfg.run.out_dir)
     _announce_variant()
-    m, _ = run_render_config(cfg, show_progress=_show_progress(), overwrite=overwrite, reuse=True)
+    m, _ = run_render_config(cfg, show_progress=_show_progress(), overwrite=overwrite, reuse=True, say=_say)
     np.set_printoptions(precision=6, suppress=False, linewidth=120)
     typer.echo(f"# {m.n_frames} frames x {len(m.mixel_names)} mixels, irradiance [W/m^2] +/- stderr, "
                f"variant {m.meta.get('variant')}, worst relative stderr {m.meta['reached_rel_stderr']:.2e}")
@@ -442,7 +304,6 @@ def render(
 @app.command("config-example")
 def config_example() -> None:
     """Print the documented TOML schema with every default."""
-    from .config import EXAMPLE_TOML
 
     typer.echo(EXAMPLE_TOML)
 
@@ -454,7 +315,6 @@ def masks_generate(
     size_m: Annotated[float, typer.Option(help="mask side [m]")] = 2e-3,
 ) -> None:
     """Write the standard mask library (ramps, constant, sinusoid, circular ramp) as OpenEXR + PNG previews."""
-    from .masks import generate_library
 
     if not 1 <= resolution <= 8192:
         raise ConfigError(f"--resolution must be 1 to 8192 texels per side, got {resolution}")
@@ -478,8 +338,6 @@ def masks_export(
     preview: Annotated[Path | None, typer.Option(help="also write what the film will transmit (OpenEXR)")] = None,
 ) -> None:
     """Export a mask as a print-ready PNG at DPI and physical size; optionally preview the printed film."""
-    from .config import parse_mask
-    from .masks import PrintedFilm, export_print_png, save_exr
 
     if not (np.isfinite(size_m) and size_m > 0):
         raise ConfigError(f"--size-m must be a positive mask side in metres, got {size_m}")
@@ -499,8 +357,8 @@ def masks_export(
 
 
 def _render_demo(out_dir: Path) -> None:
-    from .config import load_config
     from .plots import plot_response_maps, plot_sweep
+    from .render_job import run_render_config
 
     cfg = load_config({"run": {"out_dir": str(out_dir), "target_rel_stderr": 1e-3}})
     # The demo is a fixed job: it starts afresh in its own output directory every time.
@@ -513,8 +371,10 @@ def _render_demo(out_dir: Path) -> None:
 
 
 def _print_table(results: dict) -> None:
+    from .experiments import EXPERIMENTS
+
     typer.echo("experiment   simulated max / avg error [%]   paper max / avg error [%]   n")
-    for name in ("intrusion", "tracking", "speed"):
+    for name in EXPERIMENTS:
         if name in results:
             r = results[name]
             p = r["paper"]
@@ -526,46 +386,53 @@ def _print_table(results: dict) -> None:
                    f"{'-':>8} / {'-':<8}        {v['n']}")
 
 
-def _setup(**kw: Any) -> Any:
-    from .experiments import Setup
+def _reproduce_config(config: Path | None, quick: bool, **flags: Any) -> tuple[Any, dict]:
+    """Set-up and parameters from an optional reproduce config, then the command-line flags given."""
+    from .experiments import load_reproduce_config
 
+    given = {key: value for key, value in flags.items() if value is not None}
     for key in ("spacing_m", "depth_m"):
-        if key in kw and not np.isfinite(kw[key]):
-            raise ConfigError(f"--{key.replace('_', '-')} must be a finite number of metres, got {kw[key]}")
-    if "bit_depth" in kw and not 1 <= kw["bit_depth"] <= 32:
-        raise ConfigError(f"--bit-depth must be 1 to 32 bits, got {kw['bit_depth']}")
-    if kw.get("seed", 0) < 0:
-        raise ConfigError(f"--seed must be an integer >= 0, got {kw['seed']}")
+        if key in given and not np.isfinite(given[key]):
+            raise ConfigError(f"--{key.replace('_', '-')} must be a finite number of metres, got {given[key]}")
+    if given.get("seed", 0) < 0:
+        raise ConfigError(f"--seed must be an integer >= 0, got {given['seed']}")
     try:
-        return Setup(**kw)
-    except ValueError as err:
-        raise ConfigError(str(err).replace("Setup.", "--").replace("_", "-")) from None
+        return load_reproduce_config(config, quick=quick, **given)
+    except ConfigError as err:
+        text = str(err)
+        if not text.startswith("[command line]"):
+            raise
+        flag = re.sub(r"Setup\.(\w+)", lambda m: "--" + m.group(1).replace("_", "-"), text)
+        raise ConfigError(flag.replace("[command line]: ", "")) from None
 
 
 @app.command()
 def reproduce(
     experiment: Annotated[str, typer.Argument(help="intrusion, tracking, speed or all")] = "all",
     out_dir: Annotated[Path, typer.Option("--out", help="output folder (results.json + plots)")] = Path("out/repro"),
+    config: Annotated[Path | None, typer.Option(
+        "--config", help="reproduce TOML: [setup] and one section per experiment (scenes/experiments/reproduce.toml)"
+    )] = None,
     quick: Annotated[bool, typer.Option("--quick", help="fewer frames and samples (minutes)")] = False,
-    seed: Annotated[int, typer.Option(help="seed of every random choice")] = 0,
-    spacing_m: Annotated[float, typer.Option(help="mixel spacing [m] (paper: 0.033)")] = 0.033,
-    depth_m: Annotated[float, typer.Option(help="mincam to table/screen distance [m]")] = 0.5,
-    bit_depth: Annotated[int, typer.Option(help="ADC bits (paper: 12)")] = 12,
+    seed: Annotated[int | None, typer.Option(help="seed of every random choice [default 0]")] = None,
+    spacing_m: Annotated[float | None, typer.Option(help="mixel spacing [m] [default 0.033, the paper's]")] = None,
+    depth_m: Annotated[float | None, typer.Option(help="mincam to table/screen distance [m] [default 0.5]")] = None,
+    bit_depth: Annotated[int | None, typer.Option(help="ADC bits [default 12, the paper's]")] = None,
 ) -> None:
     """Reproduce the paper's experiments in simulation; print the error table beside the paper's."""
     from .experiments import EXPERIMENTS
     from .experiments import reproduce as run
-    from .store import lock_out_dir
 
     if experiment != "all" and experiment not in EXPERIMENTS:
         raise ConfigError(f"unknown experiment {experiment!r}: choose {', '.join(EXPERIMENTS)} or all")
     names = list(EXPERIMENTS) if experiment == "all" else [experiment]
-    setup = _setup(quick=quick, seed=seed, spacing_m=spacing_m, depth_m=depth_m, bit_depth=bit_depth)
+    setup, params = _reproduce_config(config, quick, seed=seed, spacing_m=spacing_m, depth_m=depth_m,
+                                      bit_depth=bit_depth)
     check_variant()
     check_out_dir(out_dir)
     _announce_variant()
     with lock_out_dir(out_dir):
-        results = run(names, setup, out_dir, show_progress=_show_progress())
+        results = run(names, setup, out_dir, show_progress=_show_progress(), params=params)
     _print_table(results)
     typer.echo(f"# results.json and plots in {out_dir}")
 
@@ -592,16 +459,17 @@ def study_run(
 def study(
     out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out/study"),
     quick: Annotated[bool, typer.Option("--quick", help="fewer spacings and depths")] = False,
+    config: Annotated[Path | None, typer.Option("--config", help="reproduce TOML ([setup], [spacing])")] = None,
 ) -> None:
     """Intrusion error against mixel spacing (0-10 cm) and depth, before/after calibration (serial)."""
-    from .experiments import spacing as spacing_study
-    from .store import lock_out_dir
+    from .experiments import reproduce as run
 
+    setup, params = _reproduce_config(config, quick)
     check_variant()
     check_out_dir(out_dir)
     _announce_variant()
     with lock_out_dir(out_dir):
-        result = spacing_study.run(_setup(quick=quick), out_dir, show_progress=_show_progress())
+        result = run(["spacing"], setup, out_dir, show_progress=_show_progress(), params=params)["spacing"]
     typer.echo("spacing [cm]  " + "  ".join(f"{100 * s:6.1f}" for s in result["spacing_m"]))
     for depth, rows in result["by_depth"].items():
         typer.echo(f"d={depth} m avg error before [%] " + " ".join(f"{v:6.2f}" for v in rows["avg_before_pct"]))
@@ -614,21 +482,22 @@ def demo(
     out_dir: Annotated[Path, typer.Option("--out", help="output directory")] = Path("out/demo"),
 ) -> None:
     """Built-in default job: a 2-mixel (x | 1-x) mincam 0.5 m from a 50" screen with a white square swept along
-    the boundary (measurements, response maps as EXR, plots), then `reproduce all --quick` and the spacing study."""
-    from .experiments import EXPERIMENTS
+    the boundary (measurements, response maps as EXR, plots), then every registered experiment in quick mode
+    (the paper's three and the spacing study)."""
+    from .experiments import EXPERIMENTS, REGISTRY
     from .experiments import reproduce as run
-    from .experiments import spacing as spacing_study
-    from .store import lock_out_dir
 
     check_variant()
     check_out_dir(out_dir)
     _announce_variant()
     _render_demo(out_dir / "render")
+    setup, params = _reproduce_config(None, quick=True)
     with lock_out_dir(out_dir / "repro"):
-        results = run(list(EXPERIMENTS), _setup(quick=True), out_dir / "repro", show_progress=_show_progress())
+        results = run(list(EXPERIMENTS), setup, out_dir / "repro", show_progress=_show_progress(), params=params)
     _print_table(results)
+    studies = [name for name in REGISTRY if name not in EXPERIMENTS]
     with lock_out_dir(out_dir / "study"):
-        spacing_study.run(_setup(quick=True), out_dir / "study", show_progress=_show_progress())
+        run(studies, setup, out_dir / "study", show_progress=_show_progress(), params=params)
     typer.echo(f"demo: wrote {out_dir}/render, {out_dir}/repro (results.json, plots), {out_dir}/study")
 
 
@@ -669,14 +538,18 @@ def design(
 @app.command()
 def figures(
     out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("scenes/figures"),
+    wave_figure: Annotated[bool, typer.Option("--wave", help="also the wave-vs-geometric optics figure "
+                                                             "(2-3 minutes of CPU)")] = False,
 ) -> None:
-    """Write the README's figures (mixel geometry, masks, response maps)."""
-    from .figures import make_figures
+    """Write the README's figures (mixel geometry, masks, response maps; --wave: wave optics)."""
+    from .figures import make_figures, make_wave_figure
 
     check_variant()
     check_out_dir(out_dir)
     for path in make_figures(out_dir):
         typer.echo(str(path))
+    if wave_figure:
+        typer.echo(str(make_wave_figure(out_dir / "wave_vs_geometric.png")))
 
 
 def main(argv: list[str] | None = None) -> None:

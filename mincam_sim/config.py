@@ -11,6 +11,7 @@ and ``file:`` masks) resolve against the config file's directory.
 
 from __future__ import annotations
 
+import dataclasses
 import tomllib
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -23,8 +24,16 @@ from . import masks as masks_mod
 from .errors import ConfigError
 from .geometry import Pose
 from .masks import Mask
-from .optics import DEFAULT_D_F_M, DEFAULT_DETECTOR_SIZE_M, PAPER_SPACING_M, Mincam, Mixel, layout
-from .scene.display import FrameSource
+from .optics import (
+    DEFAULT_D_F_M,
+    DEFAULT_DETECTOR_SIZE_M,
+    PAPER_SPACING_M,
+    Mincam,
+    Mixel,
+    cross_layout,
+    pair_layout,
+)
+from .scene.display import DEFAULT_SCREEN_RESOLUTION, FrameSource
 from .screen import Screen, Sweep, check_visible, diagonal_to_size, grid_sweep, line_sweep
 
 EXAMPLE_TOML = """\
@@ -48,6 +57,8 @@ d_f_m = 0.002              # mask-to-detector distance
 detector_size_m = 0.0001   # side of the square detector (paper: 48x48 pixels ~ 0.1 mm)
 mask_size_m = 0.002        # side of the square mask (aperture)
 mask_resolution = 256      # texels per side of generated masks
+optics = "geometric"       # "geometric" (rays) or "wave" (each mixel's scalar-wave angular response, see README)
+wavelengths_m = [550e-9]   # wavelengths of the wave response, weighted by a silicon QE curve ("wave" only)
 
 # For layout = "custom", one table per mixel:
 # [[mixel]]
@@ -56,6 +67,7 @@ mask_resolution = 256      # texels per side of generated masks
 #                          # file), or a table:
 #                          # {kind = "sinusoid", omega_rad_per_m = 15708.0, a0 = 0.5, a1 = 0.5, phase_rad = 0.0,
 #                          #  direction_deg = 0.0}
+# optics = "wave"          # optional: overrides [mincam] optics for this mixel
 # position_m = [-0.0165, 0.0, 0.0]
 # forward = [0.0, 0.0, -1.0]
 # up = [0.0, 1.0, 0.0]
@@ -89,9 +101,10 @@ _SCHEMA: dict[str, dict[str, Any]] = {
     "mincam": {
         "layout": "pair", "spacing_m": PAPER_SPACING_M, "d_f_m": DEFAULT_D_F_M,
         "detector_size_m": DEFAULT_DETECTOR_SIZE_M, "mask_size_m": masks_mod.DEFAULT_MASK_SIZE_M,
-        "mask_resolution": masks_mod.DEFAULT_RESOLUTION,
+        "mask_resolution": masks_mod.DEFAULT_RESOLUTION, "optics": "geometric", "wavelengths_m": [550e-9],
     },
-    "screen": {"diagonal_in": 50.0, "aspect": [16, 9], "resolution": [256, 144], "distance_m": 0.5},
+    "screen": {"diagonal_in": 50.0, "aspect": [16, 9], "resolution": list(DEFAULT_SCREEN_RESOLUTION),
+               "distance_m": 0.5},
     "frames": {
         "kind": "line_sweep", "start_m": [-0.25, 0.0], "end_m": [0.25, 0.0], "n": 26,
         "x_range_m": [-0.2, 0.2], "y_range_m": [-0.2, 0.2], "nx": 9, "ny": 9, "square_m": 0.03,
@@ -99,10 +112,11 @@ _SCHEMA: dict[str, dict[str, Any]] = {
     },
 }
 _MIXEL_KEYS = {"name": None, "mask": None, "position_m": [0.0, 0.0, 0.0], "forward": [0.0, 0.0, -1.0],
-               "up": [0.0, 1.0, 0.0], "d_f_m": None, "detector_size_m": None}
+               "up": [0.0, 1.0, 0.0], "d_f_m": None, "detector_size_m": None, "optics": None}
 _SINUSOID_KEYS = {"omega_rad_per_m": None, "a0": 0.5, "a1": 0.5, "phase_rad": 0.0, "direction_deg": 0.0}
 MAX_FRAMES = 10_000_000  # frames stream through the renderer; this bounds run time and the result files
 _FORMS = ("response_map", "fast", "reference")
+_OPTICS = ("geometric", "wave")
 _LAYOUTS = ("pair", "cross", "custom")
 _FRAME_KINDS = ("line_sweep", "grid_sweep", "npy")
 _VARIANTS = ("", "cuda_ad_mono", "llvm_ad_mono", "scalar_rgb")
@@ -338,18 +352,37 @@ def _build_mincam(cfg: dict, mixel_tables: list, base: Path) -> Mincam:
     size = _number("mincam", "mask_size_m", m["mask_size_m"], positive=True)
     res = _integer("mincam", "mask_resolution", m["mask_resolution"], maximum=MAX_MASK_RESOLUTION)
     kind = _choice("mincam", "layout", m["layout"], _LAYOUTS)
+    optics = _choice("mincam", "optics", m["optics"], _OPTICS)
+    wavelengths = _wavelengths(m["wavelengths_m"])
     common = {"d_f_m": d_f, "detector_size_m": det}
     if kind != "custom" and mixel_tables:
         raise ConfigError("[[mixel]] tables are only used with [mincam] layout = \"custom\"; remove them or set "
                           "layout = \"custom\"")
+    mincam = _build_layout(kind, spacing, res, size, common, mixel_tables, base, optics, wavelengths)
+    if kind == "custom":
+        return mincam
+    mixels = tuple(mx.with_optics(optics, wavelengths) for mx in mincam)
+    return Mincam(mixels, allow_overlap=mincam.allow_overlap)
+
+
+def _wavelengths(value: Any) -> tuple[float, ...]:
+    where = "[mincam] wavelengths_m"
+    if not isinstance(value, list) or not value or not all(_is_number(v) for v in value):
+        raise ConfigError(f"{where} must be a non-empty list of wavelengths in metres like [550e-9], got "
+                          f"{_describe(value)}")
+    if not all(np.isfinite(v) and 400e-9 <= v <= 1100e-9 for v in value):
+        raise ConfigError(f"{where} = {value!r}: give wavelengths in metres between 400e-9 and 1100e-9 "
+                          "(550e-9 for 550 nm; the silicon QE curve spans 400-1100 nm)")
+    return tuple(float(v) for v in value)
+
+
+def _build_layout(kind, spacing, res, size, common, mixel_tables, base, optics, wavelengths) -> Mincam:
+    d_f, det = common["d_f_m"], common["detector_size_m"]
     try:
         if kind == "pair":
-            return layout([masks_mod.ramp("x", res, size), masks_mod.ramp("1-x", res, size)],
-                          [(-spacing / 2, 0.0), (spacing / 2, 0.0)], ["x", "1-x"], **common)
+            return pair_layout(spacing, res, size, **common)
         if kind == "cross":
-            return layout([masks_mod.ramp(k, res, size) for k in ("x", "1-x", "y", "1-y")],
-                          [(-spacing, 0.0), (spacing, 0.0), (0.0, spacing), (0.0, -spacing)],
-                          ["x", "1-x", "y", "1-y"], **common)
+            return cross_layout(spacing, res, size, **common)
     except ValueError as err:
         raise ConfigError(f"[mincam]: {err}") from None
     if not mixel_tables:
@@ -375,8 +408,10 @@ def _build_mincam(cfg: dict, mixel_tables: list, base: Path) -> Mincam:
         mixel_d_f = d_f if t["d_f_m"] is None else _number(where, "d_f_m", t["d_f_m"], positive=True)
         mixel_det = det if t["detector_size_m"] is None else _number(where, "detector_size_m",
                                                                       t["detector_size_m"], positive=True)
+        mixel_optics = optics if t["optics"] is None else _choice(where, "optics", t["optics"], _OPTICS)
         try:
-            mixels.append(Mixel(mask, mixel_d_f, mixel_det, Pose(position, forward, up), name))
+            mixels.append(Mixel(mask, mixel_d_f, mixel_det, Pose(position, forward, up), name, mixel_optics,
+                                wavelengths))
         except ValueError as err:
             raise ConfigError(f"{where}: {err}") from None
     try:
@@ -554,6 +589,11 @@ def load_config(source: str | Path | dict, base_dir: str | Path | None = None) -
     for i, table in enumerate(tables):
         _table(f"[[mixel]] #{i + 1}", table)
     mincam = _build_mincam(sections["mincam"], tables, base)
+    wave = [mx.name for mx in mincam if mx.optics == "wave"]
+    if wave and form == "reference":
+        raise ConfigError(f"[run] form = \"reference\" is the literal geometric-optics scene, but mixel(s) {wave} "
+                          "have optics = \"wave\": use form = \"fast\" or \"response_map\", or optics = "
+                          "\"geometric\"")
     screen = _build_screen(sections["screen"])
     try:
         check_visible(screen, mincam)
@@ -563,3 +603,59 @@ def load_config(source: str | Path | dict, base_dir: str | Path | None = None) -
     run_cfg = RunConfig(form, spp, samples_per_texel, target, replicates, seed, variant or None, out_dir)
     return RenderConfig(run_cfg, mincam, screen, frames, positions, {**sections, "mixel": tables}, path,
                         sections["frames"]["kind"])
+
+
+# ------------------------------------------------------------------------------------ dataclass sections
+def read_sections(source: str | Path | dict, allowed: Sequence[str]) -> dict[str, dict]:
+    """A TOML document (file path, text or dict) whose top level holds only the tables ``allowed``.
+
+    Raises
+    ------
+    ConfigError
+        Unreadable or invalid TOML, a section that is not a table, or an unknown section (the message lists
+        the allowed ones).
+    """
+    raw, _, _ = _read_source(source, None)
+    unknown = sorted(set(raw) - set(allowed))
+    if unknown:
+        raise ConfigError(f"unknown section(s) {', '.join(f'[{u}]' for u in unknown)}; allowed sections are "
+                          f"{', '.join(f'[{a}]' for a in allowed)}")
+    return {name: _table(f"[{name}]", table) for name, table in raw.items()}
+
+
+def _typed_value(section: str, key: str, value: Any, default: Any) -> Any:
+    """``value`` checked against the type of ``default`` (bool, int, float, str, or a tuple of them)."""
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise ConfigError(f"{_where(section, key)} must be true or false, got {_describe(value)}")
+        return value
+    if isinstance(default, int):
+        return _integer(section, key, value, minimum=0)
+    if isinstance(default, float):
+        return _number(section, key, value)
+    if isinstance(default, str):
+        return _string(section, key, value)
+    if isinstance(default, tuple):
+        if not isinstance(value, list | tuple) or len(value) == 0:
+            raise ConfigError(f"{_where(section, key)} must be a non-empty list like {list(default)}, got "
+                              f"{_describe(value)}")
+        item = default[0] if default else 0.0
+        return tuple(_typed_value(section, f"{key}[{i}]", v, item) for i, v in enumerate(value))
+    raise ConfigError(f"{_where(section, key)} cannot be set from a config file")
+
+
+def dataclass_from_section(section: str, table: Any, defaults: Any) -> Any:
+    """A copy of the dataclass instance ``defaults`` with the keys of a TOML ``[section]`` table applied.
+
+    Every key must be a field of the dataclass and have the type of its default (integers stay integers,
+    numbers carry no units or quotes); the dataclass's own ``__post_init__`` then checks ranges, and its
+    ``ValueError`` comes back as a :class:`ConfigError` naming the section.
+    """
+    current = {f.name: getattr(defaults, f.name) for f in dataclasses.fields(defaults) if f.init}
+    given = _table(f"[{section}]", table)
+    _check_keys(section, given, current)
+    values = {key: _typed_value(section, key, value, current[key]) for key, value in given.items()}
+    try:
+        return dataclasses.replace(defaults, **values)
+    except ValueError as err:
+        raise ConfigError(f"[{section}]: {err}") from None

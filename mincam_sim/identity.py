@@ -6,7 +6,9 @@ sample budget, seed, form, library versions. :func:`fingerprint` hashes any such
 * numpy arrays by dtype, shape and bytes (C order);
 * ``dict`` / ``list`` / ``tuple`` / ``set`` / scalars / ``str`` / ``Path`` through a canonical JSON form
   (sorted keys; ``2`` and ``2.0`` hash alike, ``True`` and ``1`` do not);
-* dataclasses field by field (``Pose``, ``Mixel``, ``Mincam``, ``Screen``, ``Mask`` ...), recursively;
+* dataclasses field by field (``Pose``, ``Mixel``, ``Mincam``, ``Screen``, ``Mask`` ...), recursively; a field
+  whose metadata sets :data:`OMIT_DEFAULT` is left out while it holds its default (fields added later then
+  keep older identities valid);
 * any object with a ``fingerprint_parts()`` method, through what that method returns.
 
 :class:`StreamingHash` hashes frames chunk by chunk as they stream (the digest does not depend on how the
@@ -26,6 +28,8 @@ from pathlib import PurePath
 from typing import Any
 
 import numpy as np
+
+from .masks import Mask
 
 #: Default length of a fingerprint [hex characters] (128 bits).
 FINGERPRINT_CHARS = 32
@@ -56,6 +60,9 @@ def _number(value: float) -> Any:
     if math.isinf(value):
         return "Infinity" if value > 0 else "-Infinity"
     return float(value)
+
+
+OMIT_DEFAULT = "identity_omit_default"  # dataclass field metadata: leave the field out while it has its default
 
 
 def canonical(obj: Any) -> Any:
@@ -106,7 +113,8 @@ def canonical(obj: Any) -> Any:
                 "width_m": canonical(obj.width_m), "height_m": canonical(obj.height_m), "name": obj.name,
                 "meta": canonical(meta)}
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        fields = {f.name: canonical(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+        fields = {f.name: canonical(getattr(obj, f.name)) for f in dataclasses.fields(obj)
+                  if not (f.metadata.get(OMIT_DEFAULT) and getattr(obj, f.name) == f.default)}
         return {"__type__": type(obj).__name__, **fields}
     if isinstance(obj, Mapping):
         out = {}
@@ -127,8 +135,6 @@ def canonical(obj: Any) -> Any:
 
 
 def _is_mask(obj: Any) -> bool:
-    from .masks import Mask
-
     return isinstance(obj, Mask)
 
 

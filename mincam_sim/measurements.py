@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .atomic import atomic_open, atomic_save_npz
+
 
 @dataclass
 class Measurements:
@@ -57,8 +59,6 @@ class Measurements:
 
     def save_npz(self, path: str | Path) -> Path:
         """Write arrays + JSON metadata to an ``.npz`` file."""
-        from .atomic import atomic_save_npz
-
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         atomic_save_npz(
@@ -82,8 +82,6 @@ class Measurements:
 
     def save_csv(self, path: str | Path) -> Path:
         """Write one row per frame: frame, <mixel>_w_m2, <mixel>_stderr_w_m2 ...; metadata in a ``#`` header."""
-        from .atomic import atomic_open
-
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_open(path, "w") as fh:

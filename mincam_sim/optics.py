@@ -15,7 +15,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .geometry import Pose
-from .masks import Mask, constant, ramp
+from .masks import DEFAULT_MASK_SIZE_M, Mask, constant, ramp
 
 DEFAULT_DETECTOR_SIZE_M = 1e-4  # [m] 0.1 mm: the paper's 48x48-pixel region of interest
 DEFAULT_D_F_M = 2e-3  # [m] mask-to-detector distance
@@ -38,6 +38,12 @@ class Mixel:
         Detector centre and orientation; local +z looks at the scene, local +y is up.
     name : str
         Label used in outputs.
+    optics : {"geometric", "wave"}
+        How the renderer weighs each ray: ``"geometric"`` (default) by the mask's transmission where the ray
+        crosses it; ``"wave"`` by the mixel's scalar-wave angular response for the ray's direction
+        (:mod:`mincam_sim.wave`: diffraction by the mask and the aperture rim over ``d_f``).
+    wavelengths_m : tuple of float
+        Wavelengths [m] of the wave response, weighted by a silicon QE curve (``optics = "wave"`` only).
     """
 
     mask: Mask
@@ -45,6 +51,9 @@ class Mixel:
     detector_size_m: float = DEFAULT_DETECTOR_SIZE_M
     pose: Pose = field(default_factory=Pose)
     name: str = "mixel"
+    # added with the wave optics: left out of run identities while at their defaults (older stores stay valid)
+    optics: str = field(default="geometric", metadata={"identity_omit_default": True})
+    wavelengths_m: tuple[float, ...] = field(default=(550e-9,), metadata={"identity_omit_default": True})
 
     def __post_init__(self) -> None:
         if not isinstance(self.mask, Mask):
@@ -57,6 +66,13 @@ class Mixel:
             raise ValueError(
                 f"mixel {self.name!r}: detector_size_m must be a positive size in metres, got {self.detector_size_m!r}"
             )
+        if self.optics not in ("geometric", "wave"):
+            raise ValueError(f"mixel {self.name!r}: optics must be 'geometric' or 'wave', got {self.optics!r}")
+        lam = tuple(float(v) for v in np.atleast_1d(np.asarray(self.wavelengths_m, dtype=float)))
+        if not lam or not all(np.isfinite(v) and 0 < v < 1e-4 for v in lam):
+            raise ValueError(f"mixel {self.name!r}: wavelengths_m must be positive wavelengths in metres "
+                             f"(550e-9 for 550 nm), got {self.wavelengths_m!r}")
+        object.__setattr__(self, "wavelengths_m", lam)
         if self.detector_size_m > min(self.mask.width_m, self.mask.height_m):
             raise ValueError(
                 f"mixel {self.name!r}: detector ({self.detector_size_m} m) is larger than its mask aperture "
@@ -73,6 +89,11 @@ class Mixel:
 
     def with_mask(self, mask: Mask) -> Mixel:
         return replace(self, mask=mask)
+
+    def with_optics(self, optics: str, wavelengths_m: Sequence[float] | None = None) -> Mixel:
+        """The same mixel rendered with ``optics`` ("geometric" or "wave") at ``wavelengths_m`` [m]."""
+        lam = self.wavelengths_m if wavelengths_m is None else tuple(wavelengths_m)
+        return replace(self, optics=optics, wavelengths_m=lam)
 
     def body_corners_m(self) -> np.ndarray:
         """World coordinates (8, 3) [m] of the mixel's body: the box from the detector plane to the mask."""
@@ -190,26 +211,30 @@ def layout(
     return Mincam(tuple(mixels), allow_overlap=allow_overlap)
 
 
-def pair_layout(spacing_m: float = PAPER_SPACING_M, resolution: int = 256, **kw) -> Mincam:
-    """The paper's 1D intrusion mincam: masks x (left mixel) and 1 - x (right mixel), ``spacing_m`` apart."""
+def pair_layout(spacing_m: float = PAPER_SPACING_M, resolution: int = 256, mask_size_m: float = DEFAULT_MASK_SIZE_M,
+                **kw) -> Mincam:
+    """The paper's 1D intrusion mincam: masks x (left mixel) and 1 - x (right mixel), ``spacing_m`` apart;
+    ``kw`` goes to :func:`layout` (centre pose, d_f_m, detector_size_m)."""
     _check_spacing(spacing_m)
     return layout(
-        [ramp("x", resolution), ramp("1-x", resolution)],
+        [ramp("x", resolution, mask_size_m), ramp("1-x", resolution, mask_size_m)],
         [(-spacing_m / 2, 0.0), (spacing_m / 2, 0.0)],
         names=["x", "1-x"],
         **kw,
     )
 
 
-def cross_layout(spacing_m: float = PAPER_SPACING_M, resolution: int = 256, **kw) -> Mincam:
+def cross_layout(spacing_m: float = PAPER_SPACING_M, resolution: int = 256, mask_size_m: float = DEFAULT_MASK_SIZE_M,
+                 **kw) -> Mincam:
     """The paper's tracking mincam: 4 outer mixels (x, 1 - x, y, 1 - y) around a centre camera.
 
-    The mixels sit ``spacing_m`` from the centre: x on the left, 1 - x on the right, y above, 1 - y below.
+    The mixels sit ``spacing_m`` from the centre: x on the left, 1 - x on the right, y above, 1 - y below;
+    ``kw`` goes to :func:`layout` (centre pose, d_f_m, detector_size_m).
     """
     _check_spacing(spacing_m)
     s = spacing_m
     return layout(
-        [ramp("x", resolution), ramp("1-x", resolution), ramp("y", resolution), ramp("1-y", resolution)],
+        [ramp(k, resolution, mask_size_m) for k in ("x", "1-x", "y", "1-y")],
         [(-s, 0.0), (s, 0.0), (0.0, s), (0.0, -s)],
         names=["x", "1-x", "y", "1-y"],
         **kw,

@@ -1,4 +1,7 @@
-"""Matplotlib figures (Agg backend: no display needed). Pure numpy + matplotlib."""
+"""Matplotlib figures (Agg backend: no display needed). Pure numpy + matplotlib.
+
+Every figure uses matplotlib's constrained layout (labels never overlap), and every colourbar names its
+quantity and unit."""
 
 from __future__ import annotations
 
@@ -10,6 +13,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+plt.rcParams["figure.constrained_layout.use"] = True
+
+from .masks import Mask  # noqa: E402
 from .measurements import Measurements  # noqa: E402
 from .screen import Screen  # noqa: E402
 
@@ -48,7 +54,7 @@ def plot_response_maps(maps, screen: Screen, path: str | Path):
         ax.set_title(f"mixel {maps.mixel_names[k]}: W [sr]")
         ax.set_xlabel("screen x [cm]")
         ax.set_ylabel("screen y [cm]")
-    fig.colorbar(im, ax=axes[0].tolist(), shrink=0.8)
+    fig.colorbar(im, ax=axes[0].tolist(), shrink=0.8, label="response W [sr] per texel")
     return _save(fig, path)
 
 
@@ -68,18 +74,18 @@ def plot_mixel_geometry(mixel, distance_m: float, path: str | Path, n_rays: int 
     xs = np.linspace(-w / 2, w / 2, len(row))
     ax.scatter(xs * mm, np.full_like(xs, d_f * mm), c=row, cmap="gray", vmin=0, vmax=1, marker="s", s=12,
                edgecolors="none", zorder=3)
-    ax.plot([-det / 2 * mm, det / 2 * mm], [0, 0], color="tab:red", lw=5, solid_capstyle="butt", label="detector")
+    ax.plot([-det / 2 * mm, det / 2 * mm], [0, 0], color="tab:red", lw=5, solid_capstyle="butt")
     for xd in (-det / 2, det / 2):
         for xm in np.linspace(-w / 2, w / 2, n_rays):
             ax.plot([xd * mm, xm * mm], [0, d_f * mm], color="tab:orange", lw=0.5, alpha=0.6)
     ax.set_aspect("equal")
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("z [mm]")
-    ax.set_title(f"mixel: detector {det * mm:.2g} mm, mask {w * mm:.2g} mm at d_f = {d_f * mm:.2g} mm")
+    ax.set_title(f"mixel: detector {det * mm:.2g} mm, mask {w * mm:.2g} mm at d_f = {d_f * mm:.2g} mm", fontsize=10)
     ax.annotate("mask (gray = transmission)", (0, d_f * mm), xytext=(0, d_f * mm * 1.25), ha="center", fontsize=8)
-    ax.annotate("black housing", (w / 2 * mm, d_f * mm / 2), xytext=(w / 2 * mm * 1.05, d_f * mm / 2), fontsize=8)
-    ax.set_ylim(-0.1 * d_f * mm, 1.45 * d_f * mm)
-    ax.legend(loc="lower left", fontsize=8)
+    ax.text(w / 2 * mm * 0.93, d_f * mm / 2, "black housing", rotation=90, ha="right", va="center", fontsize=8)
+    ax.text(0, -0.06 * d_f * mm, "detector", color="tab:red", ha="center", va="top", fontsize=8)
+    ax.set_ylim(-0.16 * d_f * mm, 1.45 * d_f * mm)
     cm = 100
     for xd in (-det / 2, 0.0, det / 2):
         for xm in (-w / 2, w / 2):
@@ -135,20 +141,25 @@ def plot_calibration_2d(true_m, observed, calibration, path):
     return _save(fig, path)
 
 
-def plot_overlays(images, points, setup, path, boundary_x_m=None, title=""):
+def plot_overlays(images, points, half_extent_m: float, path, frame_numbers=None, boundary_x_m=None, title="",
+                  field_m: float | None = None):
     """Ground-truth camera frames with the mincam's prediction (red dot) and the ground-truth centroid (cyan +),
-    like the paper's Fig. 5/7. ``points[i] = (predicted (2,), truth (2,))`` in table metres."""
-    from .experiments.common import camera_fov_deg
-
+    like the paper's Fig. 5/7. ``points[i] = (predicted (2,), truth (2,))`` in table metres; ``half_extent_m``
+    is half the side of the table area each image covers. Each panel names its frame and the position error
+    (cm, and % of ``field_m`` when given)."""
     n = max(1, len(images))
-    fig, axes = plt.subplots(1, n, figsize=(3.6 * n, 3.6), squeeze=False)
-    half = setup.depth_m * np.tan(np.radians(camera_fov_deg(setup)) / 2) * 100
-    for ax, image, (pred, truth) in zip(axes[0], images, points, strict=False):
+    fig, axes = plt.subplots(1, n, figsize=(3.6 * n, 3.9), squeeze=False)
+    half = 100 * half_extent_m
+    numbers = list(frame_numbers) if frame_numbers is not None else list(range(len(images)))
+    for ax, image, (pred, truth), number in zip(axes[0], images, points, numbers, strict=False):
         ax.imshow(image, cmap="gray", extent=[-half, half, -half, half])
         if boundary_x_m is not None:
             ax.axvline(100 * boundary_x_m, color="lime", lw=1)
         ax.plot(100 * truth[0], 100 * truth[1], "c+", ms=12, mew=2, label="ground truth")
         ax.plot(100 * pred[0], 100 * pred[1], "o", color="red", ms=6, label="mincam")
+        error_cm = 100 * float(np.hypot(*(np.asarray(pred) - np.asarray(truth))))
+        share = f" ({error_cm / field_m:.1f} %)" if field_m else ""
+        ax.set_title(f"frame {int(number)}: error {error_cm:.1f} cm{share}", fontsize=9)
         ax.set_xlabel("x [cm]")
         ax.set_ylabel("y [cm]")
     if len(images):
@@ -216,3 +227,41 @@ def plot_spacing(study: dict, path):
     axes[0].legend(fontsize=7)
     fig.suptitle(f"1D intrusion: calibration at {study['calibration_depth_m']} m")
     return _save(fig, path)
+
+
+def plot_mask(mask: Mask, ax=None, cmap: str = "gray", colorbar: bool = True, title: str | None = None):
+    """Show a mask with physical axes in millimetres and a transmission colourbar.
+
+    Parameters
+    ----------
+    mask : Mask
+        Mask to draw (row 0 at the top, +y up, as seen from the detector).
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw into; by default a new Agg-safe ``matplotlib.figure.Figure`` (no pyplot state) is made,
+        reachable as ``ax.figure``.
+    cmap : str
+        Colormap; transmission 0 to 1 maps to its full range.
+    colorbar : bool
+        Add a colourbar labelled "transmission".
+    title : str, optional
+        Axes title; defaults to the mask name.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+    """
+    if ax is None:
+        from matplotlib.figure import Figure
+
+        ax = Figure(figsize=(4.2, 3.5), layout="constrained").subplots()
+    wmm, hmm = mask.width_m * 1e3, mask.height_m * 1e3
+    im = ax.imshow(
+        mask.transmission, cmap=cmap, vmin=0.0, vmax=1.0, origin="upper", interpolation="nearest",
+        extent=(-wmm / 2, wmm / 2, -hmm / 2, hmm / 2),
+    )
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("y [mm]")
+    ax.set_title(mask.name if title is None else title)
+    if colorbar:
+        ax.figure.colorbar(im, ax=ax, label="transmission")
+    return ax

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import ConvexHull
 
-from .mask_profiles import NUMPY_OPS
+from .masks.profiles import NUMPY_OPS
 from .optics import Mixel
 from .screen import Screen
 

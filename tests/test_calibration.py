@@ -16,9 +16,8 @@ from mincam_sim.calibration import (
     Calibration2D,
     ExtrapolationWarning,
     bivariate_exponents,
-    error_rates,
-    speed_error_rates,
 )
+from mincam_sim.metrics import error_rates, speed_error_rates
 
 coefficient = st.floats(min_value=-1.0, max_value=1.0, allow_nan=False)
 

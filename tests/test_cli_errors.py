@@ -238,7 +238,7 @@ CASES: list[Case] = [
          keywords=("values.npy",)),
 ]
 
-_PROGRESS = re.compile(r"(\d+%\||it/s\]|\d+it \[|s/it\])")
+_PROGRESS = re.compile(r"(\d+%\||/s\]|s/\w+\]|\d+\w* \[\d+:\d+)")  # any tqdm bar: "42%|", "it/s]", "3chunk [00:01"
 
 
 def _prepare(case: Case, tmp: Path) -> None:

@@ -228,3 +228,25 @@ def test_cli_refuses_an_out_dir_another_process_writes(tmp_path):
         holder.kill()
         holder.wait()
         holder.stdout.close()
+
+
+def test_shipped_reproduce_config_loads_and_bad_ones_name_the_field(tmp_path):
+    from mincam_sim.errors import ConfigError
+    from mincam_sim.experiments import REGISTRY, load_reproduce_config
+
+    setup, params = load_reproduce_config(ROOT / "scenes" / "experiments" / "reproduce.toml")
+    assert setup.spacing_m == 0.033 and set(params) == set(REGISTRY)
+    assert params["tracking"].frames_per_toy == 24
+    quick_setup, quick = load_reproduce_config(None, quick=True)
+    assert quick_setup.quick and quick["tracking"].frames_per_toy < params["tracking"].frames_per_toy
+    _, custom = load_reproduce_config({"tracking": {"frames_per_toy": 300}}, quick=True)
+    assert custom["tracking"].frames_per_toy == 300  # a section applies after the quick defaults
+    for doc, words in [({"setup": {"spacing_m": "3cm"}}, ("[setup] spacing_m", "number")),
+                       ({"tracking": {"frames_per_toy": 2.5}}, ("[tracking] frames_per_toy", "integer")),
+                       ({"intrusion": {"band_m": -1.0}}, ("[intrusion]", "band_m")),
+                       ({"speed": {"bogus": 1}}, ("[speed]", "bogus", "allowed keys")),
+                       ({"setp": {}}, ("[setp]", "allowed sections")),
+                       ({"tracking": {"toys": "robot"}}, ("[tracking] toys", "list"))]:
+        with pytest.raises(ConfigError) as err:
+            load_reproduce_config(doc)
+        assert all(w in str(err.value) for w in words), (doc, str(err.value))

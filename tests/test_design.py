@@ -184,8 +184,8 @@ def test_cli_design_tracking_quick(tmp_path):
     from PIL import Image
     from typer.testing import CliRunner
 
-    from mincam_sim.calibration import error_rates
     from mincam_sim.cli import app
+    from mincam_sim.metrics import error_rates
 
     out = tmp_path / "design"
     r = CliRunner().invoke(app, ["--quiet", "design", "tracking", "--quick", "--out", str(out)])

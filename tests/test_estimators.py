@@ -25,6 +25,7 @@ from mincam_sim.estimators import (
     trajectory_from_speeds,
     window_weights,
 )
+from mincam_sim.forward_model import ideal_measurement, speed_signal
 
 non_negative = st.floats(min_value=0.0, max_value=1e3, allow_nan=False, allow_infinity=False)
 
@@ -39,10 +40,10 @@ non_negative = st.floats(min_value=0.0, max_value=1e3, allow_nan=False, allow_in
 def test_intrusion_position_equals_centroid(disturbance):
     """Ideal masks x and 1 - x on a grid: Eq. 4 is the centroid of the change, frame by frame."""
     assume(np.all(disturbance.sum(axis=1) > 1e-6))
-    x = np.linspace(0.0, 1.0, disturbance.shape[1])
-    dP_x = disturbance @ x
-    dP_1mx = disturbance @ (1.0 - x)
-    np.testing.assert_allclose(intrusion_position(dP_x, dP_1mx), centroid(disturbance, x), rtol=0, atol=1e-9)
+    x = np.linspace(0.0, 1.0, disturbance.shape[1])[None, :]
+    dP_x = ideal_measurement(x, disturbance[:, None, :])
+    dP_1mx = ideal_measurement(1.0 - x, disturbance[:, None, :])
+    np.testing.assert_allclose(intrusion_position(dP_x, dP_1mx), centroid(disturbance, x[0]), rtol=0, atol=1e-9)
     observed = intrusion_position(dP_x, dP_1mx)
     assert np.all((observed >= -1e-12) & (observed <= 1 + 1e-12))
 
@@ -60,7 +61,7 @@ def test_track_4_and_track_3_equal_centroid(disturbance):
     xs, ys = np.meshgrid(np.linspace(0, 1, nx), np.linspace(0, 1, ny))
 
     def project(mask):
-        return (disturbance * mask).sum(axis=(1, 2))
+        return ideal_measurement(mask, disturbance)
 
     truth = centroid(disturbance, (xs, ys))
     dP4 = np.stack([project(xs), project(1 - xs), project(ys), project(1 - ys)], axis=1)
@@ -294,3 +295,16 @@ def test_trajectory_input_errors():
         trajectory_from_speeds([1.0, 2.0], [1.0], 1.0, 0.1)
     with pytest.raises(ValueError, match="NaN"):
         trajectory_from_speeds([np.nan], [1.0], 1.0, 0.1)
+
+
+@pytest.mark.parametrize("speed_m_s", [1.5, 4.0, 9.0])
+def test_eq13_signal_gives_back_its_speed(speed_m_s):
+    """Eq. 13 -> Eq. 14: the FFT peak of A0' + A1' cos(omega_d v t + phi') over 2 s at 400 Hz returns v to within
+    the sub-bin estimator's resolution (a small fraction of one 0.5 Hz bin)."""
+    omega_d, fs = 2 * np.pi / 0.05, 400.0
+    t = np.arange(800) / fs
+    signal = speed_signal(t, speed_m_s, omega_d, a0=3.0, a1=0.4, phase_rad=0.7)
+    assert signal[0] == pytest.approx(3.0 + 0.4 * np.cos(0.7), abs=1e-12)
+    bin_speed = 2 * np.pi * (fs / t.size) / omega_d  # one frequency bin, in m/s
+    assert speed_from_signal(signal, fs, omega_d, min_frequency_hz=2.0) == pytest.approx(speed_m_s,
+                                                                                          abs=0.1 * bin_speed)

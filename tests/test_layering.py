@@ -1,43 +1,116 @@
-"""Architecture: only the render layer imports mitsuba / drjit (estimators and calibration must run on
-measurements recorded from real hardware, without a renderer)."""
+"""Architecture: the import graph of the package, read from the code (every import, module-level or local).
+
+Floors, bottom to top: the pure core (numpy physics, sensor, estimators, calibration, masks, scene
+descriptions, config, stores) -> ``render`` (the only Mitsuba / Dr.Jit user) -> ``render_job`` (the config
+service) -> ``experiments`` and ``design`` -> ``studies`` -> ``cli``. ``plots`` draws results and sits beside
+the core. Lower floors never import upper ones, and no modules import each other in a loop.
+"""
 
 from __future__ import annotations
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
+import pytest
+
 PACKAGE = Path(__file__).resolve().parents[1] / "mincam_sim"
-RENDER_LAYER = PACKAGE / "render"
+UPPER = ("render", "render_job", "experiments", "design", "studies", "cli", "plots", "figures")
 
 
-def _imports(path: Path) -> set[str]:
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(PACKAGE.parent).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+MODULES = {_module_name(p): p for p in PACKAGE.rglob("*.py")}
+
+
+def _resolve(module: str, level: int, current: str, is_package: bool) -> str:
+    if level == 0:
+        return module
+    base = current.split(".") if is_package else current.split(".")[:-1]
+    base = base[: len(base) - (level - 1)]
+    return ".".join([*base, module] if module else base)
+
+
+def _imports(name: str, path: Path) -> set[str]:
+    """Modules of this package (and top-level third-party names) that ``name`` imports."""
     tree = ast.parse(path.read_text(), filename=str(path))
-    names = set()
+    found: set[str] = set()
+    is_package = path.name == "__init__.py"
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
-            names.update(alias.name.split(".")[0] for alias in node.names)
-        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            names.add(node.module.split(".")[0])
-    return names
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            target = _resolve(node.module or "", node.level, name, is_package)
+            for alias in node.names:
+                sub = f"{target}.{alias.name}"
+                found.add(sub if sub in MODULES else target)
+    return found
+
+
+GRAPH = {name: _imports(name, path) for name, path in MODULES.items()}
+
+
+def _floor(module: str) -> str:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 and parts[1] in UPPER else "core"
+
+
+def _offenders(source_floors: set[str], forbidden: set[str]) -> list[str]:
+    return sorted(f"{a} -> {b}" for a, targets in GRAPH.items() if _floor(a) in source_floors
+                  for b in targets if b.startswith("mincam_sim.") and _floor(b) in forbidden)
 
 
 def test_only_the_render_layer_imports_mitsuba_or_drjit():
-    offenders = [
-        str(p.relative_to(PACKAGE))
-        for p in PACKAGE.rglob("*.py")
-        if RENDER_LAYER not in p.parents and _imports(p) & {"mitsuba", "drjit"}
-    ]
+    offenders = [f"{name} -> {t}" for name, targets in GRAPH.items() if _floor(name) != "render"
+                 for t in targets if t.split(".")[0] in ("mitsuba", "drjit")]
     assert offenders == []
 
 
-def test_pure_modules_import_without_a_renderer():
-    import subprocess
-    import sys
+@pytest.mark.parametrize("source, forbidden", [
+    ({"core"}, set(UPPER)),
+    ({"render"}, {"render_job", "experiments", "design", "studies", "cli", "plots", "figures"}),
+    ({"render_job"}, {"experiments", "design", "studies", "cli", "plots", "figures"}),
+    ({"plots"}, {"experiments", "design", "studies", "cli", "render"}),
+    ({"experiments", "design"}, {"studies", "cli"}),
+    ({"studies"}, {"cli"}),
+])
+def test_lower_floors_never_import_upper_ones(source, forbidden):
+    assert _offenders(source, forbidden) == []
 
+
+def test_no_import_cycles():
+    internal = {a: {b for b in targets if b in MODULES and b != a} for a, targets in GRAPH.items()}
+    # A package's __init__ only re-exports its modules; edges into it stand for its submodules.
+    state: dict[str, int] = {}
+    cycles: list[list[str]] = []
+
+    def visit(node: str, stack: list[str]) -> None:
+        state[node] = 1
+        for nxt in internal[node]:
+            if state.get(nxt) == 1:
+                cycles.append(stack[stack.index(nxt):] + [nxt])
+            elif nxt not in state:
+                visit(nxt, [*stack, nxt])
+        state[node] = 2
+
+    for module in sorted(internal):
+        if module not in state:
+            visit(module, [module])
+    assert cycles == []
+
+
+def test_pure_modules_import_without_a_renderer():
     code = (
         "import sys\n"
         "import mincam_sim.estimators, mincam_sim.calibration, mincam_sim.sensor, mincam_sim.masks\n"
         "import mincam_sim.optics, mincam_sim.screen, mincam_sim.objects, mincam_sim.config\n"
+        "import mincam_sim.readout, mincam_sim.metrics, mincam_sim.forward_model, mincam_sim.plots\n"
         "assert 'mitsuba' not in sys.modules and 'drjit' not in sys.modules, sorted(sys.modules)\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True)

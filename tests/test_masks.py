@@ -353,7 +353,9 @@ def test_generate_library_writes_readable_deterministic_files(tmp_path):
 
 
 def test_plot_mask(tmp_path):
-    ax = M.plot_mask(M.circular_ramp(resolution=32, width_m=3e-3))
+    from mincam_sim.plots import plot_mask
+
+    ax = plot_mask(M.circular_ramp(resolution=32, width_m=3e-3))
     assert ax.get_xlabel() == "x [mm]"
     assert ax.images[0].get_extent() == pytest.approx([-1.5, 1.5, -1.5, 1.5])
     ax.figure.savefig(tmp_path / "m.png")

@@ -24,3 +24,12 @@ def test_readme_schema_matches_config_keys():
         assert f"[{section}]" in text
         for key in keys:
             assert re.search(rf"^{key} = ", text, flags=re.M), f"README schema lacks [{section}] {key}"
+
+
+def test_every_readme_python_snippet_runs(tmp_path, monkeypatch):
+    """Every ```python block after the first runs too (from the repository root, as a reader would); blocks
+    that need a finished run or a cluster are marked ```py instead."""
+    monkeypatch.chdir(README.parent)
+    blocks = re.findall(r"```python\n(.*?)```", README.read_text(), flags=re.S)
+    for i, block in enumerate(blocks[1:], start=2):
+        exec(compile(block, f"README.md python block {i}", "exec"), {})

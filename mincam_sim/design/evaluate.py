@@ -11,8 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..calibration import Calibration2D, ExtrapolationWarning, error_rates
+from ..calibration import Calibration2D, ExtrapolationWarning
 from ..geometry import Pose
+from ..metrics import error_rates
 from ..optics import Mincam
 from ..progress import progress
 from ..screen import Screen, coverage

@@ -2,104 +2,143 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from .. import objects
+from ..calibration import Calibration1D
 from ..estimators import intrusion_position
-from .common import (
-    PAPER,
-    Setup,
-    camera_fov_deg,
-    camera_pixel_to_table,
-    fit_calibration_1d,
-    intrusion_mincam,
-    locate_in_world,
-    make_tabletop,
-    mincam_on_screen,
-    read_out,
-    screen_sweep_1d,
-    toy_updates,
-    world_elements,
-)
-
-BOUNDARY_X_M = -0.1378  # the paper's finish line x0 = -13.78 cm
-BAND_M = 0.03  # width of the boundary band the masks look at [m]
+from ..plots import plot_calibration_1d, plot_overlays
+from .base import Experiment, ExperimentResult, PaperNumbers
+from .ground_truth import GroundTruthCamera
+from .layouts import intrusion_mincam
+from .pipeline import locate_in_world
+from .screen_calibration import fit_calibration_1d, screen_sweep_1d, sweep_change_dn
+from .setup import Setup
+from .tabletop_world import make_tabletop, placements, tabletop_world
 
 
-def calibrate(setup: Setup, cam, rng, out_dir: Path) -> dict:
-    """Sweep a white square along the boundary on the screen; fit the cubic f(x_obs) -> true position."""
-    from ..render.screen_engine import render_frames
+@dataclass(frozen=True)
+class IntrusionParams:
+    """Parameters of the intrusion experiment (``[intrusion]`` in a reproduce config).
 
-    screen = setup.screen()
-    sweep = screen_sweep_1d(setup, BOUNDARY_X_M, 26 if setup.quick else 51, 0.03)
-    frames = sweep.frame_stack(screen)
-    m, maps = render_frames(mincam_on_screen(cam, setup), screen, frames, "response_map",
-                            target_rel_stderr=3e-3 if setup.quick else 1e-3, seed=setup.seed)
-    readout = read_out(m.irradiance_w_m2, np.zeros(len(cam)), setup, rng)
-    change = readout.change_dn
-    observed = intrusion_position(change[:, 0], change[:, 1])
-    true = sweep.positions_m[:, 1]
-    cal = fit_calibration_1d(observed, true, {"experiment": "intrusion", "boundary_x_m": BOUNDARY_X_M,
-                                              "depth_m": setup.depth_m, "spacing_m": setup.spacing_m})
-    cal.to_json(out_dir / "intrusion_calibration.json")
-    return {"true_m": true, "change_dn": change, "observed": observed, "calibration": cal, "maps": maps,
-            "screen": screen, "mc_rel_stderr": m.meta["reached_rel_stderr"]}
+    Attributes
+    ----------
+    boundary_x_m : float
+        The finish line ``x = boundary_x_m`` [m] (paper: x0 = -13.78 cm).
+    band_m : float
+        Width of the boundary band the masks look at [m].
+    calibration_positions : int
+        White squares along the boundary on the screen.
+    calibration_square_m : float
+        Side of the calibration square [m].
+    calibration_rel_stderr : float
+        Target relative standard error of the rendered calibration sweep.
+    frame_rate_hz : float
+        Frames per second of the race video.
+    lanes_y_m, speeds_m_s : tuple of float
+        The two cars' lanes [m] and speeds [m/s].
+    start_distance_m, overrun_m : float
+        Where the race starts before the line and how far it runs past it [m].
+    """
 
+    boundary_x_m: float = -0.1378
+    band_m: float = 0.03
+    calibration_positions: int = 51
+    calibration_square_m: float = 0.03
+    calibration_rel_stderr: float = 1e-3
+    frame_rate_hz: float = 15.0
+    lanes_y_m: tuple[float, ...] = (-0.12, 0.07)
+    speeds_m_s: tuple[float, ...] = (0.12, 0.09)
+    start_distance_m: float = 0.12
+    overrun_m: float = 0.1
 
-def run(setup: Setup, out_dir: Path, show_progress: bool = False) -> dict:
-    from ..render import scene_dicts as sd
-    from ..render.world import WorldRenderer
-
-    out_dir.mkdir(parents=True, exist_ok=True)
-    rng = np.random.default_rng(setup.seed)
-    cam = intrusion_mincam(setup, BOUNDARY_X_M, BAND_M)
-    cal = calibrate(setup, cam, rng, out_dir)
-
-    cars = {"car_a": objects.toy_car(albedo=0.9), "car_b": objects.toy_car(albedo=0.75)}
-    table = make_tabletop(setup, cars, rng)
-    rate = 5.0 if setup.quick else 15.0
-    car_a, car_b = objects.race_pair(finish_line_x_m=BOUNDARY_X_M, lanes_y_m=(-0.12, 0.07), speeds_m_s=(0.12, 0.09),
-                                     start_distance_m=0.12, overrun_m=0.1, frame_rate_hz=rate)
-    frames = [toy_updates(table, {"car_a": (car_a.positions_m[i], car_a.headings_rad[i]),
-                                  "car_b": (car_b.positions_m[i], car_b.headings_rad[i])})
-              for i in range(len(car_a.times_s))]
-    background = toy_updates(table, {})
-    camera = sd.pinhole_camera(setup.center.matrix(), camera_fov_deg(setup), setup.camera_px, setup.camera_px, spp=32)
-    world = WorldRenderer(cam, world_elements(table), replicates=8, camera=camera)
-    spp = setup.spp // 2 if setup.quick else setup.spp
-    calibration = cal["calibration"]
-
-    def predict(c):
-        return calibration.apply(intrusion_position(c[:, 0], c[:, 1]))
-
-    region = _band_region(setup, (setup.camera_px, setup.camera_px))
-    summary, arrays, images, _ = locate_in_world(world, frames, background, setup, rng, predict, spp, region=region,
-                                                 axis=1, show_progress=show_progress)
-    result = {
-        **summary,
-        "paper": PAPER["intrusion"],
-        "calibration_rms_residual_m": calibration.rms_residual_m,
-        "calibration_mc_worst_rel_stderr": cal["mc_rel_stderr"],
-    }
-    _plots(setup, cal, images, arrays["predicted_m"], arrays["truth_m"], arrays["evaluated"], out_dir)
-    np.savez(out_dir / "intrusion_data.npz", **arrays)
-    return result
+    def __post_init__(self) -> None:
+        for key in ("band_m", "calibration_square_m", "calibration_rel_stderr", "frame_rate_hz"):
+            if not getattr(self, key) > 0:
+                raise ValueError(f"{key} must be > 0, got {getattr(self, key)!r}")
+        if self.calibration_positions < 5:
+            raise ValueError(f"calibration_positions must be >= 5 (a cubic needs 4), got {self.calibration_positions}")
+        if len(self.lanes_y_m) != 2 or len(self.speeds_m_s) != 2:
+            raise ValueError("lanes_y_m and speeds_m_s must each list the two cars' values")
 
 
-def _band_region(setup: Setup, shape) -> np.ndarray:
-    rows, cols = np.indices(shape)
-    xy = camera_pixel_to_table(setup, rows, cols, shape)
-    return np.abs(xy[..., 0] - BOUNDARY_X_M) <= BAND_M / 2
+@dataclass
+class IntrusionScene:
+    """The race: the tabletop, per-frame toy placements and the empty background."""
+
+    table: object
+    frames: list
+    background: dict
 
 
-def _plots(setup, cal, images, predicted, truth, evaluated, out_dir: Path) -> None:
-    from ..plots import plot_calibration_1d, plot_overlays
+class Intrusion(Experiment):
+    """Two mixels (band ramps y | 1 - y, Eq. 4) locate toy cars crossing a finish line."""
 
-    plot_calibration_1d(cal["true_m"], cal["change_dn"], cal["observed"], cal["calibration"],
-                        out_dir / "intrusion_calibration.png", names=("y", "1-y"))
-    chosen = np.flatnonzero(evaluated)[:: max(1, int(evaluated.sum()) // 3)][:3]
-    points = [(np.array([BOUNDARY_X_M, predicted[i]]), np.array([BOUNDARY_X_M, truth[i]])) for i in chosen]
-    plot_overlays([images[i] for i in chosen], points, setup, out_dir / "intrusion_frames.png",
-                  boundary_x_m=BOUNDARY_X_M, title="intrusion at the finish line")
+    name = "intrusion"
+    paper_section = "4.1"
+    paper = PaperNumbers(max_error_pct=11.42, avg_error_pct=4.83)
+    Params = IntrusionParams
+    quick_overrides = {"calibration_positions": 26, "calibration_rel_stderr": 3e-3, "frame_rate_hz": 5.0}
+    seed_offset = 0
+
+    def calibrate(self, setup: Setup, params: IntrusionParams, rng: np.random.Generator,
+                  out_dir: Path) -> dict:
+        """Sweep a white square along the boundary on the screen; fit the cubic f(x_obs) -> true position."""
+        cam = intrusion_mincam(setup, params.boundary_x_m, params.band_m)
+        sweep = screen_sweep_1d(setup, params.boundary_x_m, params.calibration_positions, params.calibration_square_m)
+        change, reached = sweep_change_dn(cam, setup, sweep, rng, params.calibration_rel_stderr)
+        observed = intrusion_position(change[:, 0], change[:, 1])
+        true = sweep.positions_m[:, 1]
+        cal = fit_calibration_1d(observed, true, {"experiment": self.name, "boundary_x_m": params.boundary_x_m,
+                                                  "depth_m": setup.depth_m, "spacing_m": setup.spacing_m})
+        cal.to_json(out_dir / "intrusion_calibration.json")
+        return {"true_m": true, "change_dn": change, "observed": observed, "calibration": cal,
+                "mc_rel_stderr": reached}
+
+    def scene(self, setup: Setup, params: IntrusionParams, rng: np.random.Generator) -> IntrusionScene:
+        cars = {"car_a": objects.toy_car(albedo=0.9), "car_b": objects.toy_car(albedo=0.75)}
+        table = make_tabletop(setup, cars, rng)
+        car_a, car_b = objects.race_pair(finish_line_x_m=params.boundary_x_m, lanes_y_m=params.lanes_y_m,
+                                         speeds_m_s=params.speeds_m_s, start_distance_m=params.start_distance_m,
+                                         overrun_m=params.overrun_m, frame_rate_hz=params.frame_rate_hz)
+        frames = [placements(table, {"car_a": (car_a.positions_m[i], car_a.headings_rad[i]),
+                                     "car_b": (car_b.positions_m[i], car_b.headings_rad[i])})
+                  for i in range(len(car_a.times_s))]
+        return IntrusionScene(table, frames, placements(table, {}))
+
+    def run(self, setup: Setup, params: IntrusionParams, out_dir: Path,
+            show_progress: bool = False) -> ExperimentResult:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        rng = self.rng(setup)
+        cal = self.calibrate(setup, params, rng, out_dir)
+        scene = self.scene(setup, params, rng)
+        camera = GroundTruthCamera.for_setup(setup)
+        cam = intrusion_mincam(setup, params.boundary_x_m, params.band_m)
+        world = tabletop_world(setup, scene.table, cam, camera)
+        calibration: Calibration1D = cal["calibration"]
+
+        def predict(c):
+            return calibration.apply(intrusion_position(c[:, 0], c[:, 1]))
+
+        rows, cols = np.indices((camera.pixels, camera.pixels))
+        xy = camera.pixel_to_table(rows, cols, (camera.pixels, camera.pixels))
+        band = np.abs(xy[..., 0] - params.boundary_x_m) <= params.band_m / 2
+        found = locate_in_world(world, camera, scene.frames, scene.background, setup, rng, predict,
+                                setup.tabletop_spp, region=band, axis=1, show_progress=show_progress)
+        a = found.arrays
+        plot_calibration_1d(cal["true_m"], cal["change_dn"], cal["observed"], calibration,
+                            out_dir / "intrusion_calibration.png", names=("y", "1-y"))
+        chosen = np.flatnonzero(a["evaluated"])[:: max(1, int(a["evaluated"].sum()) // 3)][:3]
+        line = params.boundary_x_m
+        plot_overlays([found.images[i] for i in chosen],
+                      [(np.array([line, a["predicted_m"][i]]), np.array([line, a["truth_m"][i]])) for i in chosen],
+                      camera.half_extent_m, out_dir / "intrusion_frames.png", frame_numbers=chosen,
+                      boundary_x_m=line, title="intrusion at the finish line", field_m=setup.field_m)
+        np.savez(out_dir / "intrusion_data.npz", **a)
+        return ExperimentResult.from_rates(self.name, found.summary, self.paper, {
+            "calibration_rms_residual_m": calibration.rms_residual_m,
+            "calibration_mc_worst_rel_stderr": cal["mc_rel_stderr"],
+        })

@@ -3,94 +3,143 @@ of white squares on the 50" screen (3rd-degree 2D polynomial)."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from .. import objects
+from ..calibration import Calibration2D
 from ..estimators import track_4
-from .common import (
-    PAPER,
-    Setup,
-    camera_fov_deg,
-    fit_calibration_2d,
-    locate_in_world,
-    make_tabletop,
-    mincam_on_screen,
-    read_out,
-    screen_sweep_2d,
-    toy_updates,
-    tracking_mincam,
-    world_elements,
-)
-
-TOYS = ("robot", "chick", "frog")
+from ..plots import plot_calibration_2d, plot_overlays, plot_tracks
+from .base import Experiment, ExperimentResult, PaperNumbers
+from .ground_truth import GroundTruthCamera
+from .layouts import tracking_mincam
+from .pipeline import locate_in_world
+from .screen_calibration import fit_calibration_2d, screen_sweep_2d, sweep_change_dn
+from .setup import Setup
+from .tabletop_world import make_tabletop, placements, tabletop_world
 
 
-def calibrate(setup: Setup, cam, rng, out_dir: Path) -> dict:
-    from ..render.screen_engine import render_frames
+@dataclass(frozen=True)
+class TrackingParams:
+    """Parameters of the tracking experiment (``[tracking]`` in a reproduce config).
 
-    screen = setup.screen()
-    sweep = screen_sweep_2d(setup, 9 if setup.quick else 15, 0.03)
-    m, _ = render_frames(mincam_on_screen(cam, setup), screen, sweep.frame_stack(screen), "response_map",
-                         target_rel_stderr=3e-3 if setup.quick else 1e-3, seed=setup.seed)
-    readout = read_out(m.irradiance_w_m2, np.zeros(len(cam)), setup, rng)
-    observed = track_4(readout.change_dn)
-    cal = fit_calibration_2d(observed, sweep.positions_m, {"experiment": "tracking", "depth_m": setup.depth_m,
-                                                           "spacing_m": setup.spacing_m})
-    cal.to_json(out_dir / "tracking_calibration.json")
-    return {"true_m": sweep.positions_m, "observed": observed, "calibration": cal,
-            "mc_rel_stderr": m.meta["reached_rel_stderr"]}
+    Attributes
+    ----------
+    toys : tuple of str
+        Wind-up toys, one path each (``objects.windup_toy`` kinds).
+    toy_size_m : float
+        Toy size [m].
+    frames_per_toy : int
+        Frames of each toy's random smooth path.
+    frame_interval_s : float
+        Time between frames [s]; toys walk at ``toy_speed_m_s``.
+    toy_speed_m_s : float
+        Walking speed [m/s].
+    reach_fraction : float
+        Paths stay within this fraction of the calibrated field around the centre.
+    calibration_grid : int
+        Calibration squares per axis (a grid clipped to the field's disc).
+    calibration_square_m : float
+        Side of the calibration square [m].
+    calibration_rel_stderr : float
+        Target relative standard error of the rendered calibration sweep.
+    """
+
+    toys: tuple[str, ...] = ("robot", "chick", "frog")
+    toy_size_m: float = 0.07
+    frames_per_toy: int = 24
+    frame_interval_s: float = 0.5
+    toy_speed_m_s: float = 0.04
+    reach_fraction: float = 0.4
+    calibration_grid: int = 15
+    calibration_square_m: float = 0.03
+    calibration_rel_stderr: float = 1e-3
+
+    def __post_init__(self) -> None:
+        for key in ("toy_size_m", "frame_interval_s", "toy_speed_m_s", "calibration_square_m",
+                    "calibration_rel_stderr"):
+            if not getattr(self, key) > 0:
+                raise ValueError(f"{key} must be > 0, got {getattr(self, key)!r}")
+        if not 0 < self.reach_fraction <= 0.5:
+            raise ValueError(f"reach_fraction must be in (0, 0.5], got {self.reach_fraction!r}")
+        if self.frames_per_toy < 1 or self.calibration_grid < 4 or not self.toys:
+            raise ValueError("need frames_per_toy >= 1, calibration_grid >= 4 and at least one toy")
 
 
-def run(setup: Setup, out_dir: Path, show_progress: bool = False) -> dict:
-    from ..plots import plot_calibration_2d, plot_overlays, plot_tracks
-    from ..render import scene_dicts as sd
-    from ..render.world import WorldRenderer
+@dataclass
+class TrackingScene:
+    """Toys walking one after the other: the tabletop, per-frame placements, which toy each frame shows."""
 
-    out_dir.mkdir(parents=True, exist_ok=True)
-    rng = np.random.default_rng(setup.seed + 1)
-    cam = tracking_mincam(setup)
-    cal = calibrate(setup, cam, rng, out_dir)
+    table: object
+    frames: list
+    toy_of_frame: np.ndarray
+    background: dict
 
-    kinds = TOYS[:2] if setup.quick else TOYS
-    n_per_toy = 8 if setup.quick else 24
-    toys = {kind: objects.windup_toy(kind, size_m=0.07) for kind in kinds}
-    table = make_tabletop(setup, toys, rng)
-    frames, sequence = [], []
-    reach = 0.4 * setup.field_m
-    for k, kind in enumerate(kinds):
-        path = objects.random_smooth_path(np.random.default_rng(setup.seed + 10 + k), n_per_toy, dt_s=0.5,
-                                          bounds_m=((-reach, reach), (-reach, reach)), speed_m_s=0.04)
-        for i in range(n_per_toy):
-            frames.append(toy_updates(table, {kind: (path.positions_m[i], path.headings_rad[i])}))
-            sequence.append(kind)
-    sequence = np.array(sequence)
-    background = toy_updates(table, {})
-    camera = sd.pinhole_camera(setup.center.matrix(), camera_fov_deg(setup), setup.camera_px, setup.camera_px,
-                               spp=32)
-    world = WorldRenderer(cam, world_elements(table), replicates=8, camera=camera)
-    spp = setup.spp // 2 if setup.quick else setup.spp
-    calibration = cal["calibration"]
 
-    def predict(c):
-        return calibration.apply(track_4(c))
+class Tracking(Experiment):
+    """Four mixels (ramps, Eq. 7 + cubic 2D calibration) track wind-up toys on a table."""
 
-    summary, arrays, images, _ = locate_in_world(world, frames, background, setup, rng, predict, spp,
-                                                 show_progress=show_progress)
-    result = {
-        **summary,
-        "paper": PAPER["tracking"],
-        "toys": list(kinds),
-        "calibration_points": len(cal["true_m"]),
-        "calibration_rms_residual_m": np.asarray(calibration.rms_residual_m).tolist(),  # (x, y)
-        "calibration_mc_worst_rel_stderr": cal["mc_rel_stderr"],
-    }
-    predicted, truth, evaluated = arrays["predicted_m"], arrays["truth_m"], arrays["evaluated"]
-    plot_calibration_2d(cal["true_m"], cal["observed"], calibration, out_dir / "tracking_calibration.png")
-    plot_tracks(predicted, truth, sequence, out_dir / "tracking_paths.png")
-    chosen = np.flatnonzero(evaluated)[:: max(1, int(evaluated.sum()) // 3)][:3]
-    plot_overlays([images[i] for i in chosen], [(predicted[i], truth[i]) for i in chosen], setup,
-                  out_dir / "tracking_frames.png", title="tracking wind-up toys")
-    np.savez(out_dir / "tracking_data.npz", **arrays)
-    return result
+    name = "tracking"
+    paper_section = "4.2"
+    paper = PaperNumbers(max_error_pct=6.78, avg_error_pct=2.82)
+    Params = TrackingParams
+    quick_overrides = {"toys": ("robot", "chick"), "frames_per_toy": 8, "calibration_grid": 9,
+                       "calibration_rel_stderr": 3e-3}
+    seed_offset = 1
+
+    def calibrate(self, setup: Setup, params: TrackingParams, rng: np.random.Generator, out_dir: Path) -> dict:
+        """A grid of white squares on the screen; fit the bivariate cubic from Eq. 7's output to positions."""
+        sweep = screen_sweep_2d(setup, params.calibration_grid, params.calibration_square_m)
+        change, reached = sweep_change_dn(tracking_mincam(setup), setup, sweep, rng, params.calibration_rel_stderr)
+        observed = track_4(change)
+        cal = fit_calibration_2d(observed, sweep.positions_m, {"experiment": self.name, "depth_m": setup.depth_m,
+                                                               "spacing_m": setup.spacing_m})
+        cal.to_json(out_dir / "tracking_calibration.json")
+        return {"true_m": sweep.positions_m, "observed": observed, "calibration": cal, "mc_rel_stderr": reached}
+
+    def scene(self, setup: Setup, params: TrackingParams, rng: np.random.Generator) -> TrackingScene:
+        toys = {kind: objects.windup_toy(kind, size_m=params.toy_size_m) for kind in params.toys}
+        table = make_tabletop(setup, toys, rng)
+        frames, sequence = [], []
+        reach = params.reach_fraction * setup.field_m
+        for k, kind in enumerate(params.toys):
+            path = objects.random_smooth_path(np.random.default_rng(setup.seed + 10 + k), params.frames_per_toy,
+                                              dt_s=params.frame_interval_s, bounds_m=((-reach, reach), (-reach, reach)),
+                                              speed_m_s=params.toy_speed_m_s)
+            for i in range(params.frames_per_toy):
+                frames.append(placements(table, {kind: (path.positions_m[i], path.headings_rad[i])}))
+                sequence.append(kind)
+        return TrackingScene(table, frames, np.array(sequence), placements(table, {}))
+
+    def run(self, setup: Setup, params: TrackingParams, out_dir: Path,
+            show_progress: bool = False) -> ExperimentResult:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        rng = self.rng(setup)
+        cal = self.calibrate(setup, params, rng, out_dir)
+        scene = self.scene(setup, params, rng)
+        camera = GroundTruthCamera.for_setup(setup)
+        world = tabletop_world(setup, scene.table, tracking_mincam(setup), camera)
+        calibration: Calibration2D = cal["calibration"]
+
+        def predict(c):
+            return calibration.apply(track_4(c))
+
+        found = locate_in_world(world, camera, scene.frames, scene.background, setup, rng, predict,
+                                setup.tabletop_spp, show_progress=show_progress)
+        a = found.arrays
+        predicted, truth, evaluated = a["predicted_m"], a["truth_m"], a["evaluated"]
+        plot_calibration_2d(cal["true_m"], cal["observed"], calibration, out_dir / "tracking_calibration.png")
+        plot_tracks(predicted, truth, scene.toy_of_frame, out_dir / "tracking_paths.png")
+        chosen = np.flatnonzero(evaluated)[:: max(1, int(evaluated.sum()) // 3)][:3]
+        plot_overlays([found.images[i] for i in chosen], [(predicted[i], truth[i]) for i in chosen],
+                      camera.half_extent_m, out_dir / "tracking_frames.png", frame_numbers=chosen,
+                      title="tracking wind-up toys", field_m=setup.field_m)
+        np.savez(out_dir / "tracking_data.npz", **a)
+        return ExperimentResult.from_rates(self.name, found.summary, self.paper, {
+            "toys": list(params.toys),
+            "calibration_points": len(cal["true_m"]),
+            "calibration_rms_residual_m": np.asarray(calibration.rms_residual_m).tolist(),  # (x, y)
+            "calibration_mc_worst_rel_stderr": cal["mc_rel_stderr"],
+        })

@@ -12,7 +12,6 @@ package on Linux x86_64, ships ``libLLVM.so.23.1`` inside the environment; :func
 
 from __future__ import annotations
 
-import argparse
 import importlib.metadata
 import os
 import sys
@@ -150,30 +149,3 @@ def describe() -> dict[str, str]:
         "drjit": dr.__version__,
         "libllvm": os.environ.get("DRJIT_LIBLLVM_PATH", ""),
     }
-
-
-def _main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description="Check that a Mitsuba variant loads and renders.")
-    parser.add_argument("--check", action="store_true", help="render a tiny scene and print the variant")
-    args = parser.parse_args(argv)
-    mi = mitsuba()
-    if args.check:
-        from .scene_dicts import irradiancemeter
-
-        scene = mi.load_dict(
-            {
-                "type": "scene",
-                "integrator": {"type": "path"},
-                "emitter": {"type": "constant", "radiance": {"type": "spectrum", "value": 1.0}},
-                "shape": {"type": "rectangle", "sensor": irradiancemeter(1024)},
-            }
-        )
-        value = float(mi.TensorXf(mi.render(scene)).numpy().mean())
-        print(f"mincam_sim backend OK: variant={variant()} E(constant sky, L=1)={value:.4f} W/m^2 (pi expected)")
-    else:
-        print(variant())
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(_main())

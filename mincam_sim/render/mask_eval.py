@@ -3,7 +3,7 @@
 Conventions (the only place they are coded):
 
 * A mixel's local frame has +x to the viewer's *left*, +y up, +z out through the mask (see
-  :mod:`mincam_sim.geometry`). Physical mask coordinates (:mod:`mincam_sim.mask_profiles`) have +x to the
+  :mod:`mincam_sim.geometry`). Physical mask coordinates (:mod:`mincam_sim.masks.profiles`) have +x to the
   viewer's *right*: ``x_m = -x_local``, ``y_m = y_local``.
 * Texture coordinates of the mask array (row 0 at the top, column 0 at the left): ``u = 0.5 + x_m / w``,
   ``v = 0.5 - y_m / h``.
@@ -11,19 +11,26 @@ Conventions (the only place they are coded):
 Masks with a profile are evaluated exactly at every ray; raster masks (files, printed films, polyline ramps)
 through a Mitsuba ``bitmap`` with the mask's own interpolation (bilinear between texel centres, or nearest for
 printer dots). :func:`mask_model_meta` records which, for every output.
+
+:class:`RayWeight` is the one hook the fast forms use: a ray through the mask is weighted by ``T(x_m)``
+(``optics = "geometric"``) or, for a mixel with ``optics = "wave"``, by its tabulated wave response for the
+ray's direction divided by the open-aperture fraction (:meth:`mincam_sim.wave.ResponseTable.directional_weight`),
+which averaged over the detector gives back the wave response.
 """
 
 from __future__ import annotations
 
-from ..mask_profiles import MaskProfile
 from ..masks import Mask
+from ..masks.profiles import MaskProfile
+from ..optics import Mixel
 from . import backend
+from .textures import bitmap_dict
 
 ANALYTIC_TEXTURE_PLUGIN = "mincam_analytic_mask"
 
 
 class DrJitOps:
-    """:class:`mincam_sim.mask_profiles.ArrayOps` on Dr.Jit arrays."""
+    """:class:`mincam_sim.masks.profiles.ArrayOps` on Dr.Jit arrays."""
 
     def __init__(self) -> None:
         import drjit as dr
@@ -56,8 +63,6 @@ def inside_aperture(x_m, y_m, mask: Mask):
 
 def raster_texture_dict(mask: Mask) -> dict:
     """A raw, clamped Mitsuba bitmap of the mask array with the mask's interpolation."""
-    from .scene_dicts import bitmap_dict
-
     return bitmap_dict(mask.transmission, filter_type=mask.interpolation)
 
 
@@ -86,6 +91,74 @@ class MaskEvaluator:
             si.uv = mi.Point2f(u, v)
             value = self._texture.eval_1(si, inside)
         return dr.select(inside, value, 0.0)
+
+
+_TABLES: dict[str, object] = {}
+
+
+def wave_table(mixel: Mixel):
+    """The mixel's :class:`mincam_sim.wave.ResponseTable`, computed once per process and mixel content."""
+    from ..identity import fingerprint
+    from ..wave import response_table
+
+    key = fingerprint({"mask": mixel.mask, "d_f_m": mixel.d_f_m, "detector_size_m": mixel.detector_size_m,
+                       "wavelengths_m": list(mixel.wavelengths_m)})
+    if key not in _TABLES:
+        _TABLES[key] = response_table(mixel, mixel.wavelengths_m)
+    return _TABLES[key]
+
+
+class RayWeight:
+    """A ray's mask weight for one mixel: ``T(x_m)`` (geometric) or the wave response for its direction.
+
+    ``__call__(x_m, y_m, tan_x, tan_y, active)`` takes the mask point [m] and the direction tangents in physical
+    mask coordinates (+x right, +y up): ``tan_x = -d_local.x / d_local.z``, ``tan_y = d_local.y / d_local.z``.
+    Outside the aperture the weight is 0 either way.
+    """
+
+    def __init__(self, mixel: Mixel) -> None:
+        self.mixel = mixel
+        self.optics = mixel.optics
+        self.mi = backend.mitsuba()
+        if self.optics == "wave":
+            table = wave_table(mixel)
+            self._table = table
+            weight = table.directional_weight()
+            self._texture = self.mi.load_dict(bitmap_dict(weight, filter_type="bilinear"))
+            tx, ty = table.tan_x, table.tan_y
+            self._ux = (float(tx[0]), float(tx[-1]), len(tx))
+            self._uy = (float(ty[0]), float(ty[-1]), len(ty))
+            self._mask = None
+        else:
+            from ..wave import quick_check
+
+            quick_check(mixel)  # warns when diffraction likely puts the ray model > 1 % off
+            self._mask = MaskEvaluator(mixel.mask)
+
+    def __call__(self, x_m, y_m, tan_x, tan_y, active=True):
+        import drjit as dr
+
+        if self._mask is not None:
+            return self._mask(x_m, y_m, active)
+        mi = self.mi
+        inside = inside_aperture(x_m, y_m, self.mixel.mask) & active
+        (x0, x1, nx), (y0, y1, ny) = self._ux, self._uy
+        u = (tan_x - x0) / (x1 - x0) * ((nx - 1) / nx) + 0.5 / nx
+        v = (tan_y - y0) / (y1 - y0) * ((ny - 1) / ny) + 0.5 / ny
+        si = dr.zeros(mi.SurfaceInteraction3f)
+        si.uv = mi.Point2f(u, v)
+        value = self._texture.eval_1(si, inside)
+        return dr.select(inside, value, 0.0)
+
+
+def optics_meta(mixel: Mixel) -> dict:
+    """How the renderer weighs this mixel's rays (for outputs' metadata)."""
+    if mixel.optics == "geometric":
+        return {"optics": "geometric"}
+    table = wave_table(mixel)
+    return {"optics": "wave", "wavelengths_m": list(mixel.wavelengths_m),
+            "table": {k: v for k, v in table.meta.items() if k in ("n_tan", "method", "qe", "weights",
+                                                                    "band_covered_min")}}
 
 
 def mask_model_meta(mask: Mask) -> dict:
@@ -141,8 +214,6 @@ def register_analytic_texture() -> None:
 
 def opacity_texture(mask: Mask):
     """A texture of ``1 - transmission`` for Mitsuba's ``mask`` BSDF: exact for profiles, else the raster."""
-    from .scene_dicts import bitmap_dict
-
     if mask.profile is None or not backend.is_jit():
         return bitmap_dict(1.0 - mask.transmission, filter_type=mask.interpolation)
     register_analytic_texture()
@@ -155,6 +226,9 @@ def opacity_texture(mask: Mask):
 __all__ = [
     "MaskEvaluator",
     "MaskProfile",
+    "RayWeight",
+    "optics_meta",
+    "wave_table",
     "inside_aperture",
     "local_to_mask_xy",
     "mask_model_meta",

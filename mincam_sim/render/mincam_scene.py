@@ -114,6 +114,10 @@ class MincamScene:
         """One literal scene per mixel, in millimetres around it (displays only)."""
         if self.screen is None:
             raise ValueError("the reference form renders display scenes only; use the fast form for worlds")
+        wave = [m.name for m in self.mincam if m.optics == "wave"]
+        if wave:
+            raise ValueError(f"mixel(s) {wave} have optics = 'wave', but the reference form is the literal "
+                             "(geometric-optics) scene; render them with the 'fast' or 'response_map' form")
         if self._reference is None:
             self._reference, self._reference_params = [], []
             for k, mixel in enumerate(self.mincam):

@@ -12,9 +12,11 @@ with ``x_d`` uniform on the detector (from the sub-pixel film position) and ``x_
 the aperture sample): ``weight = A_m T(x_m) cos(t_d) cos(t_m) / r^2`` and both cosines equal the local z of the
 ray direction (detector and mask are parallel). The integrator then returns the radiance L arriving along the
 ray. The mask is applied as a weight, not as a surface, so no ray is wasted on the mask or the housing.
-Masks with an analytic profile are evaluated exactly (:mod:`.mask_eval`). Rays start on the mask plane (a
-hair's breadth beyond it, :data:`START_OFFSET_M`, so that they never meet the body they leave); the other
-mixels' bodies are part of the scene (:func:`.scene_dicts.mincam_body_shapes`) and shadow what they hide.
+Masks with an analytic profile are evaluated exactly (:mod:`.mask_eval`); a mixel with ``optics = "wave"``
+weighs each ray by its wave response for the ray's direction instead of ``T`` (:class:`.mask_eval.RayWeight`).
+Rays start on the mask plane (a hair's breadth beyond it, :data:`START_OFFSET_M`, so that they never meet
+the body they leave); the other mixels' bodies are part of the scene (:func:`.scene_dicts.mincam_body_shapes`)
+and shadow what they hide.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ import numpy as np
 
 from ..optics import Mixel
 from . import backend
-from .mask_eval import MaskEvaluator, local_to_mask_xy
+from .mask_eval import RayWeight, local_to_mask_xy
 
 PLUGIN_NAME = "mincam_mixel_array"
 START_OFFSET_M = 1e-6  # [m] rays start this far along their direction past the mask plane (0.05 % of d_f)
@@ -50,7 +52,7 @@ def _make_class():
             self._geometry = [
                 (m.d_f_m, m.detector_size_m, m.mask.width_m, m.mask.height_m) for m in mixels
             ]
-            self._masks = [MaskEvaluator(m.mask) for m in mixels]
+            self._masks = [RayWeight(m) for m in mixels]
 
         def update_pose(self, index: int, matrix: np.ndarray) -> None:
             self._matrices[index] = mi.Transform4f(np.asarray(matrix).tolist())
@@ -73,7 +75,8 @@ def _make_class():
                 delta = mi.Vector3f(x_m - x_d)
                 r2 = dr.squared_norm(delta)
                 d_local = delta * dr.rsqrt(r2)
-                transmission = self._masks[k](*local_to_mask_xy(x_m.x, x_m.y), sel)
+                transmission = self._masks[k](*local_to_mask_xy(x_m.x, x_m.y), -d_local.x / d_local.z,
+                                              d_local.y / d_local.z, sel)
                 w_k = (w * h) * transmission * d_local.z * d_local.z / r2
                 to_world = self._matrices[k]
                 origin = dr.select(sel, to_world @ mi.Point3f(x_m + d_local * START_OFFSET_M), origin)

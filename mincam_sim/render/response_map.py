@@ -30,6 +30,7 @@ import numpy as np
 
 from ..atomic import atomic_path, atomic_save_npz
 from ..identity import fingerprint, library_versions
+from ..imageio import write_exr
 from ..measurements import Measurements
 from ..optics import Mincam
 from ..progress import progress
@@ -37,7 +38,7 @@ from ..screen import Screen
 from ..store import ContentCache
 from . import backend
 from .estimation import derive_seed
-from .mask_eval import MaskEvaluator, local_to_mask_xy, mask_model_meta
+from .mask_eval import RayWeight, local_to_mask_xy, mask_model_meta, optics_meta
 from .mincam_scene import MincamScene, geometry_meta
 from .mixel_sensor import START_OFFSET_M
 
@@ -81,8 +82,6 @@ class ResponseMaps:
 
     def save_exr(self, directory: str | Path) -> list[Path]:
         """One OpenEXR per mixel (channels W and sigma), the picture of what the mixel sees."""
-        from ..imageio import write_exr
-
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         paths = []
@@ -174,7 +173,7 @@ def response_maps(
             weights[out_k], variance[out_k] = cached[k]["weights_sr"], cached[k]["variance_sr2"]
     launches = [(out_k, k, start) for out_k, k in enumerate(indices) if k not in cached
                 for start in range(0, n_tex, texels_per_chunk)]
-    evaluators = {k: MaskEvaluator(mincam[k].mask) for k in indices if k not in cached}
+    evaluators = {k: RayWeight(mincam[k]) for k in indices if k not in cached}
     for out_k, k, start in progress(launches, desc=f"response maps ({spt} samples/texel)", disable=not show_progress,
                                     unit="chunk"):
         mixel = mincam[k]
@@ -217,7 +216,8 @@ def response_maps(
         valid = (cos_d > 0) & (cos_s > 0)
         t_mask = d_f / dr.maximum(cos_d, 1e-12)
         x_m = x_d + d_local * t_mask
-        transmission = evaluators[k](*local_to_mask_xy(x_m.x, x_m.y), valid)
+        transmission = evaluators[k](*local_to_mask_xy(x_m.x, x_m.y), -d_local.x / cos_d, d_local.y / cos_d,
+                                     valid)
         valid &= transmission > 0
         p_start = p_det + direction * (t_mask + START_OFFSET_M)
         dist_after = dr.sqrt(r2) - t_mask - START_OFFSET_M
@@ -241,6 +241,7 @@ def response_maps(
         "seed": seed,
         "units": "sr (W/m^2 on the detector per W m^-2 sr^-1 of texel radiance)",
         "masks": {mincam[k].name: mask_model_meta(mincam[k].mask) for k in indices},
+        "optics": {mincam[k].name: optics_meta(mincam[k]) for k in indices},
         **backend.describe(),
         **geometry_meta(Mincam(tuple(mincam[k] for k in indices), allow_overlap=True), screen),
         "mixel_bodies": "occluding" if mincam.occluding_bodies else "ignored (idealised overlapping mincam)",

@@ -17,6 +17,8 @@ import numpy as np
 from ..optics import Mixel
 from ..screen import Screen
 from . import backend
+from .mask_eval import opacity_texture
+from .textures import bitmap_dict, texture_tensor
 
 
 class SceneFrame:
@@ -60,23 +62,6 @@ def _transform(matrix: np.ndarray, frame: SceneFrame = WORLD):
 def black_bsdf() -> dict:
     """A perfectly absorbing surface (housings, detectors, screen surface)."""
     return {"type": "diffuse", "reflectance": {"type": "spectrum", "value": 0.0}}
-
-
-def texture_tensor(array: np.ndarray):
-    """A (H, W) array as a one-channel ``mi.TensorXf`` (float32) for ``bitmap`` textures."""
-    mi = backend.mitsuba()
-    return mi.TensorXf(np.ascontiguousarray(np.asarray(array, dtype=np.float32)[..., None]))
-
-
-def bitmap_dict(array: np.ndarray, filter_type: str = "bilinear") -> dict:
-    """A raw (linear, no sRGB conversion), clamped bitmap texture of ``array`` (H, W)."""
-    return {
-        "type": "bitmap",
-        "data": texture_tensor(array),
-        "raw": True,
-        "filter_type": filter_type,
-        "wrap_mode": "clamp",
-    }
 
 
 def irradiancemeter(spp: int) -> dict:
@@ -160,8 +145,6 @@ def mixel_reference_shapes(mixel: Mixel, key: str, spp: int, frame: SceneFrame =
     black BSDF, so transmitted light continues unchanged and the rest is absorbed. Analytic masks use an exact
     texture (:func:`.mask_eval.opacity_texture`).
     """
-    from .mask_eval import opacity_texture
-
     s = mixel.detector_size_m
     detector = mixel.pose.matrix() @ np.diag([s / 2, s / 2, 1.0, 1.0])
     shapes = {

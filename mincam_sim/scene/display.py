@@ -26,6 +26,7 @@ def diagonal_to_size(diagonal_in: float, aspect: tuple[int, int] = (16, 9)) -> t
 
 
 PAPER_SCREEN_SIZE_M = diagonal_to_size(50.0)  # the paper's 50" 16:9 calibration display
+DEFAULT_SCREEN_RESOLUTION = (256, 144)  # display texels (columns, rows)
 DEFAULT_DISTANCE_M = 0.5  # [m]
 
 
@@ -46,7 +47,7 @@ class Screen:
 
     width_m: float = PAPER_SCREEN_SIZE_M[0]
     height_m: float = PAPER_SCREEN_SIZE_M[1]
-    resolution: tuple[int, int] = (256, 144)
+    resolution: tuple[int, int] = DEFAULT_SCREEN_RESOLUTION
     pose: Pose = field(default_factory=lambda: Pose((0.0, 0.0, -DEFAULT_DISTANCE_M), (0.0, 0.0, 1.0)))
 
     def __post_init__(self) -> None:

@@ -1,0 +1,101 @@
+"""What an experiment is: a name, the paper section and numbers it reproduces, a parameters dataclass (every
+default in one place, quick-mode overrides beside it), and ``calibrate`` / ``scene`` / ``run`` returning a typed
+:class:`ExperimentResult`."""
+
+from __future__ import annotations
+
+import dataclasses
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+from ..config import dataclass_from_section
+from .setup import Setup
+
+
+@dataclass(frozen=True)
+class PaperNumbers:
+    """Error rates the paper reports for an experiment [% of the calibrated range, or of the true speed]."""
+
+    max_error_pct: float
+    avg_error_pct: float
+
+    def as_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+@dataclass
+class ExperimentResult:
+    """An experiment's outcome: its headline error rates (``None`` for studies without one), the paper's
+    numbers, everything else it measured (``details``: JSON-able) and its wall time [s]."""
+
+    name: str
+    max_error_pct: float | None
+    avg_error_pct: float | None
+    n: int | None
+    paper: PaperNumbers | None
+    details: dict = field(default_factory=dict)
+    seconds: float = 0.0
+
+    def as_dict(self) -> dict:
+        """Flat JSON form (the ``results.json`` entry): details, then the headline numbers and the paper's."""
+        out = dict(self.details)
+        if self.max_error_pct is not None:
+            out.update(max_error_pct=self.max_error_pct, avg_error_pct=self.avg_error_pct, n=self.n)
+        if self.paper is not None:
+            out["paper"] = self.paper.as_dict()
+        out["seconds"] = self.seconds
+        return out
+
+    @classmethod
+    def from_rates(cls, name: str, rates: dict, paper: PaperNumbers | None, details: dict) -> ExperimentResult:
+        """From an error-rate dict (:func:`~mincam_sim.metrics.error_rates`) plus details."""
+        return cls(name, float(rates["max_error_pct"]), float(rates["avg_error_pct"]), int(rates["n"]), paper,
+                   {**{k: v for k, v in rates.items() if k not in ("max_error_pct", "avg_error_pct", "n")},
+                    **details})
+
+
+class Experiment(ABC):
+    """Base of the paper's experiments (and of studies built from them).
+
+    Subclasses set ``name``, ``paper_section``, ``paper`` (or None), ``Params`` (a frozen dataclass whose
+    defaults are the full-mode values), ``quick_overrides`` (the fields ``--quick`` changes) and
+    ``seed_offset`` (separates the experiments' random streams).
+    """
+
+    name: ClassVar[str]
+    paper_section: ClassVar[str]
+    paper: ClassVar[PaperNumbers | None] = None
+    in_paper: ClassVar[bool] = True
+    Params: ClassVar[type]
+    quick_overrides: ClassVar[dict[str, Any]] = {}
+    seed_offset: ClassVar[int] = 0
+
+    def params(self, quick: bool = False, table: dict | None = None) -> Any:
+        """The parameters: defaults, the quick-mode overrides if ``quick``, then a TOML ``[name]`` table
+        (validated: unknown keys, wrong types and out-of-range values are :class:`ConfigError`)."""
+        params = self.Params()
+        if quick:
+            params = dataclasses.replace(params, **self.quick_overrides)
+        if table:
+            params = dataclass_from_section(self.name, table, params)
+        return params
+
+    def rng(self, setup: Setup) -> np.random.Generator:
+        """This experiment's random stream: the set-up's seed plus the experiment's own ``seed_offset``."""
+        return np.random.default_rng(setup.seed + self.seed_offset)
+
+    def calibrate(self, setup: Setup, params: Any, rng: np.random.Generator, out_dir: Path) -> Any:
+        """Fit what maps measurements to the quantity of interest (``None`` if the estimator needs nothing)."""
+        return None
+
+    @abstractmethod
+    def scene(self, setup: Setup, params: Any, rng: np.random.Generator) -> Any:
+        """The scene content the experiment renders."""
+
+    @abstractmethod
+    def run(self, setup: Setup, params: Any, out_dir: Path, show_progress: bool = False) -> ExperimentResult:
+        """Calibrate, render, estimate and score; write plots and data into ``out_dir``."""

@@ -1,0 +1,101 @@
+"""The mincam set-up shared by the paper's experiments: geometry, sensor, screen and sampling defaults.
+
+Every default lives here (or in an experiment's own parameters dataclass); a ``[setup]`` section of a
+``mincam-sim reproduce --config FILE`` document overrides them, validated field by field.
+
+Coordinates: the mincam looks straight down at a table (or straight at a screen) from ``depth_m``; scene
+positions are metres in the plane it looks at, ``x`` to the viewer's right and ``y`` up in its view. On the
+table (z = 0, seen from above with +y up) that is world (x, y); on the screen it is screen (x, y).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, replace
+
+import numpy as np
+
+from ..geometry import Pose
+from ..masks import DEFAULT_MASK_SIZE_M, DEFAULT_RESOLUTION
+from ..optics import DEFAULT_D_F_M, DEFAULT_DETECTOR_SIZE_M, PAPER_SPACING_M
+from ..scene.display import DEFAULT_SCREEN_RESOLUTION, Screen
+from ..sensor import SensorModel
+
+
+@dataclass
+class Setup:
+    """Built-in defaults resembling the paper's prototype (Sec. 3.1, 4.1.1, 4.2.1, 4.3.1).
+
+    Attributes
+    ----------
+    depth_m : float
+        Distance from the mincam to the table / screen [m] (a 50 cm field of view at 0.5 m).
+    spacing_m : float
+        Distance between neighbouring mixels [m] (paper: 3.3 cm).
+    d_f_m, detector_size_m, mask_size_m : float
+        Mixel geometry [m]: mask 2 mm at 2 mm gives a ~53 deg field of view, detector 0.1 mm.
+    field_m : float
+        Calibrated range [m]: the paper's 50 cm boundary / field of view; error rates are % of it.
+    bit_depth : int
+        ADC bits (paper: 12); the sensor is :meth:`SensorModel.paper_prototype` (48 x 48 pixels averaged).
+    quick : bool
+        Fewer frames and samples (for ``make demo`` and the tests).
+    """
+
+    depth_m: float = 0.5
+    spacing_m: float = PAPER_SPACING_M
+    d_f_m: float = DEFAULT_D_F_M
+    detector_size_m: float = DEFAULT_DETECTOR_SIZE_M
+    mask_size_m: float = DEFAULT_MASK_SIZE_M
+    mask_resolution: int = DEFAULT_RESOLUTION
+    field_m: float = 0.5
+    bit_depth: int = 12
+    exposure_fill: float = 0.7
+    screen_resolution: tuple[int, int] = DEFAULT_SCREEN_RESOLUTION
+    table_light_radiance_w_m2_sr: float = 20.0
+    spp: int = 1 << 23  # samples per mixel per frame on the tabletop (quick mode: half)
+    camera_px: int = 160
+    seed: int = 0
+    quick: bool = False
+
+    def __post_init__(self) -> None:
+        for key in ("depth_m", "d_f_m", "detector_size_m", "mask_size_m", "field_m"):
+            v = getattr(self, key)
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"Setup.{key} must be > 0 (metres), got {v!r}")
+        if not 1 <= self.bit_depth <= 32:
+            raise ValueError(f"Setup.bit_depth must be 1 to 32 bits, got {self.bit_depth!r}")
+        if self.spp < 1 or self.camera_px < 8:
+            raise ValueError("Setup.spp must be >= 1 and Setup.camera_px >= 8")
+        if not 0 < self.exposure_fill <= 1:
+            raise ValueError(f"Setup.exposure_fill must be in (0, 1], got {self.exposure_fill!r}")
+        if not (np.isfinite(self.spacing_m) and self.spacing_m >= 0):
+            raise ValueError(f"Setup.spacing_m must be >= 0 metres, got {self.spacing_m!r}")
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+    def with_(self, **kw) -> Setup:
+        return replace(self, **kw)
+
+    @property
+    def center(self) -> Pose:
+        """Pose of the mincam centre above the table (looking down, +y up in its view)."""
+        return Pose((0.0, 0.0, self.depth_m), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0))
+
+    def screen(self, depth_m: float | None = None) -> Screen:
+        """The paper's 50" 16:9 display at ``depth_m`` (default: the set-up's depth), facing the mincam."""
+        d = self.depth_m if depth_m is None else depth_m
+        return Screen(resolution=self.screen_resolution, pose=Pose((0.0, 0.0, -d), (0.0, 0.0, 1.0)))
+
+    @property
+    def tabletop_spp(self) -> int:
+        """Samples per mixel per frame on the tabletop (``spp``, halved in quick mode)."""
+        return self.spp // 2 if self.quick else self.spp
+
+    def sensor(self) -> SensorModel:
+        return SensorModel.paper_prototype(bit_depth=self.bit_depth)
+
+    def scene_to_mask(self, value_m: float, depth_m: float | None = None) -> float:
+        """Normalised mask coordinate (0..1) seen, from the mincam centre, at scene coordinate ``value_m``."""
+        d = self.depth_m if depth_m is None else depth_m
+        return 0.5 + value_m * self.d_f_m / d / self.mask_size_m

@@ -1,0 +1,152 @@
+"""Mask files: PNG / OpenEXR in (grayscale or RGB -> luma, alpha refused), OpenEXR out with metadata."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .. import imageio
+from .mask import Mask
+
+_LUMA_709 = np.array([0.2126, 0.7152, 0.0722])
+
+
+def _to_transmission(arr: np.ndarray, channels: list[str], src: str) -> np.ndarray:
+    """Reduce an image (H, W) or (H, W, C) to one transmission channel."""
+    if arr.ndim == 2:
+        return arr
+    names = list(channels)
+    if "A" in names:
+        alpha = arr[..., names.index("A")]
+        if np.any(alpha < 1.0 - 1e-6):
+            raise ValueError(
+                f"mask file {src!r} has a transparent alpha channel; transmission would be ambiguous:"
+                " flatten the image onto white or black and save it without alpha"
+            )
+        keep = [k for k, n in enumerate(names) if n != "A"]
+        arr, names = arr[..., keep], [names[k] for k in keep]
+        if arr.shape[-1] == 1:
+            return arr[..., 0]
+    if "Y" in names:
+        return arr[..., names.index("Y")]
+    if all(c in names for c in ("R", "G", "B")) and len(names) == 3:
+        rgb = np.stack([arr[..., names.index(c)] for c in ("R", "G", "B")], axis=-1)
+        return rgb @ _LUMA_709
+    raise ValueError(
+        f"mask file {src!r} has {arr.shape[-1]} channels ({', '.join(names)}); give a single-channel"
+        " grayscale (PNG 'L' / EXR 'Y') or an RGB image"
+    )
+
+
+def load(
+    path: str | Path,
+    width_m: float | None = None,
+    height_m: float | None = None,
+    invert: bool = False,
+    name: str | None = None,
+) -> Mask:
+    """Load a mask from a PNG (8/16-bit) or OpenEXR file.
+
+    Parameters
+    ----------
+    path : str or Path
+        Image file; the format is detected from its content. Image row 0 (top) is mask row 0 (top as seen from
+        the detector looking out), i.e. the picture overlays the scene as the mixel sees it.
+    width_m : float, optional
+        Physical mask width [m]. Required for PNG; for EXR files written by :func:`save_exr` it defaults to
+        the stored size.
+    height_m : float, optional
+        Physical mask height [m]; defaults to the stored size (EXR) or ``width_m * H / W`` (square texels).
+    invert : bool
+        Use ``1 - value`` (for files where black means clear).
+    name : str, optional
+        Mask name; defaults to the stored name (EXR) or the file stem.
+
+    Returns
+    -------
+    Mask
+        ``meta`` records the source file and format (and, for EXR, the stored metadata).
+
+    Raises
+    ------
+    FileNotFoundError
+        If the file does not exist.
+    ValueError
+        For an empty, unreadable or non-image file, an unsupported channel layout, NaN/infinite values, values
+        outside [0, 1] (EXR) or a missing/invalid physical size.
+
+    Notes
+    -----
+    PNG values are divided by 255 (8-bit) or 65535 (16-bit). RGB images are reduced to luminance with the
+    Rec. 709 weights 0.2126 R + 0.7152 G + 0.0722 B applied to the stored values (no gamma decoding: the file
+    value is taken to be the intended transmission). An alpha channel is accepted only if fully opaque.
+    """
+    p = Path(path)
+    fmt = imageio.sniff_format(p, "mask file")
+    stored: dict = {}
+    if fmt == "exr":
+        arr, info = imageio.read_exr(p)
+        arr = np.asarray(arr, dtype=np.float64)
+        stored = info
+        t = _to_transmission(arr, info["channels"], str(p))
+        bad = ~np.isfinite(t)
+        if bad.any():
+            raise ValueError(
+                f"mask file {str(p)!r}: {int(bad.sum())} pixel(s) are NaN or infinite;"
+                " transmission must be finite numbers in [0, 1]"
+            )
+        lo, hi = float(t.min()), float(t.max())
+        if lo < 0.0 or hi > 1.0:
+            raise ValueError(
+                f"mask file {str(p)!r}: values span [{lo:.4g}, {hi:.4g}] but transmission must lie in [0, 1];"
+                " rescale the image (e.g. divide by its maximum) or clip it before loading"
+            )
+    else:
+        arr, info = imageio.read_png(p)
+        t = _to_transmission(arr, info["channels"], str(p))
+    h, w = t.shape
+    if width_m is None:
+        width_m = stored.get("width_m")
+    if width_m is None:
+        hint = ""
+        if "dpi" in info and info["dpi"][0] > 0:
+            dpi_x = info["dpi"][0]
+            hint = f" (the file says {dpi_x:g} dpi, i.e. width_m={w / dpi_x * 0.0254:.6g} m)"
+        raise ValueError(f"mask file {str(p)!r} has no physical size: give width_m in metres{hint}")
+    if height_m is None:
+        same_width = "width_m" in stored and width_m == stored.get("width_m")
+        height_m = stored.get("height_m") if same_width else None
+    if height_m is None:
+        height_m = float(width_m) * h / w
+    if invert:
+        t = 1.0 - t
+    label = name if name is not None else str(stored.get("name") or p.stem)
+    meta = dict(stored.get("meta", {})) if isinstance(stored.get("meta"), dict) else {}
+    meta.update({"source": str(p), "format": fmt, "invert": bool(invert)})
+    if fmt == "png":
+        meta["bit_depth"] = info["bit_depth"]
+    return Mask(t, width_m, height_m, label, meta)
+
+
+def save_exr(mask: Mask, path: str | Path) -> Path:
+    """Write a mask to OpenEXR (one float32 channel ``Y`` = transmission) with its physical size.
+
+    The header records ``width_m``, ``height_m``, ``units`` ("m"), ``name``, the array convention and the
+    mask's ``meta``; :func:`load` reads them back (values exact to float32, ~6e-8).
+
+    Returns
+    -------
+    Path
+        The written file.
+    """
+    metadata = {
+        "width_m": mask.width_m,
+        "height_m": mask.height_m,
+        "units": "m",
+        "name": mask.name,
+        "quantity": "transmission",
+        "convention": "row 0 = top, column 0 = left, as seen from the detector looking out",
+        "meta": mask.meta,
+    }
+    return imageio.write_exr(path, mask.transmission, ("Y",), metadata)

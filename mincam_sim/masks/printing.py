@@ -1,0 +1,177 @@
+"""What a printer makes of a mask on transparency film (:class:`PrintedFilm`: dot grid, grey levels or
+ordered halftone, film transmission range) and print-ready PNG export at the mask's physical size."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from .. import imageio
+from .mask import MAX_TEXELS, Mask, resample
+
+_BAYER8 = np.array(
+    [
+        [0, 32, 8, 40, 2, 34, 10, 42],
+        [48, 16, 56, 24, 50, 18, 58, 26],
+        [12, 44, 4, 36, 14, 46, 6, 38],
+        [60, 28, 52, 20, 62, 30, 54, 22],
+        [3, 35, 11, 43, 1, 33, 9, 41],
+        [51, 19, 59, 27, 49, 17, 57, 25],
+        [15, 47, 7, 39, 13, 45, 5, 37],
+        [63, 31, 55, 23, 61, 29, 53, 21],
+    ]
+)
+
+
+@dataclass(frozen=True)
+class PrintedFilm:
+    """What a printer really makes of a mask on transparency film.
+
+    Parameters
+    ----------
+    t_min : float
+        Transmission of fully inked film (printer value 0, black). Typical printed black on transparency film
+        passes ~1-5 % of visible light; default 0.02. Measure your own film for quantitative work.
+    t_max : float
+        Transmission of the unprinted film (printer value 1, white). Clear transparency film typically
+        transmits ~85-92 %; default 0.9.
+    dpi : float
+        Printer addressable resolution [dots per inch]; default 600. Note that a 2 mm mask is only ~47 dots
+        across at 600 dpi.
+    levels : int or None
+        Grey levels the printer reproduces per dot (256 = 8-bit); ``None`` = continuous. Ignored when
+        halftoning.
+    halftone : {None, "ordered"}
+        ``"ordered"``: each dot is either fully inked or clear, grey produced by an 8x8 Bayer ordered dither
+        (65 effective levels over 8x8 dots), as laser and many inkjet printers do. Deterministic.
+    gamma : float
+        Tone response: transmission = t_min + (t_max - t_min) * value**gamma (1 = linear; fit it to a printed
+        step wedge if needed).
+
+    Notes
+    -----
+    The printed transmission spans [t_min, t_max], not [0, 1]: a complementary pair M, 1 - M sums to
+    t_min + t_max instead of 1, and the dark parts of a mask still leak light. These defaults are typical
+    values only; set them from measurements of your film and printer.
+    """
+
+    t_min: float = 0.02
+    t_max: float = 0.9
+    dpi: float = 600.0
+    levels: int | None = 256
+    halftone: str | None = None
+    gamma: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not (0.0 <= self.t_min < self.t_max <= 1.0):
+            raise ValueError(
+                f"PrintedFilm: need 0 <= t_min < t_max <= 1, got t_min={self.t_min}, t_max={self.t_max}"
+            )
+        if not (np.isfinite(self.dpi) and self.dpi > 0):
+            raise ValueError(f"PrintedFilm: dpi must be a positive number of dots per inch, got {self.dpi!r}")
+        if self.levels is not None and (int(self.levels) != self.levels or self.levels < 2):
+            raise ValueError(f"PrintedFilm: levels must be an integer >= 2 or None, got {self.levels!r}")
+        if self.halftone not in (None, "ordered"):
+            raise ValueError(f"PrintedFilm: halftone must be None or 'ordered', got {self.halftone!r}")
+        if not (np.isfinite(self.gamma) and self.gamma > 0):
+            raise ValueError(f"PrintedFilm: gamma must be positive, got {self.gamma!r}")
+
+    @property
+    def dots_per_m(self) -> float:
+        """Printer resolution [dots/m]."""
+        return self.dpi / 0.0254
+
+    def grid_shape(self, width_m: float, height_m: float) -> tuple[int, int]:
+        """(H, W) printer dots covering a ``width_m`` x ``height_m`` [m] mask (rounded, at least 1)."""
+        return _dot_grid(width_m, height_m, self.dpi)
+
+    def printer_input(self, mask: Mask) -> np.ndarray:
+        """Printer grey values in [0, 1] (0 = full ink) on the dot grid: resampled, quantised or halftoned."""
+        v = resample(mask, self.grid_shape(mask.width_m, mask.height_m))
+        if self.halftone == "ordered":
+            h, w = v.shape
+            thr = (np.tile(_BAYER8, (h // 8 + 1, w // 8 + 1))[:h, :w] + 0.5) / 64.0
+            return (v >= thr).astype(np.float64)
+        if self.levels is not None:
+            v = np.rint(v * (self.levels - 1)) / (self.levels - 1)
+        return v
+
+    def print(self, mask: Mask) -> Mask:
+        """The mask as printed on this film.
+
+        The mask is area-averaged onto the printer's dot grid for its physical size (``round(size * dpi)``
+        dots per side; the dot pitch is adjusted by less than half a dot so the print covers exactly the mask
+        size), quantised to ``levels`` (or halftoned) and mapped to [t_min, t_max].
+
+        Returns
+        -------
+        Mask
+            Same physical size, one texel per printer dot; ``meta["film"]`` records this film and
+            ``meta["printed_from"]`` the source mask name.
+        """
+        v = self.printer_input(mask)
+        t = self.t_min + (self.t_max - self.t_min) * v**self.gamma
+        meta = dict(mask.meta)
+        meta.update({"film": asdict(self), "printed_from": mask.name})
+        return Mask(np.clip(t, 0.0, 1.0), mask.width_m, mask.height_m, f"{mask.name}@film", meta,
+                    interpolation="nearest")
+
+
+def _dot_grid(width_m: float, height_m: float, dpi: float) -> tuple[int, int]:
+    if not (np.isfinite(dpi) and dpi > 0):
+        raise ValueError(f"dpi must be a positive number of dots per inch, got {dpi!r}")
+    per_m = dpi / 0.0254
+    h, w = max(1, round(height_m * per_m)), max(1, round(width_m * per_m))
+    if h * w > MAX_TEXELS:
+        raise ValueError(
+            f"print grid {h}x{w} dots is too large (max {MAX_TEXELS}); lower the dpi or the mask size"
+        )
+    return h, w
+
+
+def export_print_png(
+    mask: Mask,
+    path: str | Path,
+    dpi: float | None = None,
+    film: PrintedFilm | None = None,
+    bit_depth: int = 8,
+) -> Path:
+    """Write a print-ready grayscale PNG of a mask at its physical size.
+
+    Parameters
+    ----------
+    mask : Mask
+        Mask to print; white (1) = no ink = clear, black (0) = full ink.
+    path : str or Path
+        Output PNG.
+    dpi : float, optional
+        Printer resolution [dots per inch]; default ``film.dpi`` if a film is given, else 600. The image has
+        ``round(width_m * dpi / 0.0254)`` x ``round(height_m * dpi / 0.0254)`` pixels and the PNG records
+        the dpi so that printing at 100 % scale reproduces the physical size.
+    film : PrintedFilm, optional
+        If given, the pixels are the film's printer input (quantised to its levels, or halftoned), i.e.
+        exactly what :meth:`PrintedFilm.print` assumes is printed.
+    bit_depth : {8, 16}
+        PNG bit depth (printer drivers generally use 8).
+
+    Returns
+    -------
+    Path
+        The written file.
+
+    Notes
+    -----
+    The image is the mask as seen from the detector looking out; mount the film so the print reads the same
+    way from the detector side (printing on the far side of the film mirrors it as seen from the scene).
+    """
+    if dpi is None:
+        dpi = film.dpi if film is not None else 600.0
+    if film is not None:
+        if dpi != film.dpi:
+            film = replace(film, dpi=float(dpi))
+        values = film.printer_input(mask)
+    else:
+        values = resample(mask, _dot_grid(mask.width_m, mask.height_m, dpi))
+    return imageio.write_png(path, values, bit_depth=bit_depth, dpi=dpi)

@@ -1,0 +1,63 @@
+"""The paper's error rates (pure numpy).
+
+The position error is ``|predicted - true|`` (Euclidean distance in 2D) as a percentage of the calibrated range
+(paper Sec. 4.1.2, 4.2.2); the speed error is ``|predicted - true|`` as a percentage of the true speed
+(Sec. 4.3.2). Rows with NaN/inf (frames without a detection) are counted, not scored.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+
+def _error_summary(errors_pct: np.ndarray) -> dict[str, float | int]:
+    finite = np.isfinite(errors_pct)
+    valid = errors_pct[finite]
+    if valid.size == 0:
+        raise ValueError("no finite predictions to evaluate (all NaN/inf)")
+    return {
+        "max_error_pct": float(valid.max()),
+        "avg_error_pct": float(valid.mean()),
+        "rms_error_pct": float(np.sqrt(np.mean(valid**2))),
+        "n": int(valid.size),
+        "n_missing": int(np.count_nonzero(~finite)),
+    }
+
+
+def error_rates(predicted: ArrayLike, truth: ArrayLike, calibrated_range: float) -> dict[str, float | int]:
+    """Position error rates as defined in the paper: ``|predicted - truth|`` as % of the calibrated range.
+
+    Parameters
+    ----------
+    predicted, truth : array_like, shape (n,) or (n, k)
+        Predicted and true positions in the same unit as ``calibrated_range`` (metres in this package); for
+        (n, k) arrays the error is the Euclidean distance per row.
+    calibrated_range : float
+        Length of the calibrated range (e.g. 0.5 for the paper's 50 cm boundary or field of view).
+
+    Returns
+    -------
+    dict
+        ``max_error_pct``, ``avg_error_pct``, ``rms_error_pct`` over the ``n`` rows with finite values, and
+        ``n_missing``, the number of rows with NaN/inf (e.g. frames without detection), which are excluded.
+    """
+    pred = np.asarray(predicted, dtype=np.float64)
+    true = np.asarray(truth, dtype=np.float64)
+    if pred.shape != true.shape or pred.ndim not in (1, 2):
+        raise ValueError(f"predicted and truth need equal shape (n,) or (n, k), got {pred.shape}, {true.shape}")
+    if not np.isfinite(calibrated_range) or calibrated_range <= 0:
+        raise ValueError(f"calibrated_range must be a finite length > 0, got {calibrated_range!r}")
+    error = np.abs(pred - true) if pred.ndim == 1 else np.sqrt(np.sum((pred - true) ** 2, axis=1))
+    return _error_summary(100.0 * error / calibrated_range)
+
+
+def speed_error_rates(pred_v: ArrayLike, true_v: ArrayLike) -> dict[str, float | int]:
+    """Speed error rates: ``|pred_v - true_v| / |true_v|`` in %, summarised as in :func:`error_rates`."""
+    pred = np.asarray(pred_v, dtype=np.float64)
+    true = np.asarray(true_v, dtype=np.float64)
+    if pred.shape != true.shape or pred.ndim != 1:
+        raise ValueError(f"pred_v and true_v must be 1D arrays of one length, got {pred.shape}, {true.shape}")
+    if np.any(true == 0):
+        raise ValueError("true_v contains zero speeds: a percentage of the true speed is undefined there")
+    return _error_summary(100.0 * np.abs(pred - true) / np.abs(true))

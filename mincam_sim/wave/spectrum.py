@@ -1,0 +1,93 @@
+"""Spectral weighting of the wave response: a silicon quantum-efficiency model and band weights."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+DEFAULT_WAVELENGTHS_M = (550e-9,)  # [m] the sensor model's wavelength
+
+
+# Absorption coefficient of crystalline silicon at 300 K [1/m], rounded from M. A. Green, "Self-consistent
+# optical parameters of intrinsic silicon at 300 K including temperature coefficients", Solar Energy Materials
+# & Solar Cells 92, 1305-1310 (2008), Table 1 (values there in 1/cm).
+_SI_ALPHA_NM = np.array([400, 450, 500, 550, 600, 650, 700, 750, 800, 850, 900, 950, 1000, 1050, 1100.0])
+
+
+_SI_ALPHA_PER_M = 100.0 * np.array(
+    [9.52e4, 2.55e4, 1.11e4, 6.39e3, 4.14e3, 2.81e3, 1.90e3, 1.30e3, 8.50e2, 5.35e2, 3.06e2, 1.57e2, 6.40e1,
+     1.63e1, 3.5]
+)
+
+
+SI_DEAD_LAYER_M = 0.2e-6  # [m] surface layer whose photocarriers recombine before collection (model)
+
+
+SI_COLLECTION_DEPTH_M = 3e-6  # [m] depth down to which photocarriers are collected (front-illuminated CMOS, model)
+
+
+SI_SURFACE_LOSS = 0.1  # fraction lost at the surface (reflection of an uncoated oxide stack ~ 10 %, model)
+
+
+def silicon_qe(wavelength_m: float | np.ndarray) -> np.ndarray:
+    """Quantum efficiency of a silicon photodiode (a model): ``(1 - R) (exp(-alpha d0) - exp(-alpha W))``.
+
+    Parameters
+    ----------
+    wavelength_m : float or array_like
+        Wavelength(s) [m], within 400-1100 nm.
+
+    Returns
+    -------
+    ndarray
+        Electrons per photon in [0, 1].
+
+    Notes
+    -----
+    ``alpha`` is silicon's absorption coefficient (Green 2008, see the module source), interpolated
+    log-linearly: photons absorbed between the depths ``d0`` = :data:`SI_DEAD_LAYER_M` (0.2 um, lost to
+    surface recombination) and ``W`` = :data:`SI_COLLECTION_DEPTH_M` (3 um) are collected; ``R`` =
+    :data:`SI_SURFACE_LOSS` (0.1). The shape (a peak near 550-600 nm, losses in the blue, a steep fall in the
+    near infrared) is that of front-illuminated CMOS sensors; the response here only uses *relative* weights,
+    so the scale does not matter. For a specific
+    sensor pass its measured curve as ``qe`` to :func:`spectral_weights`.
+    """
+    lam_nm = np.asarray(wavelength_m, dtype=np.float64) * 1e9
+    if np.any(~np.isfinite(lam_nm)) or np.any(lam_nm < _SI_ALPHA_NM[0]) or np.any(lam_nm > _SI_ALPHA_NM[-1]):
+        raise ValueError(f"silicon_qe: wavelength_m must lie in [400e-9, 1100e-9] m, got {wavelength_m!r}")
+    alpha = np.exp(np.interp(lam_nm, _SI_ALPHA_NM, np.log(_SI_ALPHA_PER_M)))
+    return (1.0 - SI_SURFACE_LOSS) * (np.exp(-alpha * SI_DEAD_LAYER_M) - np.exp(-alpha * SI_COLLECTION_DEPTH_M))
+
+
+def spectral_weights(
+    wavelengths_m: Sequence[float], qe: Callable[[np.ndarray], np.ndarray] | None = silicon_qe
+) -> np.ndarray:
+    """Weights (sum 1) of the wavelengths for a flat photon spectrum seen by a detector of quantum efficiency ``qe``.
+
+    Each wavelength stands for the band between its neighbours' midpoints (trapezoid rule); a single
+    wavelength gets weight 1. ``qe=None`` weighs the bands by their width only.
+    """
+    lam = _check_wavelengths(wavelengths_m)
+    if len(lam) == 1:
+        return np.ones(1)
+    order = np.argsort(lam)
+    s = lam[order]
+    edges = np.concatenate(([s[0]], 0.5 * (s[1:] + s[:-1]), [s[-1]]))
+    width = np.diff(edges)
+    w_sorted = width * (np.ones_like(s) if qe is None else np.asarray(qe(s), dtype=np.float64))
+    w = np.empty_like(w_sorted)
+    w[order] = w_sorted
+    if not np.all(np.isfinite(w)) or w.sum() <= 0:
+        raise ValueError("spectral_weights: the QE curve gives no weight to these wavelengths")
+    return w / w.sum()
+
+
+def _check_wavelengths(wavelengths_m: Sequence[float]) -> np.ndarray:
+    lam = np.atleast_1d(np.asarray(wavelengths_m, dtype=np.float64))
+    if lam.ndim != 1 or lam.size == 0 or not np.all(np.isfinite(lam)) or np.any(lam <= 0):
+        raise ValueError(f"wavelengths_m must be a non-empty list of positive wavelengths in metres, got "
+                         f"{wavelengths_m!r}")
+    if np.any(lam > 1e-4):
+        raise ValueError(f"wavelengths_m {wavelengths_m!r} look like nanometres; give metres (550e-9 for 550 nm)")
+    return lam
