@@ -32,6 +32,7 @@ and the film's tone mapping through that linear model with ``mi.ad.Adam``.
 from __future__ import annotations
 
 from collections.abc import Callable
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -102,6 +103,24 @@ class Samples:
 def _mi():
     backend.require_jit("Differentiable mixel measurements (Dr.Jit AD)")
     return backend.mitsuba()
+
+
+@contextmanager
+def single_threaded():
+    """Run Dr.Jit kernels on one thread inside the block (then restore the pool).
+
+    The reverse pass of a ``gather`` is an atomic scatter-add, whose float32 sum depends on the order in
+    which threads reach it: with several threads the same seed gave gradients differing by ~1e-5 relative,
+    and optimisations that drifted apart. On one thread the order is fixed: same seed, same numbers.
+    """
+    import drjit as dr
+
+    threads = dr.thread_count()
+    dr.set_thread_count(1)
+    try:
+        yield
+    finally:
+        dr.set_thread_count(threads)
 
 
 def bodies_scene(mincam: Mincam):
@@ -312,8 +331,9 @@ class GradientProbe:
 
         texels, d_f, position = self._inputs()
         dr.enable_grad(texels)
-        dr.backward(dr.sum(self._measure(texels, d_f, position)))
-        return np.asarray(dr.grad(texels), dtype=np.float64)
+        with single_threaded():  # the reverse pass scatter-adds: fixed order
+            dr.backward(dr.sum(self._measure(texels, d_f, position)))
+            return np.asarray(dr.grad(texels), dtype=np.float64)
 
     def forward(self, parameter: str, index: int = 0) -> np.ndarray:
         """Forward-mode derivative per frame with respect to ``texel`` [index], ``d_f_m`` or ``position_m``
@@ -480,29 +500,30 @@ def optimise_masks(
     tx, ty = (mi.Float(problem.targets[:, i]) for i in range(2))
     history = []
     coef = None
-    with bar(iterations, "optimising masks", disable=not show_progress, unit="step") as b:
-        for it in range(iterations):
-            logits = [opt[f"theta{k}"] for k in range(len(initial_logits))]
-            masks = masks_from_logits(problem, logits)
-            irr = [_matvec(a_flat[k], masks[k], n_frames, d) for k in range(len(masks))]
-            irr_np = np.array([np.asarray(dr.detach(e)) for e in irr], dtype=np.float64)
-            sigma = problem.noise_dn(irr_np)
-            eps = np.random.default_rng([int(seed), it]).standard_normal(sigma.shape)
-            dn = [problem.dn_per_w_m2 * irr[k] + mi.Float(sigma[k] * eps[k]) for k in range(len(irr))]
-            terms = poly_terms(*problem.features(dn, dr))
-            design = np.stack([np.asarray(dr.detach(t), dtype=np.float64) for t in terms], axis=1)
-            ok = np.all(np.isfinite(design), axis=1)
-            coef = np.stack([np.linalg.lstsq(design[ok], problem.targets[ok, i], rcond=None)[0]
-                             for i in range(2)])
-            c_x, c_y = (mi.Float(c) for c in coef.astype(np.float32))  # arrays, not literals: one kernel
-            px = sum(dr.gather(mi.Float, c_x, i) * t for i, t in enumerate(terms))
-            py = sum(dr.gather(mi.Float, c_y, i) * t for i, t in enumerate(terms))
-            loss = dr.mean(dr.square(px - tx) + dr.square(py - ty))
-            dr.backward(loss)
-            opt.step()
-            history.append(float(np.sqrt(np.asarray(loss, dtype=np.float64).ravel()[0])))
-            b.update(1)
-            b.set_postfix_str(f"rms {100 * history[-1]:.2f} % of field")
+    with single_threaded():  # reverse passes scatter-add: one thread keeps their order (same seed, same numbers)
+        with bar(iterations, "optimising masks", disable=not show_progress, unit="step") as b:
+            for it in range(iterations):
+                logits = [opt[f"theta{k}"] for k in range(len(initial_logits))]
+                masks = masks_from_logits(problem, logits)
+                irr = [_matvec(a_flat[k], masks[k], n_frames, d) for k in range(len(masks))]
+                irr_np = np.array([np.asarray(dr.detach(e)) for e in irr], dtype=np.float64)
+                sigma = problem.noise_dn(irr_np)
+                eps = np.random.default_rng([int(seed), it]).standard_normal(sigma.shape)
+                dn = [problem.dn_per_w_m2 * irr[k] + mi.Float(sigma[k] * eps[k]) for k in range(len(irr))]
+                terms = poly_terms(*problem.features(dn, dr))
+                design = np.stack([np.asarray(dr.detach(t), dtype=np.float64) for t in terms], axis=1)
+                ok = np.all(np.isfinite(design), axis=1)
+                coef = np.stack([np.linalg.lstsq(design[ok], problem.targets[ok, i], rcond=None)[0]
+                                 for i in range(2)])
+                c_x, c_y = (mi.Float(c) for c in coef.astype(np.float32))  # arrays, not literals: one kernel
+                px = sum(dr.gather(mi.Float, c_x, i) * t for i, t in enumerate(terms))
+                py = sum(dr.gather(mi.Float, c_y, i) * t for i, t in enumerate(terms))
+                loss = dr.mean(dr.square(px - tx) + dr.square(py - ty))
+                dr.backward(loss)
+                opt.step()
+                history.append(float(np.sqrt(np.asarray(loss, dtype=np.float64).ravel()[0])))
+                b.update(1)
+                b.set_postfix_str(f"rms {100 * history[-1]:.2f} % of field")
     logits_np = [np.asarray(opt[f"theta{k}"], dtype=np.float64) for k in range(len(initial_logits))]
     final = masks_from_logits(problem, [mi.Float(t) for t in logits_np])
     return DesignResult(logits_np, [np.asarray(t, dtype=np.float64) for t in final], np.array(history), coef)
@@ -523,4 +544,5 @@ __all__ = [
     "mixel_samples",
     "optimise_masks",
     "poly_terms",
+    "single_threaded",
 ]
