@@ -53,7 +53,7 @@ def test_rerun_with_target_noise_reuses_cached_maps(tmp_path, monkeypatch):
     def no_tracing(*args, **kwargs):
         raise AssertionError("maps were traced again although they are cached")
 
-    monkeypatch.setattr(rm, "MaskEvaluator", no_tracing)
+    monkeypatch.setattr(rm, "RayWeight", no_tracing)
     second, _ = render_frames(cam, SCREEN, frames, target_rel_stderr=3e-3, seed=2, out_dir=tmp_path)
     np.testing.assert_array_equal(first.irradiance_w_m2, second.irradiance_w_m2)
     assert second.meta["samples_per_texel"] == first.meta["samples_per_texel"]
@@ -76,13 +76,13 @@ def test_killed_map_tracing_resumes_mixel_by_mixel(tmp_path, monkeypatch):
         render_frames(cam, SCREEN, frames, samples_per_texel=16, seed=4, out_dir=tmp_path)
     monkeypatch.setattr(rm.ContentCache, "put", original_put)
     traced = []
-    original_eval = rm.MaskEvaluator
+    original_eval = rm.RayWeight
 
-    def counting_eval(mask):
-        traced.append(mask.name)
-        return original_eval(mask)
+    def counting_eval(mixel):
+        traced.append(mixel.mask.name)
+        return original_eval(mixel)
 
-    monkeypatch.setattr(rm, "MaskEvaluator", counting_eval)
+    monkeypatch.setattr(rm, "RayWeight", counting_eval)
     resumed, _ = render_frames(cam, SCREEN, frames, samples_per_texel=16, seed=4, out_dir=tmp_path)
     assert traced == [cam[1].mask.name]  # only the mixel whose map was not stored
     np.testing.assert_array_equal(resumed.irradiance_w_m2, reference.irradiance_w_m2)
