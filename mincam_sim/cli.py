@@ -502,6 +502,40 @@ def demo(
 
 
 @app.command()
+def design(
+    task: Annotated[str, typer.Argument(help="design task: tracking")],
+    out_dir: Annotated[Path, typer.Option("--out", help="output folder (design.json, PNG masks, plots)")] = Path(
+        "out/design"),
+    quick: Annotated[bool, typer.Option("--quick", help="smaller training and held-out sets (minutes)")] = False,
+    seed: Annotated[int, typer.Option(help="seed of the training and held-out draws and of the noise")] = 0,
+    dpi: Annotated[float, typer.Option(help="printer resolution of the film and the PNG masks [dots/inch]")] = 600.0,
+) -> None:
+    """Design masks by differentiable rendering through the real geometry; compare with the paper's ramps."""
+    from .design import TASKS, run_design
+    from .store import lock_out_dir
+
+    if task not in TASKS:
+        raise ConfigError(f"unknown design task {task!r}: choose one of {', '.join(TASKS)}")
+    if seed < 0:
+        raise ConfigError(f"--seed must be an integer >= 0, got {seed}")
+    if not (np.isfinite(dpi) and 50 <= dpi <= 4800):
+        raise ConfigError(f"--dpi must be a printer resolution of 50 to 4800 dots per inch, got {dpi}")
+    check_variant()
+    check_out_dir(out_dir)
+    _announce_variant()
+    with lock_out_dir(out_dir):
+        r = run_design(task, out_dir, quick=quick, seed=seed, dpi=dpi, show_progress=_show_progress())
+    typer.echo(f"gradient check: max relative error {r['gradient_check']['max_rel_error']:.2e} "
+               f"over {r['gradient_check']['n_checked']} parameters")
+    typer.echo("masks          avg / max error [% of field]   n")
+    for key, label in (("baseline", "paper ramps"), ("designed", "designed")):
+        typer.echo(f"{label:<14} {r[key]['avg_error_pct']:>6.2f} / {r[key]['max_error_pct']:<8.2f}"
+                   f"              {r[key]['n']}")
+    typer.echo(f"# goal (designed <= half the baseline): {'met' if r['goal']['met'] else 'not met'} "
+               f"(ratio {r['goal']['designed_over_baseline_avg']:.2f}); design.json, masks, plots in {out_dir}")
+
+
+@app.command()
 def figures(
     out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("scenes/figures"),
     wave_figure: Annotated[bool, typer.Option("--wave", help="also the wave-vs-geometric optics figure "

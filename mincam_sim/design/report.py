@@ -1,0 +1,78 @@
+"""Figures of a design run (matplotlib, constrained layout, written atomically). Pure numpy + matplotlib."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from ..atomic import atomic_path  # noqa: E402
+from ..masks import Mask  # noqa: E402
+
+
+def _save(fig, path: Path) -> Path:
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120, format="png")
+    plt.close(fig)
+    return path
+
+
+def plot_loss(histories: dict[str, np.ndarray], kept: str, path: Path) -> Path:
+    """Training RMS position error against the optimiser step, one curve per start (the kept one bold)."""
+    fig, ax = plt.subplots(figsize=(6.0, 3.6), layout="constrained")
+    for label, loss in histories.items():
+        ax.plot(np.arange(1, len(loss) + 1), 100 * np.asarray(loss), lw=1.8 if label == kept else 0.8,
+                label=f"start: {label}" + (" (kept)" if label == kept else ""))
+    ax.legend(fontsize=8)
+    ax.set_xlabel("optimiser step")
+    ax.set_ylabel("training RMS position error [% of field]")
+    ax.set_title("mask design: loss (noisy read-out, calibration in the loop)")
+    ax.grid(alpha=0.3)
+    return _save(fig, path)
+
+
+def plot_masks(rows: dict[str, list[Mask]], names: list[str], path: Path) -> Path:
+    """Masks as printed (transmission), one row per design, one column per mixel."""
+    fig, axes = plt.subplots(len(rows), len(names), figsize=(2.6 * len(names), 2.5 * len(rows)),
+                             layout="constrained", squeeze=False)
+    image = None
+    for r, (label, masks) in enumerate(rows.items()):
+        for c, (mask, name) in enumerate(zip(masks, names, strict=True)):
+            ax = axes[r, c]
+            extent = (-mask.width_m / 2 * 1e3, mask.width_m / 2 * 1e3, -mask.height_m / 2 * 1e3,
+                      mask.height_m / 2 * 1e3)
+            image = ax.imshow(mask.transmission, cmap="gray", vmin=0.0, vmax=1.0, extent=extent,
+                              interpolation="nearest")
+            ax.set_title(f"{label}: {name}", fontsize=9)
+            ax.set_xlabel("x on mask [mm]", fontsize=8)
+            if c == 0:
+                ax.set_ylabel("y on mask [mm]", fontsize=8)
+    fig.colorbar(image, ax=axes, shrink=0.8, label="transmission (as printed on film)")
+    return _save(fig, path)
+
+
+def plot_error_vs_depth(results: dict[str, dict], path: Path) -> Path:
+    """Per-object position error against depth, and the per-depth averages, for each mincam."""
+    fig, ax = plt.subplots(figsize=(6.4, 3.8), layout="constrained")
+    for (label, res), colour in zip(results.items(), ("tab:red", "tab:blue", "tab:gray"), strict=False):
+        a = res["arrays"]
+        ax.scatter(100 * a["depth_m"], a["error_pct"], s=6, alpha=0.35, color=colour)
+        depths = np.unique(a["depth_m"])
+        avg = [np.nanmean(a["error_pct"][a["depth_m"] == d]) for d in depths]
+        ax.plot(100 * depths, avg, "-o", color=colour, ms=4,
+                label=f"{label}: avg {res['avg_error_pct']:.2f} %, max {res['max_error_pct']:.1f} %")
+    ax.axvline(50, color="k", lw=0.8, ls=":", label="calibration depth")
+    ax.set_yscale("log")
+    ax.set_xlabel("object depth [cm]")
+    ax.set_ylabel("position error [% of field]")
+    ax.set_title("held-out objects, physical simulator (response maps), 12-bit sensor")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3, which="both")
+    return _save(fig, path)
+
+
+__all__ = ["plot_error_vs_depth", "plot_loss", "plot_masks"]
