@@ -303,6 +303,9 @@ def signed_change_centroid(image: np.ndarray, background: np.ndarray, setup: Set
     return (points * change[..., None]).sum(axis=(0, 1)) / total
 
 
+STRATIFIED_SHARE = 64  # the stratified dP estimator's rays per pass: the plain budget (setup.spp) / this (issue 10)
+
+
 def locate_in_world(world, frames, background, setup: Setup, rng: np.random.Generator, predict, spp: int,
                     region: np.ndarray | None = None, axis: int | None = None,
                     show_progress: bool = False) -> tuple[dict, dict, list, np.ndarray]:
@@ -316,7 +319,8 @@ def locate_in_world(world, frames, background, setup: Setup, rng: np.random.Gene
     from ..estimators import detect_change
     from ..progress import progress
 
-    dp, _ = world.measure_changes(frames, background, spp=spp, seed=setup.seed, show_progress=show_progress)
+    dp, _ = world.measure_changes(frames, background, spp=spp, seed=setup.seed, show_progress=show_progress,
+                                  estimator="stratified")
     bg_irr = np.asarray(dp.meta["background_w_m2"])
     frame_irr = bg_irr + dp.irradiance_w_m2
     readout = read_out(frame_irr, bg_irr, setup, rng)
@@ -362,6 +366,8 @@ def locate_in_world(world, frames, background, setup: Setup, rng: np.random.Gene
         "noise_sigma_median_pct": float(100 * np.median(sigma_norm[ok]) / setup.field_m) if ok.any() else None,
         "dP_worst_rel_stderr": float(np.nanmax(dp_rel[ok])) if ok.any() else None,
         "spp_per_mixel_per_frame": spp,
+        "dP_estimator": dp.meta["estimator"],
+        "rays_per_mixel_per_frame": dp.meta["rays_per_mixel_per_frame"],
         "exposure_s": readout.sensor.exposure_s,
     }
     arrays = {"predicted_m": predicted, "truth_m": truth, "signed_centroid_m": signed, "detected": detected,

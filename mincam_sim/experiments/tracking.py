@@ -11,6 +11,7 @@ from .. import objects
 from ..estimators import track_4
 from .common import (
     PAPER,
+    STRATIFIED_SHARE,
     Setup,
     camera_fov_deg,
     fit_calibration_2d,
@@ -54,7 +55,7 @@ def run(setup: Setup, out_dir: Path, show_progress: bool = False) -> dict:
     cal = calibrate(setup, cam, rng, out_dir)
 
     kinds = TOYS[:2] if setup.quick else TOYS
-    n_per_toy = 8 if setup.quick else 24
+    n_per_toy = 8 if setup.quick else 100  # full mode: a 300-frame video
     toys = {kind: objects.windup_toy(kind, size_m=0.07) for kind in kinds}
     table = make_tabletop(setup, toys, rng)
     frames, sequence = [], []
@@ -70,7 +71,7 @@ def run(setup: Setup, out_dir: Path, show_progress: bool = False) -> dict:
     camera = sd.pinhole_camera(setup.center.matrix(), camera_fov_deg(setup), setup.camera_px, setup.camera_px,
                                spp=32)
     world = WorldRenderer(cam, world_elements(table), replicates=8, camera=camera)
-    spp = setup.spp // 2 if setup.quick else setup.spp
+    spp = (setup.spp // 2 if setup.quick else setup.spp) // STRATIFIED_SHARE  # rays per pass of the stratified dP
     calibration = cal["calibration"]
 
     def predict(c):
