@@ -287,6 +287,23 @@ def bench_study_scaling() -> dict:
             "includes": "cluster start-up, point computation, Zarr writes"}
 
 
+def bench_reproduce_all() -> dict:
+    """Issue 10: wall time of ``reproduce all`` in full mode (intrusion and tracking videos of >= 300 frames)."""
+    import tempfile
+
+    from mincam_sim.experiments import EXPERIMENTS, Setup, reproduce
+
+    setup = Setup()
+    with tempfile.TemporaryDirectory() as out:
+        t = time.perf_counter()
+        results = reproduce(list(EXPERIMENTS), setup, Path(out))
+        seconds = time.perf_counter() - t
+    frames = {name: results[name].get("frames") for name in ("intrusion", "tracking") if name in results}
+    return {"reproduce_all_seconds": seconds, "frames_per_run": frames,
+            "rays_per_mixel_per_frame": {name: results[name].get("rays_per_mixel_per_frame")
+                                         for name in ("intrusion", "tracking") if name in results}}
+
+
 BENCHMARKS = {
     "baseline": bench_baseline,
     "sweep": bench_sweep,
@@ -295,6 +312,7 @@ BENCHMARKS = {
     "memory_sweep_1080p": bench_memory_sweep_1080p,
     "memory_10k_frames": bench_memory_10k_frames,
     "study_scaling": bench_study_scaling,
+    "reproduce_all": bench_reproduce_all,
 }
 
 
@@ -342,6 +360,8 @@ def main() -> int:
             summary[f"moving_object.{key}"] = moving[key]
     summary["memory_peak_mib"] = {k: v["peak_memory_mib"] for k, v in results.items() if isinstance(v, dict)
                                   and "peak_memory_mib" in v}
+    if "reproduce_all" in results:
+        summary["reproduce_all_seconds"] = results["reproduce_all"]["reproduce_all_seconds"]
     if "study_scaling" in results:
         scaling = results["study_scaling"]
         summary["study_scaling_efficiency_1_to_2_workers"] = scaling["scaling_efficiency_1_to_2_workers"]
