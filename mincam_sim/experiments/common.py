@@ -303,7 +303,7 @@ def signed_change_centroid(image: np.ndarray, background: np.ndarray, setup: Set
     return (points * change[..., None]).sum(axis=(0, 1)) / total
 
 
-STRATIFIED_SHARE = 64  # the stratified dP estimator's rays per pass: the plain budget (setup.spp) / this (issue 10)
+STRATIFIED_SHARE = 128  # the stratified dP estimator's rays per pass: the plain budget (setup.spp) / this (issue 10)
 
 
 def locate_in_world(world, frames, background, setup: Setup, rng: np.random.Generator, predict, spp: int,

@@ -44,7 +44,7 @@ MAX_SPP = 1 << 26  # cap of the target-noise budget, samples per mixel per frame
 ESTIMATORS = ("plain", "stratified")
 STRATA_EXPANSIONS = (1.0, 2.0, 4.0, 8.0)  # nested rectangles: the change region, then scaled about its centre
 STRATA_SHARES = (0.4, 0.1, 0.12, 0.18, 0.2)  # rays per stratum (region, rings, rest): ~Neyman on the bench scene
-BACKGROUND_PASSES = 16  # stratified: the background's whole-aperture value costs as many rays as 16 passes
+BACKGROUND_PASSES = 4  # stratified: the background's whole-aperture value (for P, once per run) costs 4 passes
 Updates = Mapping[str, np.ndarray]
 __all__ = ["CAMERA_KEY", "SENSOR_KEY", "WorldRenderer", "transform_update", "vertex_update"]
 
