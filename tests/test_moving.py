@@ -160,7 +160,7 @@ def test_small_box_high_precision_and_what_the_region_leaves_out():
 
     world, frames, bg = _world({}, (0.04, 0.02, 0.02))
     fr = frames([(0.03, 0.02, 0.0), (-0.06, -0.01, 0.0)])
-    plain, fast = _compare(world, fr, bg, 1 << 22, 1 << 18, seed=7, what="small box, high precision")
+    plain, fast = _compare(world, fr, bg, 1 << 23, 1 << 18, seed=7, what="small box, high precision")
     resolution = np.hypot(plain.stderr_w_m2, fast.stderr_w_m2).max() / np.abs(plain.irradiance_w_m2).max()
     assert resolution < 0.01
     world.update(bg)
