@@ -176,3 +176,15 @@ def test_small_box_high_precision_and_what_the_region_leaves_out():
     outside = parts[..., 1:].sum(axis=2)  # (replicates, mixels): dP outside the region
     z_outside = outside.mean(0) / (outside.std(0, ddof=1) / np.sqrt(len(outside)))
     assert np.all(np.abs(z_outside) > 5), f"outside-region dP only {z_outside} sigma"
+
+
+def test_only_shapes_that_differ_from_the_background_bound_the_region():
+    """Updates that re-set a parked shape to its background value do not move it (tracking frames re-park every
+    toy but the active one): only the active shape's bounds enter the region."""
+    from mincam_sim.render.world import _changed_shapes
+
+    bg = {"a.vertex_positions": np.zeros(6, np.float32), "b.vertex_positions": np.ones(6, np.float32)}
+    frame = {"a.vertex_positions": np.full(6, 2.0, np.float32), "b.vertex_positions": np.ones(6, np.float32),
+             "c.to_world": np.eye(4)}
+    assert _changed_shapes(frame, bg) == {"a", "c"}
+    assert _changed_shapes(bg, bg) == set()

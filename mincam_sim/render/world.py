@@ -231,11 +231,14 @@ class WorldRenderer:
         counts = [max(1, int(round(per_rep * s / shares.sum()))) for s in shares]
         moving = _moving_shapes([background, *frames])
         self.update(background)
-        bg_regions = self.change_regions(moving)
+        bg_regions = {name: self.change_regions([name]) for name in moving}
         fractions = []
         for i in progress(todo, desc="frames", disable=not show_progress):
+            changed = _changed_shapes(frames[i], background)
             self.update({**background, **frames[i]})
-            regions = bg_regions.union(self.change_regions(moving))
+            regions = self.change_regions(changed)
+            for name in changed:
+                regions = regions.union(bg_regions[name])
             frame_seed = derive_seed(seed, "stratified") if correlated else derive_seed(seed, "stratified", int(i))
             est = stratified_estimates(self.scene, self.sensor, self.mincam, regions, r, counts, frame_seed,
                                        expansions)
@@ -257,8 +260,16 @@ class WorldRenderer:
                 "region_area_fraction_mean": float(np.mean(fractions)) if fractions else None}
 
     def change_regions(self, moving: Sequence[str]) -> ApertureRegions:
-        """Aperture regions (per mixel) that the named shapes, in their current place, and their shadows reach."""
-        return mixel_regions(self.mincam, _change_points(self.scene, moving))
+        """Aperture regions (per mixel) that the named shapes, in their current place, and their shadows reach:
+        the bounding rectangle of each shape's own region (so that far-apart shapes, one of them out of view,
+        do not make one hull spanning both); the whole aperture if one of them is unbounded."""
+        regions = ApertureRegions.empty(self.mincam)
+        for name in sorted(moving):
+            points = _change_points(self.scene, [name])
+            if points is None:
+                return ApertureRegions.full(self.mincam)
+            regions = regions.union(mixel_regions(self.mincam, points))
+        return regions
 
     def content_fingerprint(self) -> str:
         """Content key of the scene as Mitsuba holds it: every traversable parameter's value (meshes,
@@ -289,6 +300,21 @@ def _param_array(value) -> np.ndarray:
 def _moving_shapes(updates: Sequence[Updates]) -> set[str]:
     """Names of the shapes whose parameters the updates set (the part before the first dot of each key)."""
     return {key.split(".", 1)[0] for u in updates for key in u} - {SENSOR_KEY, CAMERA_KEY}
+
+
+def _changed_shapes(update: Updates, background: Updates) -> set[str]:
+    """Names of the shapes that ``update``, applied on top of ``background``, sets to other values."""
+    names = set()
+    for key, value in update.items():
+        same = False
+        if key in background:
+            try:
+                same = np.array_equal(np.asarray(value), np.asarray(background[key]))
+            except (TypeError, ValueError):
+                same = False
+        if not same:
+            names.add(key.split(".", 1)[0])
+    return names - {SENSOR_KEY, CAMERA_KEY}
 
 
 def _change_points(scene, moving) -> np.ndarray | None:
