@@ -300,7 +300,9 @@ def bench_reproduce_all() -> dict:
         results = reproduce(list(EXPERIMENTS), setup, Path(out))
         seconds = time.perf_counter() - t
     frames = {name: results[name].get("frames") for name in ("intrusion", "tracking") if name in results}
-    return {"reproduce_all_seconds": seconds, "frames_per_run": frames,
+    errors = {name: [results[name].get("max_error_pct"), results[name].get("avg_error_pct")]
+              for name in ("intrusion", "tracking") if name in results}
+    return {"reproduce_all_seconds": seconds, "frames_per_run": frames, "max_avg_error_pct": errors,
             "rays_per_mixel_per_frame": {name: results[name].get("rays_per_mixel_per_frame")
                                          for name in ("intrusion", "tracking") if name in results}}
 
