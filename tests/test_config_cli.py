@@ -236,7 +236,7 @@ def test_shipped_reproduce_config_loads_and_bad_ones_name_the_field(tmp_path):
 
     setup, params = load_reproduce_config(ROOT / "scenes" / "experiments" / "reproduce.toml")
     assert setup.spacing_m == 0.033 and set(params) == set(REGISTRY)
-    assert params["tracking"].frames_per_toy == 24
+    assert params["tracking"].frames_per_toy == 100
     quick_setup, quick = load_reproduce_config(None, quick=True)
     assert quick_setup.quick and quick["tracking"].frames_per_toy < params["tracking"].frames_per_toy
     _, custom = load_reproduce_config({"tracking": {"frames_per_toy": 300}}, quick=True)

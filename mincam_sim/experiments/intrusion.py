@@ -49,7 +49,7 @@ class IntrusionParams:
     calibration_positions: int = 51
     calibration_square_m: float = 0.03
     calibration_rel_stderr: float = 1e-3
-    frame_rate_hz: float = 15.0
+    frame_rate_hz: float = 125.0  # full mode: a >= 300-frame video (the slower car's 2.4 s run)
     lanes_y_m: tuple[float, ...] = (-0.12, 0.07)
     speeds_m_s: tuple[float, ...] = (0.12, 0.09)
     start_distance_m: float = 0.12
@@ -120,8 +120,8 @@ class Intrusion(Experiment):
         world = tabletop_world(setup, scene.table, cam, camera)
         calibration: Calibration1D = cal["calibration"]
 
-        def predict(c):
-            return calibration.apply(intrusion_position(c[:, 0], c[:, 1]))
+        def predict(c, min_total_dn):
+            return calibration.apply(intrusion_position(c[:, 0], c[:, 1], min_total_dn))
 
         rows, cols = np.indices((camera.pixels, camera.pixels))
         xy = camera.pixel_to_table(rows, cols, (camera.pixels, camera.pixels))

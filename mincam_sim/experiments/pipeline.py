@@ -18,6 +18,7 @@ from .setup import Setup
 
 GROUND_TRUTH_SPP = 32  # camera samples per pixel
 GROUND_TRUTH_THRESHOLD = 0.02  # binary detection: |change| > this fraction of the brightest background pixel
+STRATIFIED_SHARE = 128  # the stratified dP estimator spends the plain budget / this per pass (issue 10)
 
 
 @dataclass
@@ -36,25 +37,38 @@ def _finite_rows(a: np.ndarray) -> np.ndarray:
 
 
 def locate_in_world(world: WorldRenderer, camera: GroundTruthCamera, frames: Sequence[dict], background: dict,
-                    setup: Setup, rng: np.random.Generator, predict: Callable[[np.ndarray], np.ndarray], spp: int,
+                    setup: Setup, rng: np.random.Generator, predict: Callable[[np.ndarray, float], np.ndarray],
+                    spp: int,
                     region: np.ndarray | None = None, axis: int | None = None,
                     show_progress: bool = False) -> Located:
-    """Render dP of every frame (correlated seeds), read it out, detect, predict positions with
-    ``predict(change_dn)``, propagate the noise, and compare with the ground-truth camera.
+    """Render dP of every frame (``setup.dp_estimator``: the stratified estimator with the plain budget ``spp`` /
+    ``STRATIFIED_SHARE`` rays per pass, or the plain correlated one with ``spp``), read it out, detect, predict
+    positions with
+    ``predict(change_dn, min_total_dn)``, propagate the noise, and compare with the ground-truth camera.
+
+    ``min_total_dn`` is the detection threshold: a ratio estimator (Eq. 4 / Eq. 7) gives NaN (not a position) where
+    its denominator, a sum of mixel changes, is within that of zero, as when an object's brightening and its
+    shadow's darkening cancel; such frames count as missed, not as wild positions.
 
     ``axis`` picks one coordinate (1D experiments); ``region`` restricts the ground truth (e.g. the boundary
     band).
     """
-    dp, _ = world.measure_changes(frames, background, spp=spp, seed=setup.seed, show_progress=show_progress)
+    rays = spp // STRATIFIED_SHARE if setup.dp_estimator == "stratified" else spp
+    dp, _ = world.measure_changes(frames, background, spp=rays, seed=setup.seed, show_progress=show_progress,
+                                  estimator=setup.dp_estimator)
     bg_irr = np.asarray(dp.meta["background_w_m2"])
     frame_irr = bg_irr + dp.irradiance_w_m2
     readout = read_out(frame_irr, bg_irr, setup.sensor(), rng, setup.exposure_fill)
     detected = detect_change(readout.frames_dn, readout.background_dn, readout.threshold_dn)
     change = readout.change_dn
-    predicted = predict(change)
-    predicted_ideal = predict(readout.ideal_change_dn(frame_irr, bg_irr))
-    sigma = propagate_sigma(predict, change, readout.change_sigma_dn(frame_irr, bg_irr, dp.stderr_w_m2))
-    sigma_sensor = propagate_sigma(predict, change, readout.change_sigma_dn(frame_irr, bg_irr))
+
+    def estimate(c: np.ndarray) -> np.ndarray:
+        return predict(c, readout.threshold_dn)
+
+    predicted = estimate(change)
+    predicted_ideal = estimate(readout.ideal_change_dn(frame_irr, bg_irr))
+    sigma = propagate_sigma(estimate, change, readout.change_sigma_dn(frame_irr, bg_irr, dp.stderr_w_m2))
+    sigma_sensor = propagate_sigma(estimate, change, readout.change_sigma_dn(frame_irr, bg_irr))
 
     world.update(background)
     bg_image = world.camera_image(spp=GROUND_TRUTH_SPP, seed=setup.seed)
@@ -88,7 +102,9 @@ def locate_in_world(world: WorldRenderer, camera: GroundTruthCamera, frames: Seq
         "vs_signed_centroid": error_rates(predicted[ok], signed[ok], setup.field_m),
         "noise_sigma_median_pct": float(100 * np.median(sigma_norm[ok]) / setup.field_m) if ok.any() else None,
         "dP_worst_rel_stderr": float(np.nanmax(dp_rel[ok])) if ok.any() else None,
-        "spp_per_mixel_per_frame": spp,
+        "spp_per_mixel_per_frame": rays,
+        "dP_estimator": dp.meta["estimator"],
+        "rays_per_mixel_per_frame": dp.meta["rays_per_mixel_per_frame"],
         "exposure_s": readout.sensor.exposure_s,
     }
     arrays = {"predicted_m": predicted, "truth_m": truth, "signed_centroid_m": signed, "detected": detected,

@@ -37,6 +37,11 @@ class Setup:
         Calibrated range [m]: the paper's 50 cm boundary / field of view; error rates are % of it.
     bit_depth : int
         ADC bits (paper: 12); the sensor is :meth:`SensorModel.paper_prototype` (48 x 48 pixels averaged).
+    spp : int
+        Plain-estimator samples per mixel per frame on the tabletop (halved in quick mode); the stratified
+        estimator spends ``spp / 128`` rays per pass for the same noise (:mod:`.pipeline`).
+    dp_estimator : {"stratified", "plain"}
+        How frame changes dP are rendered (both unbiased; "plain" is the reference).
     quick : bool
         Fewer frames and samples (for ``make demo`` and the tests).
     """
@@ -52,7 +57,8 @@ class Setup:
     exposure_fill: float = 0.7
     screen_resolution: tuple[int, int] = DEFAULT_SCREEN_RESOLUTION
     table_light_radiance_w_m2_sr: float = 20.0
-    spp: int = 1 << 23  # samples per mixel per frame on the tabletop (quick mode: half)
+    spp: int = 1 << 23  # plain-estimator samples per mixel per frame on the tabletop (quick mode: half)
+    dp_estimator: str = "stratified"  # "stratified" (rays where the change is) or "plain" (the reference)
     camera_px: int = 160
     seed: int = 0
     quick: bool = False
@@ -68,6 +74,8 @@ class Setup:
             raise ValueError("Setup.spp must be >= 1 and Setup.camera_px >= 8")
         if not 0 < self.exposure_fill <= 1:
             raise ValueError(f"Setup.exposure_fill must be in (0, 1], got {self.exposure_fill!r}")
+        if self.dp_estimator not in ("stratified", "plain"):
+            raise ValueError(f"Setup.dp_estimator must be 'stratified' or 'plain', got {self.dp_estimator!r}")
         if not (np.isfinite(self.spacing_m) and self.spacing_m >= 0):
             raise ValueError(f"Setup.spacing_m must be >= 0 metres, got {self.spacing_m!r}")
 

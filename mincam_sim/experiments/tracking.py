@@ -49,7 +49,7 @@ class TrackingParams:
 
     toys: tuple[str, ...] = ("robot", "chick", "frog")
     toy_size_m: float = 0.07
-    frames_per_toy: int = 24
+    frames_per_toy: int = 100  # full mode: a 300-frame video
     frame_interval_s: float = 0.5
     toy_speed_m_s: float = 0.04
     reach_fraction: float = 0.4
@@ -123,8 +123,8 @@ class Tracking(Experiment):
         world = tabletop_world(setup, scene.table, tracking_mincam(setup), camera)
         calibration: Calibration2D = cal["calibration"]
 
-        def predict(c):
-            return calibration.apply(track_4(c))
+        def predict(c, min_total_dn):
+            return calibration.apply(track_4(c, min_total_dn))
 
         found = locate_in_world(world, camera, scene.frames, scene.background, setup, rng, predict,
                                 setup.tabletop_spp, show_progress=show_progress)

@@ -5,6 +5,19 @@ are traced in one kernel. A frame and its background are traced with the same se
 so the Monte Carlo noise of the two largely cancels in their difference ``dP`` (what the estimators use); the
 standard error of ``dP`` comes from the spread of the per-replicate differences, so it includes that
 correlation.
+
+Two estimators of ``dP`` (``measure_changes(estimator=...)``):
+
+* ``"plain"`` (the reference): every frame traced over the whole aperture with the background's seed; the
+  background traced once.
+* ``"stratified"``: per frame and mixel, the aperture region where the frame can differ from the background
+  (:mod:`.change_region`: the moving shapes' bounds and their shadow volumes from the emitting shapes, for both
+  the frame and the background) gets most rays, the rest of the aperture a few, both strata unbiased
+  (:mod:`.stratified`). The frame and the background are traced with the same seed, counts and regions, so
+  their rays pair up lane by lane; the background's full-aperture value (for ``P``) is traced once, with
+  :data:`BACKGROUND_PASSES` times a pass's rays. Kernels are compiled once and reused (same code every frame,
+  per-frame bounds are array inputs); each frame costs one parameter update (one acceleration-structure rebuild)
+  for the frame and one back to the background.
 """
 
 from __future__ import annotations
@@ -20,12 +33,18 @@ from ..optics import Mincam
 from ..progress import progress
 from ..store import ResultStore
 from . import backend
+from .change_region import ApertureRegions, change_points, mixel_regions
 from .elements import transform_update, vertex_update
 from .estimation import derive_seed, samples_for_target, warn_unreached, worst_relative_stderr
 from .mask_eval import mask_model_meta
 from .mincam_scene import CAMERA_KEY, SENSOR_KEY, MincamScene, geometry_meta
+from .stratified import check_strata, stratified_estimates
 
 MAX_SPP = 1 << 26  # cap of the target-noise budget, samples per mixel per frame
+ESTIMATORS = ("plain", "stratified")
+STRATA_EXPANSIONS = (1.0, 2.0, 4.0, 8.0)  # nested rectangles: the change region, then scaled about its centre
+STRATA_SHARES = (0.4, 0.1, 0.12, 0.18, 0.2)  # rays per stratum (region, rings, rest): ~Neyman on the bench scene
+BACKGROUND_PASSES = 4  # stratified: the background's whole-aperture value (for P, once per run) costs 4 passes
 Updates = Mapping[str, np.ndarray]
 __all__ = ["CAMERA_KEY", "SENSOR_KEY", "WorldRenderer", "transform_update", "vertex_update"]
 
@@ -81,6 +100,9 @@ class WorldRenderer:
         show_progress: bool = False,
         target_rel_stderr: float = 0.0,
         overwrite: bool = False,
+        estimator: str = "plain",
+        strata_shares: Sequence[float] = STRATA_SHARES,
+        strata_expansions: Sequence[float] = STRATA_EXPANSIONS,
     ) -> tuple[Measurements, Measurements]:
         """Measure each frame's change from the background: ``dP = P(frame) - P(background)``.
 
@@ -101,6 +123,16 @@ class WorldRenderer:
             so that every significant change (|dP| > 3 sigma in the pilot) reaches this relative standard
             error; ``meta["spp_per_mixel_per_frame"]`` is what was used and ``meta["reached_rel_stderr"]``
             what was reached over the significant changes.
+        estimator : {"plain", "stratified"}
+            ``"plain"``: whole-aperture rays for every frame (the reference). ``"stratified"``: most rays in the
+            aperture region the moving shapes and their shadows can reach, the rest in rings around it and over
+            the rest of the aperture; the frame and the background are both traced per frame (``spp`` rays each)
+            at the same rays.
+        strata_shares : sequence of float
+            Share of the stratified estimator's ``spp`` per stratum (region, each ring, rest), positive.
+        strata_expansions : sequence of float
+            Scale factors of the nested rectangles about the region's centre, starting at 1 (one fewer than the
+            shares).
 
         Returns
         -------
@@ -110,15 +142,24 @@ class WorldRenderer:
         n = len(self.mincam)
         if not (np.isfinite(target_rel_stderr) and target_rel_stderr >= 0):
             raise ValueError(f"target_rel_stderr must be >= 0 (0 = use spp as given), got {target_rel_stderr!r}")
+        if estimator not in ESTIMATORS:
+            raise ValueError(f"estimator must be one of {ESTIMATORS}, got {estimator!r}")
+        shares = np.asarray(strata_shares, dtype=float)
+        if shares.ndim != 1 or not np.all(np.isfinite(shares) & (shares > 0)):
+            raise ValueError(f"strata_shares (share of rays per stratum) must be positive numbers, "
+                             f"got {strata_shares!r}")
         budget: dict = {}
         if target_rel_stderr > 0 and len(frames):
             pilot_idx = np.unique(np.linspace(0, len(frames) - 1, min(4, len(frames))).astype(int))
-            pilot, _ = self.measure_changes([frames[i] for i in pilot_idx], background, spp, seed, correlated)
+            pilot, _ = self.measure_changes([frames[i] for i in pilot_idx], background, spp, seed, correlated,
+                                            estimator=estimator, strata_shares=strata_shares,
+                                            strata_expansions=strata_expansions)
             worst = worst_relative_stderr(pilot.irradiance_w_m2, pilot.stderr_w_m2, significance=3.0)
             budget = {"pilot_spp": int(spp), "pilot_worst_rel_stderr": worst, "target_rel_stderr": target_rel_stderr}
             spp = samples_for_target(spp, worst, target_rel_stderr, MAX_SPP)
         self.update(background)
-        bg = self.estimates(spp, seed)
+        bg_spp = spp if estimator == "plain" else BACKGROUND_PASSES * spp  # traced once: P = background + dP
+        bg = self.estimates(bg_spp, seed)
         columns = [f"dP_{m}" for m in self.mincam.names] + [f"P_{m}" for m in self.mincam.names]
         values = np.full((len(frames), 2 * n), np.nan)
         errors = np.full_like(values, np.nan)
@@ -130,18 +171,29 @@ class WorldRenderer:
                         "background": _fingerprint([background]), "mincam": fingerprint(self.mincam),
                         "scene": self.content_fingerprint(), "variant": backend.variant(),
                         "versions": library_versions()}
+            if estimator != "plain":
+                identity.update(estimator=estimator, strata_shares=shares.tolist(),
+                                strata_expansions=[float(e) for e in strata_expansions])
             store = ResultStore(out_dir, len(frames), columns, identity, overwrite=overwrite)
             values[:], errors[:] = store.values, store.stderr
             todo = store.pending()
+        strata: dict = {}
         try:
-            self._measure_into(frames, background, todo, spp, seed, correlated, bg, values, errors, store,
-                               show_progress)
+            if estimator == "plain":
+                self._measure_into(frames, background, todo, spp, seed, correlated, bg, values, errors, store,
+                                   show_progress)
+            else:
+                strata = self._measure_stratified_into(frames, background, todo, spp, seed, correlated,
+                                                       (shares, tuple(strata_expansions)), bg, values, errors,
+                                                       store, show_progress)
         finally:
             if store is not None:
                 store.close()
         self.update(background)
 
-        meta = {"form": "fast_world", "spp_per_mixel_per_frame": int(spp), "seed": seed, "correlated_seeds": correlated,
+        meta = {"form": "fast_world", "estimator": estimator, **strata,
+                "spp_per_mixel_per_frame": int(spp), "background_spp_per_mixel": int(bg_spp), "seed": seed,
+                "correlated_seeds": correlated,
                 "replicates": self.replicates, "background_w_m2": bg.mean(0).tolist(),
                 "masks": {m.name: mask_model_meta(m.mask) for m in self.mincam},
                 "background_stderr_w_m2": (bg.std(0, ddof=1) / np.sqrt(self.replicates)).tolist(),
@@ -170,6 +222,55 @@ class WorldRenderer:
             if store is not None:
                 store.write([i], row_v[None], row_e[None])
 
+    def _measure_stratified_into(self, frames, background, todo, spp, seed, correlated, strata, bg, values,
+                                 errors, store, show_progress) -> dict:
+        r = self.replicates
+        shares, expansions = strata
+        check_strata([1] * len(shares), expansions)
+        per_rep = -(-int(spp) // r)
+        counts = [max(1, int(round(per_rep * s / shares.sum()))) for s in shares]
+        moving = _moving_shapes([background, *frames])
+        self.update(background)
+        bg_regions = {name: self.change_regions([name]) for name in moving}
+        fractions = []
+        for i in progress(todo, desc="frames", disable=not show_progress):
+            changed = _changed_shapes(frames[i], background)
+            self.update({**background, **frames[i]})
+            regions = self.change_regions(changed)
+            for name in changed:
+                regions = regions.union(bg_regions[name])
+            frame_seed = derive_seed(seed, "stratified") if correlated else derive_seed(seed, "stratified", int(i))
+            est = stratified_estimates(self.scene, self.sensor, self.mincam, regions, r, counts, frame_seed,
+                                       expansions)
+            self.update(background)
+            bg_seed = frame_seed if correlated else derive_seed(seed, "stratified-background", int(i))
+            bg_est = stratified_estimates(self.scene, self.sensor, self.mincam, regions, r, counts, bg_seed,
+                                          expansions)
+            diff = est - bg_est
+            frame = bg + diff  # P(frame): the background traced once over the whole aperture, plus the change
+            row_v = np.concatenate([diff.mean(0), frame.mean(0)])
+            row_e = np.concatenate([diff.std(0, ddof=1), frame.std(0, ddof=1)]) / np.sqrt(r)
+            values[i], errors[i] = row_v, row_e
+            fractions.append(regions.area_fraction())
+            if store is not None:
+                store.write([i], row_v[None], row_e[None])
+        return {"strata_expansions": list(expansions), "strata_rays_per_replicate": counts,
+                "rays_per_mixel_per_frame": 2 * r * sum(counts),
+                "moving_shapes": sorted(moving),
+                "region_area_fraction_mean": float(np.mean(fractions)) if fractions else None}
+
+    def change_regions(self, moving: Sequence[str]) -> ApertureRegions:
+        """Aperture regions (per mixel) that the named shapes, in their current place, and their shadows reach:
+        the bounding rectangle of each shape's own region (so that far-apart shapes, one of them out of view,
+        do not make one hull spanning both); the whole aperture if one of them is unbounded."""
+        regions = ApertureRegions.empty(self.mincam)
+        for name in sorted(moving):
+            points = _change_points(self.scene, [name])
+            if points is None:
+                return ApertureRegions.full(self.mincam)
+            regions = regions.union(mixel_regions(self.mincam, points))
+        return regions
+
     def content_fingerprint(self) -> str:
         """Content key of the scene as Mitsuba holds it: every traversable parameter's value (meshes,
         textures, transforms, radiances), the element names and plugin types, and the path depth."""
@@ -194,6 +295,44 @@ def _param_array(value) -> np.ndarray:
     if arr.dtype.hasobject:
         arr = np.frombuffer(repr(value).encode(), dtype=np.uint8)
     return arr
+
+
+def _moving_shapes(updates: Sequence[Updates]) -> set[str]:
+    """Names of the shapes whose parameters the updates set (the part before the first dot of each key)."""
+    return {key.split(".", 1)[0] for u in updates for key in u} - {SENSOR_KEY, CAMERA_KEY}
+
+
+def _changed_shapes(update: Updates, background: Updates) -> set[str]:
+    """Names of the shapes that ``update``, applied on top of ``background``, sets to other values."""
+    names = set()
+    for key, value in update.items():
+        same = False
+        if key in background:
+            try:
+                same = np.array_equal(np.asarray(value), np.asarray(background[key]))
+            except (TypeError, ValueError):
+                same = False
+        if not same:
+            names.add(key.split(".", 1)[0])
+    return names - {SENSOR_KEY, CAMERA_KEY}
+
+
+def _change_points(scene, moving) -> np.ndarray | None:
+    """Corner points whose hull holds the moving shapes and their shadow volumes [m]; None if unbounded
+    (an environment light or a moving emitter, or a moved parameter that belongs to no shape)."""
+    shapes = {s.id(): s for s in scene.shapes()}
+    if any(e.is_environment() for e in scene.emitters()) or any(name not in shapes for name in moving):
+        return None
+    if any(shapes[name].is_emitter() for name in moving):
+        return None
+
+    def box(shape):
+        bb = shape.bbox()
+        return np.array(bb.min, dtype=float), np.array(bb.max, dtype=float)
+
+    objects = [box(shapes[name]) for name in sorted(moving)]
+    lights = [box(s) for s in scene.shapes() if s.is_emitter()]
+    return change_points(objects, lights, box(scene))
 
 
 def _fingerprint(updates: Sequence[Updates]) -> list:

@@ -1,0 +1,182 @@
+"""Two-stratum estimates of the fast sensor: most rays where a frame can change things, a few everywhere else.
+
+For every ray the detector point ``x_d`` is drawn uniformly (as in :mod:`.mixel_sensor`); given ``x_d``, the
+aperture ``[0, 1]^2`` (aperture-sample units, the whole mask) is split into the *region* rectangle ``R(x_d)``
+(:mod:`.change_region`, clipped to the aperture) and its *rest* ``C(x_d)`` (up to four rectangles). A region ray
+draws its aperture point uniformly in ``R`` and is weighted by ``|R|``; a rest ray draws uniformly in ``C``
+(a rectangle picked in proportion to its area, then a uniform point in it) and is weighted by ``|C|``. For every
+``x_d`` both are exact stratum measures, so::
+
+    E = mean over region rays of |R| w L  +  mean over rest rays of |C| w L
+
+is unbiased for the sensor's irradiance whatever the region (a region that misses the change only costs
+variance; an empty region leaves the rest stratum the whole aperture). Each (mixel, replicate) group holds
+``n_region + n_rest`` lanes; the lane layout depends only on the counts, so two passes with the same seed, counts
+and regions (a frame and its background) draw the same random numbers lane by lane, and their difference cancels
+everywhere the scenes agree. Values are summed in float64 in a fixed order (as :mod:`.tracing`).
+
+The region's rays sit on a jittered grid in the region's own coordinates (every cell the same number of times,
+a uniform point in it): unbiased, and less variance from where the object's edges cut the region. The detector
+point stays independent per ray, so no fixed pairing of strata across factors arises.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..optics import Mincam
+from . import backend
+from .change_region import ApertureRegions
+from .tracing import MAX_LANES
+
+DETECTOR_SHRINK = 1 - 2e-6  # as mixel_sensor.mixel_position_sample: keeps x strictly inside the mixel's film cell
+
+
+def check_strata(counts: Sequence[int], expansions: Sequence[float]) -> None:
+    """Raise a ``ValueError`` naming the field unless every stratum has >= 1 ray and the expansions grow."""
+    if len(counts) != len(expansions) + 1:
+        raise ValueError(f"counts (rays per replicate and mixel in each stratum) needs one entry per expansion "
+                         f"plus one for the rest of the aperture: got {len(counts)} counts, {len(expansions)} "
+                         "expansions")
+    for j, value in enumerate(counts):
+        if isinstance(value, bool) or int(value) != value or value < 1:
+            raise ValueError(f"counts[{j}] (rays per replicate and mixel in stratum {j}) must be an integer >= 1, "
+                             f"got {value!r}; every stratum needs rays, or the estimate is biased")
+    if not expansions or expansions[0] != 1.0 or any(b <= a for a, b in zip(expansions, expansions[1:], strict=False)):
+        raise ValueError(f"expansions (region scale factors of the nested strata) must start at 1 and grow, "
+                         f"got {list(expansions)!r}")
+
+
+def stratified_estimates(scene, sensor, mincam: Mincam, regions: ApertureRegions, replicates: int,
+                         counts: Sequence[int], seed: int, expansions: Sequence[float] = (1.0,),
+                         by_stratum: bool = False, jitter: bool = True) -> np.ndarray:
+    """(replicates, n_mixels) independent stratified estimates of each mixel's irradiance [W/m^2].
+
+    Parameters
+    ----------
+    scene, sensor
+        The fast scene and its mixel-array sensor (:class:`.mincam_scene.MincamScene`).
+    regions : ApertureRegions
+        Per-mixel region bounds (aperture-sample units, affine in the detector point).
+    replicates : int
+        Independent groups per mixel (their spread gives the standard error).
+    counts : sequence of int
+        Rays per (mixel, replicate) in each stratum: the region, each ring, the rest of the aperture.
+    expansions : sequence of float
+        Scale factors (about the region's centre) of the nested rectangles: ``(1.0,)`` = region and rest;
+        ``(1.0, 3.0)`` adds the ring between the region and the region scaled 3 times (indirect light near it).
+    seed : int
+        Seed of the launch; same seed, counts and regions give the same random numbers lane by lane.
+    by_stratum : bool
+        Return (replicates, n_mixels, n_strata): each stratum's part; their sum is the estimate.
+    jitter : bool
+        Region rays on a jittered grid (one per cell of the largest square grid that fits, the remainder
+        uniform): still unbiased (every cell equally often, a uniform point in it), less variance from
+        where in the region the object's edges lie.
+    """
+    counts = [int(c) for c in counts]
+    check_strata(counts, expansions)
+    mi = backend.mitsuba()
+    import drjit as dr
+
+    n = len(mincam)
+    per = sum(counts)
+    n_strata = len(counts)
+    edges = np.cumsum(counts)
+    n_groups = n * int(replicates)
+    packed = np.concatenate([regions.packed(), 2.0 * regions.detector_half_m[:, None]], axis=1)  # (n, 9)
+    coeffs = mi.Float(np.ascontiguousarray(packed.ravel(), dtype=np.float32))
+    integrator = scene.integrator()
+    totals = np.zeros((n_groups, n_strata), dtype=np.float64)
+    groups_per_launch = max(1, MAX_LANES // per)
+    for launch, g0 in enumerate(range(0, n_groups, groups_per_launch)):
+        ng = min(groups_per_launch, n_groups - g0)
+        sampler = mi.load_dict({"type": "independent"})
+        sampler.seed((int(seed) * 1_000_003 + launch) & 0x7FFFFFFF, ng * per)
+        lane = dr.arange(mi.UInt32, ng * per)
+        group = lane // per + g0
+        j = lane % per
+        stratum = mi.UInt32(0)
+        for edge in edges[:-1]:
+            stratum += mi.UInt32(j >= int(edge))
+        k = group // int(replicates)
+        c = [dr.gather(mi.Float, coeffs, k * 9 + i) for i in range(9)]
+        u = sampler.next_2d()
+        v = sampler.next_2d()
+        if jitter:
+            v = _jittered_region(dr, mi, v, j, counts[0])
+        pick = sampler.next_1d()
+        wavelength = sampler.next_1d()
+        position = mi.Point2f((mi.Float(k) + 0.5 + (u.x - 0.5) * DETECTOR_SHRINK) / n, u.y)
+        x_d = (u.x - 0.5) * DETECTOR_SHRINK * c[8]
+        y_d = (u.y - 0.5) * c[8]
+        aperture, scale = _stratum_sample(dr, mi, c, x_d, y_d, v, pick, stratum, list(expansions))
+        ray, weight = sensor.sample_ray_differential(0.0, wavelength, position, aperture)
+        radiance, _, _ = integrator.sample(scene, sampler, ray, None, True)
+        value = np.asarray(scale * weight * radiance, dtype=np.float64).reshape(ng, per)
+        start = 0
+        for s, count in enumerate(counts):
+            totals[g0:g0 + ng, s] = value[:, start:start + count].sum(axis=1) / count
+            start += count
+    parts = totals.reshape(n, int(replicates), n_strata).transpose(1, 0, 2)
+    return parts if by_stratum else parts.sum(axis=2)
+
+
+def _jittered_region(dr, mi, v, j, n_region: int):
+    """Aperture samples of the region lanes ``j < n_region`` on a jittered ``side x side`` grid (normalised
+    region coordinates), for the largest complete set of cells; the other lanes keep ``v``."""
+    side = math.isqrt(int(n_region))
+    if side < 2:
+        return v
+    cells = side * side
+    on_grid = j < (int(n_region) // cells) * cells
+    cell = j % cells
+    gx = (mi.Float(cell % side) + v.x) / side
+    gy = (mi.Float(cell // side) + v.y) / side
+    return mi.Point2f(dr.select(on_grid, gx, v.x), dr.select(on_grid, gy, v.y))
+
+
+def _stratum_sample(dr, mi, c, x_d, y_d, v, pick, stratum, expansions):
+    """Aperture sample in [0, 1]^2 and its stratum's measure: stratum s is the ring between nested rectangle
+    s - 1 (a point for s = 0) and rectangle s (the whole aperture for the last)."""
+    lo_x = c[0] + dr.minimum(c[4] * x_d, c[5] * x_d)
+    lo_y = c[1] + dr.minimum(c[6] * y_d, c[7] * y_d)
+    hi_x = c[2] + dr.maximum(c[4] * x_d, c[5] * x_d)
+    hi_y = c[3] + dr.maximum(c[6] * y_d, c[7] * y_d)
+    empty = ~((hi_x > lo_x) & (hi_y > lo_y) & dr.isfinite(hi_x - lo_x) & dr.isfinite(hi_y - lo_y))
+    full = ~(dr.isfinite(lo_x) & dr.isfinite(lo_y) & dr.isfinite(hi_x) & dr.isfinite(hi_y))
+    mid_x, mid_y = 0.5 * (lo_x + hi_x), 0.5 * (lo_y + hi_y)
+    half_x, half_y = 0.5 * (hi_x - lo_x), 0.5 * (hi_y - lo_y)
+
+    def rect(scale):
+        if scale is None:  # the whole aperture
+            return (mi.Float(0.0), mi.Float(0.0), mi.Float(1.0), mi.Float(1.0))
+        box = [mid_x - scale * half_x, mid_y - scale * half_y, mid_x + scale * half_x, mid_y + scale * half_y]
+        box = [dr.select(full, b, dr.clip(x, 0.0, 1.0)) for b, x in zip((0.0, 0.0, 1.0, 1.0), box, strict=True)]
+        return [dr.select(empty & ~full, 0.0, x) for x in box]
+
+    rects = [rect(e) for e in expansions] + [rect(None)]
+    inner = [mi.Float(0.0)] * 4
+    outer = list(rects[0])
+    for s in range(1, len(rects)):
+        sel = stratum == s
+        inner = [dr.select(sel, a, b) for a, b in zip(rects[s - 1], inner, strict=True)]
+        outer = [dr.select(sel, a, b) for a, b in zip(rects[s], outer, strict=True)]
+    at_corner = stratum == 0  # the innermost stratum: a ring around a point at its corner
+    inner = [dr.select(at_corner, outer[i % 2], inner[i]) for i in range(4)]
+    ox0, oy0, ox1, oy1 = outer
+    ix0, iy0, ix1, iy1 = inner
+    a0, a1 = (ox1 - ox0) * (iy0 - oy0), (ox1 - ox0) * (oy1 - iy1)  # bottom, top strips
+    a2, a3 = (ix0 - ox0) * (iy1 - iy0), (ox1 - ix1) * (iy1 - iy0)  # left, right of the inner rectangle
+    area = a0 + a1 + a2 + a3
+    t = pick * area
+    first, second, third = t < a0, t < a0 + a1, t < a0 + a1 + a2
+    x0 = dr.select(first | second | third, ox0, ix1)
+    x1 = dr.select(first | second, ox1, dr.select(third, ix0, ox1))
+    y0 = dr.select(first, oy0, dr.select(second, iy1, iy0))
+    y1 = dr.select(first, iy0, dr.select(second, oy1, iy1))
+    aperture = mi.Point2f(x0 + (x1 - x0) * v.x, y0 + (y1 - y0) * v.y)
+    return aperture, area
