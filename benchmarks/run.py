@@ -289,16 +289,18 @@ def bench_study_scaling() -> dict:
 
 
 def bench_reproduce_all() -> dict:
-    """Issue 10: wall time of ``reproduce all`` in full mode (intrusion and tracking videos of >= 300 frames)."""
-    import tempfile
+    """Issue 10: wall time of ``reproduce all`` in full mode (intrusion and tracking videos of >= 300 frames).
+    Its results.json and plots stay in ``out/bench_reproduce_all`` (the README's experiment table and figures)."""
+    import shutil
 
     from mincam_sim.experiments import EXPERIMENTS, Setup, reproduce
 
     setup = Setup()
-    with tempfile.TemporaryDirectory() as out:
-        t = time.perf_counter()
-        results = reproduce(list(EXPERIMENTS), setup, Path(out))
-        seconds = time.perf_counter() - t
+    out = HERE.parent / "out" / "bench_reproduce_all"
+    shutil.rmtree(out, ignore_errors=True)
+    t = time.perf_counter()
+    results = reproduce(list(EXPERIMENTS), setup, out)
+    seconds = time.perf_counter() - t
     frames = {name: results[name].get("frames") for name in ("intrusion", "tracking") if name in results}
     errors = {name: [results[name].get("max_error_pct"), results[name].get("avg_error_pct")]
               for name in ("intrusion", "tracking") if name in results}
