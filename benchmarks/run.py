@@ -31,7 +31,7 @@ def _peak_mib() -> float:
 
 def _sweep_setup():
     from mincam_sim import Screen, cross_layout
-    from mincam_sim.screen import grid_sweep
+    from mincam_sim.scene.display import grid_sweep
 
     cam = cross_layout()
     screen = Screen()
@@ -47,7 +47,7 @@ def bench_baseline() -> dict:
     ramp mask, for the reference form (literal scene) and the fast form (mixel sensor), same spp."""
     from mincam_sim import Screen, masks, single
     from mincam_sim.render.screen_engine import ScreenRenderer
-    from mincam_sim.screen import white_square
+    from mincam_sim.scene.display import white_square
 
     screen = Screen()
     cam = single(masks.ramp("x"))
@@ -235,7 +235,7 @@ def bench_memory_sweep_1080p() -> dict:
 
     from mincam_sim import Screen, pair_layout
     from mincam_sim.render.screen_engine import render_frames
-    from mincam_sim.screen import line_sweep
+    from mincam_sim.scene.display import line_sweep
 
     screen = Screen(resolution=(1920, 1080))
     sweep = line_sweep((-0.25, 0.0), (0.25, 0.0), 1000, 0.03)
@@ -254,7 +254,7 @@ def bench_memory_10k_frames() -> dict:
 
     from mincam_sim import Screen, pair_layout
     from mincam_sim.render.screen_engine import render_frames
-    from mincam_sim.screen import line_sweep
+    from mincam_sim.scene.display import line_sweep
 
     screen = Screen()
     sweep = line_sweep((-0.25, -0.1), (0.25, 0.1), 10_000, 0.03)

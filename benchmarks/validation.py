@@ -21,7 +21,7 @@ def main() -> int:
 
     from mincam_sim import Mincam, Mixel, Pose, Screen, masks, single
     from mincam_sim.render.screen_engine import ScreenRenderer, response_maps
-    from mincam_sim.screen import vertical_line, white_square
+    from mincam_sim.scene.display import vertical_line, white_square
 
     out: dict = {}
     screen = Screen()
@@ -107,7 +107,7 @@ def coupled_geometry_and_shadows() -> dict:
     from mincam_sim import Mincam, Mixel, Screen, masks
     from mincam_sim.quadrature import mixel_irradiance_gl
     from mincam_sim.render.screen_engine import ScreenRenderer, response_maps
-    from mincam_sim.screen import coverage
+    from mincam_sim.scene.display import coverage
 
     out: dict = {}
     for name, mask in (("sinusoid30", SINUSOID_30), ("ramp", masks.ramp("1-x"))):

@@ -7,7 +7,7 @@ Only ``mincam_sim.render`` imports mitsuba / drjit; everything else is pure nump
 from .geometry import Pose, look_at
 from .masks import Mask
 from .optics import Mincam, Mixel, cross_layout, layout, pair_layout, single
-from .screen import Screen, grid_sweep, line_sweep, white_square
+from .scene.display import Screen, grid_sweep, line_sweep, white_square
 
 __all__ = [
     "Mask",

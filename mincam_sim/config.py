@@ -33,8 +33,16 @@ from .optics import (
     cross_layout,
     pair_layout,
 )
-from .scene.display import DEFAULT_SCREEN_RESOLUTION, FrameSource
-from .screen import Screen, Sweep, check_visible, diagonal_to_size, grid_sweep, line_sweep
+from .scene.display import (
+    DEFAULT_SCREEN_RESOLUTION,
+    FrameSource,
+    Screen,
+    Sweep,
+    check_visible,
+    diagonal_to_size,
+    grid_sweep,
+    line_sweep,
+)
 
 EXAMPLE_TOML = """\
 # mincam-sim render configuration. Units are in the key names: _m metres, _in inches, _deg degrees,

@@ -10,7 +10,7 @@ import numpy as np
 from . import masks, wave
 from .optics import Mixel, pair_layout
 from .plots import _save, plot_mask, plot_mixel_geometry, plot_response_maps, plt
-from .screen import Screen
+from .scene.display import Screen
 from .wave.report import DEFAULT_PERIOD_M, print_deviation, rim_profile
 
 

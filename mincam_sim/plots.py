@@ -17,7 +17,7 @@ plt.rcParams["figure.constrained_layout.use"] = True
 
 from .masks import Mask  # noqa: E402
 from .measurements import Measurements  # noqa: E402
-from .screen import Screen  # noqa: E402
+from .scene.display import Screen  # noqa: E402
 
 
 def _save(fig, path: str | Path) -> Path:

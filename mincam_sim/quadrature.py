@@ -20,7 +20,7 @@ from scipy.spatial import ConvexHull
 
 from .masks.profiles import NUMPY_OPS
 from .optics import Mixel
-from .screen import Screen
+from .scene.display import Screen
 
 
 def _gl(n: int, lo: float, hi: float, panels: int = 1) -> tuple[np.ndarray, np.ndarray]:

@@ -109,7 +109,7 @@ def test_pure_modules_import_without_a_renderer():
     code = (
         "import sys\n"
         "import mincam_sim.estimators, mincam_sim.calibration, mincam_sim.sensor, mincam_sim.masks\n"
-        "import mincam_sim.optics, mincam_sim.screen, mincam_sim.objects, mincam_sim.config\n"
+        "import mincam_sim.optics, mincam_sim.scene.display, mincam_sim.objects, mincam_sim.config\n"
         "import mincam_sim.readout, mincam_sim.metrics, mincam_sim.forward_model, mincam_sim.plots\n"
         "assert 'mitsuba' not in sys.modules and 'drjit' not in sys.modules, sorted(sys.modules)\n"
     )

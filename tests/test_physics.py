@@ -13,7 +13,7 @@ from scipy.optimize import curve_fit
 from mincam_sim import Mincam, Mixel, Pose, Screen, masks, single
 from mincam_sim.closed_forms import open_aperture_irradiance
 from mincam_sim.render.screen_engine import ScreenRenderer, response_maps
-from mincam_sim.screen import vertical_line, white_square
+from mincam_sim.scene.display import vertical_line, white_square
 
 SPP = 1 << 18
 REPLICATES = 16

@@ -13,7 +13,7 @@ from mincam_sim.geometry import look_at
 from mincam_sim.masks import Mask
 from mincam_sim.quadrature import mixel_irradiance_gl, open_aperture_view_factor_irradiance
 from mincam_sim.render.screen_engine import ScreenRenderer, response_maps
-from mincam_sim.screen import coverage
+from mincam_sim.scene.display import coverage
 
 TILT_SCREEN = Screen(width_m=0.4, height_m=0.3, resolution=(80, 60),
                      pose=Pose((0.0, 0.0, -0.6), (np.sin(np.radians(25)), 0.0, np.cos(np.radians(25))), (0, 1, 0)))

@@ -7,7 +7,7 @@ import pytest
 
 from mincam_sim import Mixel, Pose, Screen, masks, pair_layout, single
 from mincam_sim.render.screen_engine import ScreenRenderer, render_frames, response_maps
-from mincam_sim.screen import white_square
+from mincam_sim.scene.display import white_square
 
 
 @pytest.mark.parametrize(

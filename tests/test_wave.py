@@ -296,7 +296,7 @@ def test_rendered_wave_measurement_matches_quadrature_of_the_response():
     from mincam_sim import single
     from mincam_sim.render.mask_eval import wave_table
     from mincam_sim.render.screen_engine import ScreenRenderer, response_maps
-    from mincam_sim.screen import Screen
+    from mincam_sim.scene.display import Screen
 
     screen = Screen()
     mask = masks.sinusoid(2 * np.pi / 0.1e-3, phase_rad=0.7)
@@ -330,7 +330,7 @@ def test_rendered_wave_measurement_matches_quadrature_of_the_response():
 def test_reference_form_refuses_wave_optics():
     from mincam_sim import single
     from mincam_sim.render.screen_engine import ScreenRenderer
-    from mincam_sim.screen import Screen
+    from mincam_sim.scene.display import Screen
 
     with pytest.raises(ValueError, match="reference form"):
         ScreenRenderer(single(masks.ramp("x"), optics="wave"), Screen(), "reference")

@@ -16,7 +16,7 @@ from ..geometry import Pose
 from ..metrics import error_rates
 from ..optics import Mincam
 from ..progress import progress
-from ..screen import Screen, coverage
+from ..scene.display import Screen, coverage
 from . import tracking as tr
 
 

@@ -8,7 +8,7 @@ import numpy as np
 from ..calibration import Calibration1D, Calibration2D
 from ..readout import read_out
 from ..render.screen_engine import render_frames
-from ..screen import Sweep, grid_sweep, line_sweep
+from ..scene.display import Sweep, grid_sweep, line_sweep
 from .layouts import mincam_on_screen
 from .setup import Setup
 

@@ -24,7 +24,7 @@ from ..metrics import error_rates
 from ..plots import plot_spacing
 from ..progress import progress
 from ..render.screen_engine import response_maps
-from ..screen import Screen
+from ..scene.display import Screen
 from .base import Experiment, ExperimentResult
 from .layouts import intrusion_mincam, mincam_on_screen
 from .screen_calibration import fit_calibration_1d, screen_sweep_1d

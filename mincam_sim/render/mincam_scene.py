@@ -1,6 +1,6 @@
 """One scene object for a mincam anywhere (a display or a world), with the forms as solvers over it.
 
-:class:`MincamScene` holds the mincam and its content (a :class:`~mincam_sim.screen.Screen`, or Mitsuba elements
+:class:`MincamScene` holds the mincam and its content (a :class:`~mincam_sim.scene.display.Screen`, or Mitsuba elements
 of a world in metres) and builds, on demand, the Mitsuba scenes the forms trace:
 
 * the *fast* scene: content + every mixel's body (opaque boxes, :func:`.scene_dicts.mincam_body_shapes`) + the
@@ -21,7 +21,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from ..optics import Mincam
-from ..screen import Screen, check_visible
+from ..scene.display import Screen, check_visible
 from . import backend
 from .estimation import check_counts, derive_seed
 from .mixel_sensor import mixel_position_sample, sensor_dict

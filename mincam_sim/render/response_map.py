@@ -34,7 +34,7 @@ from ..imageio import write_exr
 from ..measurements import Measurements
 from ..optics import Mincam
 from ..progress import progress
-from ..screen import Screen
+from ..scene.display import Screen
 from ..store import ContentCache
 from . import backend
 from .estimation import derive_seed

@@ -1,6 +1,6 @@
 """Mitsuba scene dictionaries built by small pure functions (the style of ``mitsuba.util.cornell_box``).
 
-Conventions (see :mod:`mincam_sim.geometry`, :mod:`mincam_sim.masks`, :mod:`mincam_sim.screen`):
+Conventions (see :mod:`mincam_sim.geometry`, :mod:`mincam_sim.masks`, :mod:`mincam_sim.scene.display`):
 
 * Mitsuba's ``rectangle`` spans [-1, 1]^2 in its local xy plane, normal +z, with ``uv = (x + 1, y + 1) / 2``;
   ``bitmap`` row 0 is at ``v = 0``.
@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..optics import Mixel
-from ..screen import Screen
+from ..scene.display import Screen
 from . import backend
 from .mask_eval import opacity_texture
 from .textures import bitmap_dict, texture_tensor

@@ -24,8 +24,7 @@ from ..identity import StreamingHash, fingerprint, library_versions, run_key
 from ..measurements import Measurements
 from ..optics import Mincam
 from ..progress import progress
-from ..scene.display import FrameSource, as_frame_source
-from ..screen import Screen
+from ..scene.display import FrameSource, Screen, as_frame_source
 from ..store import ContentCache, ResultStore
 from . import backend
 from .estimation import (
