@@ -11,13 +11,14 @@ from .. import objects
 from ..calibration import Calibration1D
 from ..estimators import intrusion_position
 from ..plots import plot_calibration_1d, plot_overlays
+from ..render.elements import toy_updates
 from .base import Experiment, ExperimentResult, PaperNumbers
 from .ground_truth import GroundTruthCamera
 from .layouts import intrusion_mincam
 from .pipeline import locate_in_world
 from .screen_calibration import fit_calibration_1d, screen_sweep_1d, sweep_change_dn
 from .setup import Setup
-from .tabletop_world import make_tabletop, placements, tabletop_world
+from .tabletop_world import make_tabletop, tabletop_world
 
 
 @dataclass(frozen=True)
@@ -104,10 +105,10 @@ class Intrusion(Experiment):
         car_a, car_b = objects.race_pair(finish_line_x_m=params.boundary_x_m, lanes_y_m=params.lanes_y_m,
                                          speeds_m_s=params.speeds_m_s, start_distance_m=params.start_distance_m,
                                          overrun_m=params.overrun_m, frame_rate_hz=params.frame_rate_hz)
-        frames = [placements(table, {"car_a": (car_a.positions_m[i], car_a.headings_rad[i]),
+        frames = [toy_updates(table, {"car_a": (car_a.positions_m[i], car_a.headings_rad[i]),
                                      "car_b": (car_b.positions_m[i], car_b.headings_rad[i])})
                   for i in range(len(car_a.times_s))]
-        return IntrusionScene(table, frames, placements(table, {}))
+        return IntrusionScene(table, frames, toy_updates(table, {}))
 
     def run(self, setup: Setup, params: IntrusionParams, out_dir: Path,
             show_progress: bool = False) -> ExperimentResult:
@@ -131,7 +132,7 @@ class Intrusion(Experiment):
         a = found.arrays
         plot_calibration_1d(cal["true_m"], cal["change_dn"], cal["observed"], calibration,
                             out_dir / "intrusion_calibration.png", names=("y", "1-y"))
-        chosen = np.flatnonzero(a["evaluated"])[:: max(1, int(a["evaluated"].sum()) // 3)][:3]
+        chosen = found.example_frames()
         line = params.boundary_x_m
         plot_overlays([found.images[i] for i in chosen],
                       [(np.array([line, a["predicted_m"][i]]), np.array([line, a["truth_m"][i]])) for i in chosen],

@@ -31,6 +31,11 @@ class Located:
     images: list
     background_image: np.ndarray
 
+    def example_frames(self, count: int = 3) -> np.ndarray:
+        """Indices of ``count`` evaluated frames spread over the run (for the overlay figures)."""
+        evaluated = np.flatnonzero(self.arrays["evaluated"])
+        return evaluated[:: max(1, evaluated.size // count)][:count]
+
 
 def _finite_rows(a: np.ndarray) -> np.ndarray:
     return np.isfinite(a) if a.ndim == 1 else np.all(np.isfinite(a), axis=1)

@@ -10,7 +10,7 @@ import trimesh
 
 from .. import objects
 from ..optics import Mincam
-from ..render.elements import tabletop_elements, toy_updates
+from ..render.elements import tabletop_elements
 from ..render.world import WorldRenderer
 from ..scene.tabletop import Tabletop
 from .ground_truth import GroundTruthCamera
@@ -29,8 +29,3 @@ def tabletop_world(setup: Setup, table: Tabletop, mincam: Mincam, camera: Ground
                    replicates: int = 8) -> WorldRenderer:
     """The renderer of ``mincam`` over ``table`` with the ground-truth camera."""
     return WorldRenderer(mincam, tabletop_elements(table), replicates=replicates, camera=camera.scene_dict(setup))
-
-
-def placements(table: Tabletop, where: Mapping[str, tuple[np.ndarray, float]]) -> dict:
-    """Parameter updates placing toys: ``where[name] = (position (2,) [m], heading [rad])``; others parked."""
-    return toy_updates(table, where)

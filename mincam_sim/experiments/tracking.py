@@ -12,13 +12,14 @@ from .. import objects
 from ..calibration import Calibration2D
 from ..estimators import track_4
 from ..plots import plot_calibration_2d, plot_overlays, plot_tracks
+from ..render.elements import toy_updates
 from .base import Experiment, ExperimentResult, PaperNumbers
 from .ground_truth import GroundTruthCamera
 from .layouts import tracking_mincam
 from .pipeline import locate_in_world
 from .screen_calibration import fit_calibration_2d, screen_sweep_2d, sweep_change_dn
 from .setup import Setup
-from .tabletop_world import make_tabletop, placements, tabletop_world
+from .tabletop_world import make_tabletop, tabletop_world
 
 
 @dataclass(frozen=True)
@@ -109,9 +110,9 @@ class Tracking(Experiment):
                                               dt_s=params.frame_interval_s, bounds_m=((-reach, reach), (-reach, reach)),
                                               speed_m_s=params.toy_speed_m_s)
             for i in range(params.frames_per_toy):
-                frames.append(placements(table, {kind: (path.positions_m[i], path.headings_rad[i])}))
+                frames.append(toy_updates(table, {kind: (path.positions_m[i], path.headings_rad[i])}))
                 sequence.append(kind)
-        return TrackingScene(table, frames, np.array(sequence), placements(table, {}))
+        return TrackingScene(table, frames, np.array(sequence), toy_updates(table, {}))
 
     def run(self, setup: Setup, params: TrackingParams, out_dir: Path,
             show_progress: bool = False) -> ExperimentResult:
@@ -129,10 +130,10 @@ class Tracking(Experiment):
         found = locate_in_world(world, camera, scene.frames, scene.background, setup, rng, predict,
                                 setup.tabletop_spp, show_progress=show_progress)
         a = found.arrays
-        predicted, truth, evaluated = a["predicted_m"], a["truth_m"], a["evaluated"]
+        predicted, truth = a["predicted_m"], a["truth_m"]
         plot_calibration_2d(cal["true_m"], cal["observed"], calibration, out_dir / "tracking_calibration.png")
         plot_tracks(predicted, truth, scene.toy_of_frame, out_dir / "tracking_paths.png")
-        chosen = np.flatnonzero(evaluated)[:: max(1, int(evaluated.sum()) // 3)][:3]
+        chosen = found.example_frames()
         plot_overlays([found.images[i] for i in chosen], [(predicted[i], truth[i]) for i in chosen],
                       camera.half_extent_m, out_dir / "tracking_frames.png", frame_numbers=chosen,
                       title="tracking wind-up toys", field_m=setup.field_m)
