@@ -10,6 +10,7 @@ from conftest import Z, assert_close_mc
 
 from mincam_sim import Pose
 from mincam_sim.optics import cross_layout
+from mincam_sim.render import backend
 from mincam_sim.render import scene_dicts as sd
 from mincam_sim.render.change_region import ApertureRegions, change_points, mixel_regions
 from mincam_sim.render.world import WorldRenderer, vertex_update
@@ -188,3 +189,146 @@ def test_only_shapes_that_differ_from_the_background_bound_the_region():
              "c.to_world": np.eye(4)}
     assert _changed_shapes(frame, bg) == {"a", "c"}
     assert _changed_shapes(bg, bg) == set()
+
+
+# --- tilted, rotated mincams and every kind of light: the bounds checked against the sensor's own rays --------
+
+TILTED_MOVER = ((0.04, 0.03, 0.03), (0.01, 0.02, 0.0))  # (size, foot position) [m]
+LIGHTS = {
+    "area": lambda: sd.area_light(0.3, 0.3, Pose((-0.3, 0.2, 0.9), (0.3, -0.2, -0.9)).matrix(), 10.0),
+    "point": lambda: {"type": "point", "position": [0.2, -0.3, 0.8], "intensity": {"type": "spectrum", "value": 2.0}},
+    "spot": lambda: {"type": "spot", "intensity": {"type": "spectrum", "value": 2.0}, "cutoff_angle": 40.0,
+                     "to_world": sd._transform(Pose((0.2, -0.3, 0.8), (-0.2, 0.3, -0.8)).matrix())},
+    "directional": lambda: {"type": "directional", "direction": [0.4, -0.3, -1.0],
+                            "irradiance": {"type": "spectrum", "value": 3.0}},
+}
+
+
+def _tilted_mincam():
+    """Two mixels at ~0.3 m looking obliquely down at the table, rolled, with different d_f, non-square masks
+    (2 x 3 mm), an off-axis sinusoid and a 0.2 mm detector."""
+    from mincam_sim import masks
+    from mincam_sim.geometry import look_at
+    from mincam_sim.optics import Mincam, Mixel
+
+    first = look_at((0.12, -0.08, 0.3), (-0.03, 0.04, 0.0), up=(0.5, 1.0, 0.2))
+    left, _, _ = first.axes()
+    second = look_at(tuple(np.add(first.position_m, 0.033 * left)), (0.02, 0.0, 0.0), up=(-0.3, 1.0, 0.0))
+    return Mincam((
+        Mixel(masks.ramp("x", 64, 0.002, 0.003), d_f_m=0.002, detector_size_m=0.0002, pose=first, name="a"),
+        Mixel(masks.sinusoid(4000.0, direction_deg=30.0, width_m=0.002, height_m=0.003), d_f_m=0.0035,
+              detector_size_m=0.0002, pose=second, name="b"),
+    ))
+
+
+def _tilted_world(light: str):
+    rng = np.random.default_rng(2)
+    elements = {
+        "table": sd.textured_plane(np.clip(0.4 + 0.1 * rng.standard_normal((32, 32)), 0, 1), 1.0, 1.0,
+                                   Pose((0, 0, 0), (0, 0, 1)).matrix()),
+        "light": LIGHTS[light](),
+    }
+    size, at = TILTED_MOVER
+    v, f = _box(size, PARK)
+    elements["mover"] = sd.mesh_object("mover", v, f, 0.9)
+    world = WorldRenderer(_tilted_mincam(), elements, replicates=8)
+    frame = vertex_update("mover", v - PARK + np.asarray(at))
+    return world, frame, vertex_update("mover", v)
+
+
+def _light_points(light: str) -> np.ndarray:
+    """Points a shadow ray can aim at [m] (a 5 x 5 grid over the area light); a directional light's rays come from
+    far along minus its direction."""
+    if light == "area":
+        pose = Pose((-0.3, 0.2, 0.9), (0.3, -0.2, -0.9))
+        g = np.linspace(-0.15, 0.15, 5)
+        return pose.to_world(np.array([(x, y, 0.0) for x in g for y in g]))
+    if light == "directional":
+        d = np.array([0.4, -0.3, -1.0])
+        return -1e3 * d[None] / np.linalg.norm(d)  # an offset from the shaded point, see _region_violations
+    return np.array([[0.2, -0.3, 0.8]])
+
+
+def _segment_hits_box(o: np.ndarray, d: np.ndarray, lo, hi, t_max) -> np.ndarray:
+    """(n,) whether the segments ``o + t d``, ``0 < t < t_max``, meet the box [lo, hi] (slab test)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1, t2 = (np.asarray(lo) - o) / d, (np.asarray(hi) - o) / d
+    near = np.nanmax(np.where(d != 0, np.minimum(t1, t2), -np.inf), axis=1)
+    far = np.nanmin(np.where(d != 0, np.maximum(t1, t2), np.inf), axis=1)
+    inside_slabs = np.all((d != 0) | ((o >= lo) & (o <= hi)), axis=1)
+    return inside_slabs & (far >= np.maximum(near, 1e-9)) & (near < t_max)
+
+
+def _region_violations(world, light: str, base_override=None, n: int = 40_000, seed: int = 0):
+    """Rays of the fast sensor drawn uniformly over (detector, aperture), split by the change region of the
+    mover: (rays outside that meet the mover or land in its shadow, rays inside that do)."""
+    mi = backend.mitsuba()
+    regions = world.change_regions(["mover"])
+    base = regions.base if base_override is None else base_override
+    mover = {s.id(): s for s in world.scene.shapes()}["mover"].bbox()
+    lo_box, hi_box = np.array(mover.min, float), np.array(mover.max, float)
+    lights = _light_points(light)
+    rng = np.random.default_rng(seed)
+    outside_bad = inside_good = 0
+    n_mix = len(world.mincam)
+    for k, mixel in enumerate(world.mincam):
+        u, s = rng.random((n, 2)), rng.random((n, 2))
+        x_d = (u - 0.5) * (1 - 2e-6) * mixel.detector_size_m
+        a = regions.slope[k]
+        lo = base[k, :2] + np.minimum(a[[0, 2]] * x_d, a[[1, 3]] * x_d)
+        hi = base[k, 2:] + np.maximum(a[[0, 2]] * x_d, a[[1, 3]] * x_d)
+        margin = 1e-4  # float32 rounding of the sensor's sample mapping
+        outside = np.any((s < lo - margin) | (s > hi + margin), axis=1)
+        inside = np.all((s >= lo) & (s <= hi), axis=1)
+        position = mi.Point2f((k + 0.5 + (u[:, 0] - 0.5) * (1 - 2e-6)) / n_mix, u[:, 1])
+        ray, _ = world.sensor.sample_ray(0.0, mi.Float(0.5), position, mi.Point2f(s[:, 0], s[:, 1]))
+        o, d = np.array(ray.o, float).T, np.array(ray.d, float).T
+        hits_mover = _segment_hits_box(o, d, lo_box, hi_box, np.inf)
+        si = world.scene.ray_intersect(ray)
+        p = np.array(si.p, float).T
+        valid = np.array(si.is_valid(), bool) & ~hits_mover
+        shadowed = np.zeros(n, bool)
+        for target in lights:
+            towards = np.broadcast_to(target, p.shape) if light == "directional" else target - p
+            shadowed |= valid & _segment_hits_box(p, towards, lo_box, hi_box, 1.0)
+        changed = hits_mover | shadowed
+        outside_bad += int(np.sum(changed & outside))
+        inside_good += int(np.sum(changed & inside))
+    return outside_bad, inside_good
+
+
+@pytest.mark.parametrize("light", sorted(LIGHTS))
+def test_tilted_mincam_bounds_hold_every_ray_that_meets_the_mover_or_its_shadow(light):
+    """On a tilted, rolled two-mixel mincam (different d_f, non-square masks), no ray of the sensor outside the
+    change region meets the moving box or lands in its shadow, for area, point, spot and directional lights;
+    rays inside do (the check has something to find), and mirrored bounds fail it (the check can fail)."""
+    world, frame, bg = _tilted_world(light)
+    world.update({**bg, **frame})
+    outside_bad, inside_good = _region_violations(world, light)
+    assert outside_bad == 0, f"{light} light: {outside_bad} rays outside the change region meet the change"
+    assert inside_good > 50, f"{light} light: only {inside_good} rays inside the region meet the change"
+    regions = world.change_regions(["mover"])
+    mirrored = regions.base.copy()
+    mirrored[:, [0, 2]] = 1.0 - regions.base[:, [2, 0]]
+    assert _region_violations(world, light, base_override=mirrored)[0] > 0
+    assert np.all(regions.area_fraction() < 0.5), "the bounds should be a small part of the aperture"
+    world.update(bg)
+
+
+@pytest.mark.parametrize("light", ["area", "point"])
+def test_tilted_mincam_stratified_agrees_with_plain(light):
+    world, frame, bg = _tilted_world(light)
+    _compare(world, [frame], bg, 1 << 18, 1 << 15, what=f"tilted mincam, {light} light")
+
+
+def test_directional_light_shadow_points_and_bad_direction():
+    """A directional light's shadow reaches the scene box's floor along its direction; a zero direction is a
+    clear error."""
+    box = (np.array([0.0, 0.0, 0.1]), np.array([0.02, 0.02, 0.12]))
+    scene_box = (np.array([-1.0, -1.0, 0.0]), np.array([1.0, 1.0, 1.0]))
+    points = change_points([box], [], scene_box, [np.array([1.0, 0.0, -1.0])])
+    floor = np.array([0.12, 0.0, 0.0])  # the box's far bottom corner, 0.1 m up, shifted 0.1 m along +x to z = 0
+    hull_lo, hull_hi = points.min(axis=0), points.max(axis=0)
+    assert np.all(floor >= hull_lo - 1e-12) and np.all(floor <= hull_hi + 1e-12)
+    with pytest.raises(ValueError, match="directions"):
+        change_points([box], [], scene_box, [np.zeros(3)])

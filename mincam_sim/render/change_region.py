@@ -7,7 +7,9 @@ light. Both sets are bounded by convex point sets in the world:
 * their shadow volumes, truncated at the scene's bounding box: every segment from a light point ``l`` through an
   object point ``b`` continued to ``l + t (b - l)``, ``1 <= t <= T``; that set lies inside the convex hull of
   the corner points ``b_j`` and ``l_i + T (b_j - l_i)`` (the map is affine in ``l`` and ``b`` for fixed ``t``
-  and linear in ``t``), with ``T`` the largest exit parameter of those lines from the scene's box.
+  and linear in ``t``), with ``T`` the largest exit parameter of those lines from the scene's box. Lights are
+  boxes (emitting shapes) or points (point and spot lights: a box of zero size); a directional light (parallel
+  rays along ``d``) shadows ``b + t d``, ``t >= 0``, held by the corners ``b_j`` and ``b_j + T d``.
 
 A ray of the fast sensor runs from a detector point ``x_d`` (local ``z = 0``) through a mask point ``x_m``
 (local ``z = d_f``); it reaches a local point ``X`` when ``x_m = x_d (1 - d_f / Z) + X d_f / Z``. For a fixed
@@ -103,7 +105,8 @@ def box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return np.where(idx, hi, lo)
 
 
-def change_points(objects: Sequence[BoxM], lights: Sequence[BoxM], scene_box: BoxM) -> np.ndarray:
+def change_points(objects: Sequence[BoxM], lights: Sequence[BoxM], scene_box: BoxM,
+                  directions: Sequence[np.ndarray] = ()) -> np.ndarray:
     """(m, 3) points whose convex hull holds the objects and their shadow volumes inside the scene box [m].
 
     Parameters
@@ -111,26 +114,40 @@ def change_points(objects: Sequence[BoxM], lights: Sequence[BoxM], scene_box: Bo
     objects : sequence of (lo, hi)
         Bounding boxes of the moving objects [m].
     lights : sequence of (lo, hi)
-        Bounding boxes of the emitting shapes [m] (environment lights have none; see :func:`mixel_regions`).
+        Bounding boxes of the lights at a finite place [m]: emitting shapes, and point-like lights as boxes of
+        zero size (environment lights have none; see :func:`mixel_regions`).
     scene_box : (lo, hi)
         Bounding box of all the scene's geometry [m]: nothing beyond it can be shadowed.
+    directions : sequence of (3,) float
+        Directions in which directional lights' parallel rays travel (any length; zero vectors are refused).
     """
     if not objects:
         return np.zeros((0, 3))
     obj = np.concatenate([box_corners(*b) for b in objects])
-    if not lights:
-        return obj
-    light = np.concatenate([box_corners(*b) for b in lights])
     lo, hi = (np.asarray(v, float) for v in scene_box)
-    d = obj[None, :, :] - light[:, None, :]  # (L, B, 3) from light corner to object corner
+    parts = [obj]
+    if lights:
+        light = np.concatenate([box_corners(*b) for b in lights])
+        d = obj[None, :, :] - light[:, None, :]  # (L, B, 3) from light corner to object corner
+        t_max = max(1.0, _largest_exit(light[:, None, :], d, lo, hi))
+        parts.append((light[:, None, :] + t_max * d).reshape(-1, 3))
+    for direction in directions:
+        d = np.asarray(direction, float)
+        if d.shape != (3,) or not np.all(np.isfinite(d)) or not np.any(d):
+            raise ValueError(f"directions: a directional light needs a finite non-zero 3-vector, got {direction!r}")
+        t_max = max(0.0, _largest_exit(obj, np.broadcast_to(d, obj.shape), lo, hi))
+        parts.append(obj + t_max * d)
+    return np.concatenate(parts)
+
+
+def _largest_exit(start: np.ndarray, d: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
+    """Largest parameter ``t`` at which the lines ``start + t d`` leave the box ``[lo, hi]`` (0 if none do)."""
     with np.errstate(divide="ignore", invalid="ignore"):
-        t_lo = (lo - light[:, None, :]) / d
-        t_hi = (hi - light[:, None, :]) / d
-    t_exit = np.where(d != 0, np.maximum(t_lo, t_hi), np.inf).min(axis=2)  # leaving the box's slab on one axis
+        t_lo = (lo - start) / d
+        t_hi = (hi - start) / d
+    t_exit = np.where(d != 0, np.maximum(t_lo, t_hi), np.inf).min(axis=-1)  # leaving the box's slab on one axis
     t_exit = t_exit[np.isfinite(t_exit)]
-    t_max = max(1.0, float(t_exit.max())) if t_exit.size else 1.0
-    far = light[:, None, :] + t_max * d
-    return np.concatenate([obj, far.reshape(-1, 3)])
+    return float(t_exit.max()) if t_exit.size else 0.0
 
 
 def mixel_regions(mincam: Mincam, points_m: np.ndarray | None) -> ApertureRegions:

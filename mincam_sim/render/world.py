@@ -319,11 +319,13 @@ def _changed_shapes(update: Updates, background: Updates) -> set[str]:
 
 def _change_points(scene, moving) -> np.ndarray | None:
     """Corner points whose hull holds the moving shapes and their shadow volumes [m]; None if unbounded
-    (an environment light or a moving emitter, or a moved parameter that belongs to no shape)."""
+    (an environment light, a moving emitter, an emitter of a kind not bounded here, or a moved parameter that
+    belongs to no shape)."""
     shapes = {s.id(): s for s in scene.shapes()}
-    if any(e.is_environment() for e in scene.emitters()) or any(name not in shapes for name in moving):
+    if any(name not in shapes or shapes[name].is_emitter() for name in moving):
         return None
-    if any(shapes[name].is_emitter() for name in moving):
+    lights = _light_bounds(scene)
+    if lights is None:
         return None
 
     def box(shape):
@@ -331,8 +333,32 @@ def _change_points(scene, moving) -> np.ndarray | None:
         return np.array(bb.min, dtype=float), np.array(bb.max, dtype=float)
 
     objects = [box(shapes[name]) for name in sorted(moving)]
-    lights = [box(s) for s in scene.shapes() if s.is_emitter()]
-    return change_points(objects, lights, box(scene))
+    boxes, directions = lights
+    boxes = boxes + [box(s) for s in scene.shapes() if s.is_emitter()]
+    return change_points(objects, boxes, box(scene), directions)
+
+
+def _light_bounds(scene) -> tuple[list, list] | None:
+    """Where the scene's non-shape emitters shine from: point-like ones (point, spot) as zero-size boxes [m],
+    directional ones by the direction their rays travel; None for an environment light or any other kind."""
+    mi = backend.mitsuba()
+    boxes, directions = [], []
+    for emitter in scene.emitters():
+        flags = int(emitter.flags())
+        if flags & int(mi.EmitterFlags.Surface):
+            continue  # an emitting shape: bounded by its shape's box
+        if emitter.is_environment():
+            return None
+        params = mi.traverse(emitter)
+        if flags & int(mi.EmitterFlags.DeltaDirection) and "to_world" in params:
+            directions.append(np.array(params["to_world"].matrix, dtype=float).reshape(4, 4)[:3, 2])
+        elif flags & int(mi.EmitterFlags.DeltaPosition) and ("position" in params or "to_world" in params):
+            where = (np.array(params["position"], dtype=float).ravel() if "position" in params
+                     else np.array(params["to_world"].matrix, dtype=float).reshape(4, 4)[:3, 3])
+            boxes.append((where, where))
+        else:
+            return None
+    return boxes, directions
 
 
 def _fingerprint(updates: Sequence[Updates]) -> list:
