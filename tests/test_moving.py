@@ -332,3 +332,17 @@ def test_directional_light_shadow_points_and_bad_direction():
     assert np.all(floor >= hull_lo - 1e-12) and np.all(floor <= hull_hi + 1e-12)
     with pytest.raises(ValueError, match="directions"):
         change_points([box], [], scene_box, [np.zeros(3)])
+
+
+@pytest.mark.parametrize("estimator", ["plain", "stratified"])
+def test_background_that_leaves_out_a_moved_parameter_means_the_scene_as_built(estimator):
+    """``background={}`` (or one that leaves out a parameter the frames set) restores the scene as built, run after
+    run: the same numbers as the explicit background (it once traced the background with the frame's toy in place
+    and returned dP = 0, or the previous run's last frame as the background)."""
+    world, frames, bg = _world({}, (0.04, 0.02, 0.02))
+    fr = frames([(0.03, 0.02, 0.0)])
+    explicit, _ = world.measure_changes(fr, bg, spp=1 << 12, seed=5, estimator=estimator)
+    for _ in range(2):
+        left_out, _ = world.measure_changes(fr, {}, spp=1 << 12, seed=5, estimator=estimator)
+        np.testing.assert_array_equal(left_out.irradiance_w_m2, explicit.irradiance_w_m2)
+    assert np.any(np.abs(explicit.irradiance_w_m2) > 3 * explicit.stderr_w_m2), "the frame should change dP"

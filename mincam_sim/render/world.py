@@ -61,7 +61,8 @@ class WorldRenderer:
     replicates : int
         Independent estimates per measurement (>= 2), for the standard error.
     max_depth : int
-        Path length of the ``path`` integrator (3 = direct lighting of diffuse objects).
+        Longest path of the ``path`` integrator, in segments from the mask: 2 = direct lighting only; 3 (the
+        default) adds one inter-reflection (e.g. light the moving object throws onto the table).
     camera : dict, optional
         A ground-truth camera (:func:`~.scene_dicts.pinhole_camera`) rendered by :meth:`camera_image`.
     """
@@ -80,10 +81,23 @@ class WorldRenderer:
         self.params = self.world.params
         self._content_key: str | None = None
         self._content_key = self.content_fingerprint()  # before any update: the scene as built
+        self._as_built: dict[str, object] = {}  # each updated parameter's value before its first update
 
     def update(self, updates: Updates) -> None:
         """Set scene parameters (numpy arrays or Mitsuba values) and apply them without reloading."""
+        for key in updates:
+            if key not in self._as_built and key in self.params:
+                self._as_built[key] = _param_value(self.params[key])
         self.world.update(updates)
+
+    def complete_background(self, frames: Sequence[Updates], background: Updates) -> dict:
+        """``background`` plus, for every parameter the frames set and it leaves out, that parameter's value in the
+        scene as built (so that restoring the background undoes every frame)."""
+        missing = sorted({key for f in frames for key in f} - set(background))
+        for key in missing:
+            if key not in self._as_built and key in self.params:
+                self._as_built[key] = _param_value(self.params[key])
+        return {**background, **{key: self._as_built[key] for key in missing if key in self._as_built}}
 
     def estimates(self, spp: int, seed: int) -> np.ndarray:
         """(replicates, n_mixels) independent irradiance estimates [W/m^2], ``spp / replicates`` rays each."""
@@ -111,7 +125,8 @@ class WorldRenderer:
         frames : sequence of dict
             Parameter updates of each frame (applied on top of ``background``).
         background : dict
-            Parameter updates that restore the background (e.g. objects moved out of view).
+            Parameter updates that restore the background (e.g. objects moved out of view). A parameter the frames
+            set that it leaves out is restored to its value in the scene as built (``{}`` = the scene as built).
         correlated : bool
             True: each frame uses the background's seed (noise cancels in dP). False: independent seeds.
         out_dir : path, optional
@@ -148,6 +163,7 @@ class WorldRenderer:
         if shares.ndim != 1 or not np.all(np.isfinite(shares) & (shares > 0)):
             raise ValueError(f"strata_shares (share of rays per stratum) must be positive numbers, "
                              f"got {strata_shares!r}")
+        background = self.complete_background(frames, background)
         budget: dict = {}
         if target_rel_stderr > 0 and len(frames):
             pilot_idx = np.unique(np.linspace(0, len(frames) - 1, min(4, len(frames))).astype(int))
@@ -295,6 +311,17 @@ def _param_array(value) -> np.ndarray:
     if arr.dtype.hasobject:
         arr = np.frombuffer(repr(value).encode(), dtype=np.uint8)
     return arr
+
+
+def _param_value(value):
+    """A copy of a traversed parameter that :meth:`WorldRenderer.update` accepts back (transforms as 4 x 4 numpy
+    matrices, arrays and tensors as Mitsuba values of their own type and shape)."""
+    matrix = getattr(value, "matrix", None)
+    if matrix is not None:
+        return np.array(matrix, dtype=np.float64).reshape(4, 4)
+    if isinstance(value, (bool, int, float)):
+        return value
+    return type(value)(np.array(value))
 
 
 def _moving_shapes(updates: Sequence[Updates]) -> set[str]:
