@@ -324,9 +324,12 @@ BENCHMARKS = {
 def _run_one(name: str) -> None:
     from mincam_sim.render import backend
 
+    load_before = os.getloadavg()[0]
     t = time.perf_counter()
     result = BENCHMARKS[name]()
     result["wall_seconds"] = time.perf_counter() - t
+    # other work on the machine slows every rate here: the 1-minute load average before and after says if there was
+    result["load_average_1min"] = [load_before, os.getloadavg()[0]]
     result["peak_memory_mib"] = _peak_mib()
     result["variant"] = backend.variant()
     print(json.dumps(result))

@@ -346,3 +346,34 @@ def test_background_that_leaves_out_a_moved_parameter_means_the_scene_as_built(e
         left_out, _ = world.measure_changes(fr, {}, spp=1 << 12, seed=5, estimator=estimator)
         np.testing.assert_array_equal(left_out.irradiance_w_m2, explicit.irradiance_w_m2)
     assert np.any(np.abs(explicit.irradiance_w_m2) > 3 * explicit.stderr_w_m2), "the frame should change dP"
+
+
+def test_stratified_run_killed_midway_resumes_to_the_same_numbers(tmp_path, monkeypatch):
+    """A stratified run stopped after two of four frames resumes with them kept and gives the uninterrupted run's
+    numbers; the same out dir refuses other strata shares or the plain estimator."""
+    import mincam_sim.render.world as world_module
+    from mincam_sim.errors import StaleResultError
+
+    world, frames, bg = _world({}, (0.04, 0.02, 0.02))
+    fr = frames([(0.03, 0.02, 0.0), (-0.05, 0.0, 0.0), (0.0, -0.04, 0.0), (0.06, 0.05, 0.0)])
+    whole, _ = world.measure_changes(fr, bg, spp=1 << 12, seed=7, estimator="stratified")
+    real, calls = world_module.stratified_estimates, []
+
+    def dies_on_the_fifth_pass(*args, **kwargs):  # two passes per frame: frames 0 and 1 finish
+        calls.append(1)
+        if len(calls) == 5:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(world_module, "stratified_estimates", dies_on_the_fifth_pass)
+    with pytest.raises(KeyboardInterrupt):
+        world.measure_changes(fr, bg, spp=1 << 12, seed=7, estimator="stratified", out_dir=tmp_path)
+    monkeypatch.setattr(world_module, "stratified_estimates", lambda *a, **k: calls.append(1) or real(*a, **k))
+    calls.clear()
+    resumed, _ = world.measure_changes(fr, bg, spp=1 << 12, seed=7, estimator="stratified", out_dir=tmp_path)
+    assert len(calls) == 4, f"the resumed run traced {len(calls) // 2} frames, not the 2 left"
+    np.testing.assert_array_equal(resumed.irradiance_w_m2, whole.irradiance_w_m2)
+    np.testing.assert_array_equal(resumed.stderr_w_m2, whole.stderr_w_m2)
+    for other in ({"estimator": "plain"}, {"estimator": "stratified", "strata_shares": (0.5, 0.1, 0.1, 0.1, 0.2)}):
+        with pytest.raises(StaleResultError):
+            world.measure_changes(fr, bg, spp=1 << 12, seed=7, out_dir=tmp_path, **other)
