@@ -268,6 +268,8 @@ def _region_violations(world, light: str, base_override=None, n: int = 40_000, s
     mover = {s.id(): s for s in world.scene.shapes()}["mover"].bbox()
     lo_box, hi_box = np.array(mover.min, float), np.array(mover.max, float)
     lights = _light_points(light)
+    if light != "directional":  # the renderer works around the mincam: scene = world - scene_origin_m
+        lights = lights - world.scene_origin_m
     rng = np.random.default_rng(seed)
     outside_bad = inside_good = 0
     n_mix = len(world.mincam)

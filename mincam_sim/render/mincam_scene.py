@@ -149,7 +149,7 @@ class MincamScene:
         for key, value in updates.items():
             if key not in params:
                 raise KeyError(f"unknown scene parameter {key!r}; see the scene's params.keys()")
-            params[key] = _as_param(self.mi, params[key], value)
+            params[key] = _as_param(self.mi, params[key], value, key)
         params.update()
 
     # ------------------------------------------------------------------------------------------ solvers
@@ -210,9 +210,27 @@ def geometry_meta(mincam: Mincam, screen: Screen | None = None) -> dict:
     return meta
 
 
-def _as_param(mi, current, value):
+def _as_param(mi, current, value, key: str = "parameter"):
+    """A numpy update in the type of the parameter it replaces: 4 x 4 -> transform; 3-vectors (a point light's
+    position, colours) as (3, n); textures keep their (rows, cols, channels) shape."""
+    import drjit as dr
+
     if not isinstance(value, np.ndarray):
         return value
     if value.shape == (4, 4):
         return mi.Transform4f(value.tolist())
-    return type(current)(np.asarray(value, dtype=np.float32).ravel())
+    if value.shape == (3, 3) and "Transform3" in type(current).__name__:  # a texture's to_uv
+        return type(current)(np.ascontiguousarray(value, dtype=np.float32))
+    flat = np.asarray(value, dtype=np.float32).ravel()
+    if dr.is_tensor_v(current):
+        shape = tuple(current.shape)
+        if flat.size != int(np.prod(shape)):
+            raise ValueError(f"{key}: a texture of shape {shape} needs {int(np.prod(shape))} values, got "
+                             f"{flat.size}; pass an array of that shape")
+        return type(current)(flat.reshape(shape))
+    width = dr.size_v(current) if dr.depth_v(current) > 1 else -1  # static width of a Point3f / Color3f
+    if width > 0:
+        if flat.size % width:
+            raise ValueError(f"{key}: needs a multiple of {width} values (one {width}-vector each), got {flat.size}")
+        return type(current)(flat.reshape(-1, width).T)
+    return type(current)(flat)
