@@ -43,8 +43,7 @@ class Readout:
         var = self.sensor.expected_std_dn(frame_irradiance) ** 2
         var = var + self.sensor.expected_std_dn(background_irradiance) ** 2 / self.n_background_frames
         if mc_stderr_w_m2 is not None:
-            gain = self.sensor.expected(1.0) - self.sensor.expected(0.0)  # DN per W/m^2 (linear model)
-            var = var + (gain * np.asarray(mc_stderr_w_m2)) ** 2
+            var = var + (self.sensor.dn_per_irradiance * np.asarray(mc_stderr_w_m2)) ** 2
         return np.sqrt(var)
 
 
