@@ -299,7 +299,9 @@ def test_calibration_squares_out_of_a_mixels_view_are_left_out():
     """Finding: the tracking calibration swept squares to the rim of the 50 cm disc; the mixels 3.3 cm off
     centre have a +-26.25 cm field at 0.5 m, so the square at x = -25 cm is out of the right-hand (1 - x) mixel's
     view and Eq. 7 read x_obs = 1.0 for it (and 0.0 at +25 cm): a folded cubic (rms residual 3.0 cm in x).
-    Squares are now kept only if every mixel sees them whole: |centre - mixel| + side/2 <= d tan(half fov)."""
+    Squares in a mixel's penumbra fold the same way (depth 0.6 m, spacing 5 cm: x rms 1.5 cm). Squares are now
+    kept only if every detector point of every mixel sees them whole through the mask:
+    |centre - mixel| + side/2 <= d (mask - detector) / (2 d_f)."""
     from mincam_sim.experiments import Setup
     from mincam_sim.experiments.layouts import intrusion_mincam, tracking_mincam
     from mincam_sim.experiments.screen_calibration import screen_sweep_1d, screen_sweep_2d, seen_by_every_mixel
@@ -309,7 +311,7 @@ def test_calibration_squares_out_of_a_mixels_view_are_left_out():
     for spacing in (0.0, 0.033, 0.06):
         s = setup.with_(spacing_m=spacing)
         keep = seen_by_every_mixel(tracking_mincam(s), s, sweep)
-        limit = s.depth_m * (s.mask_size_m + s.detector_size_m) / (2 * s.d_f_m) - spacing - 0.015
+        limit = s.depth_m * (s.mask_size_m - s.detector_size_m) / (2 * s.d_f_m) - spacing - 0.015
         np.testing.assert_array_equal(keep, np.all(np.abs(sweep.positions_m) <= limit + 1e-12, axis=1))
     dropped = screen_sweep_2d(setup, 9, 0.03).positions_m[~seen_by_every_mixel(tracking_mincam(setup), setup,
                                                                                 screen_sweep_2d(setup, 9, 0.03))]
@@ -317,8 +319,8 @@ def test_calibration_squares_out_of_a_mixels_view_are_left_out():
     pair = intrusion_mincam(setup, -0.1378, 0.03)
     line = screen_sweep_1d(setup, -0.1378, 51, 0.03)
     kept = line.positions_m[seen_by_every_mixel(pair, setup, line), 1]
-    half_span = setup.depth_m * 0.525 - setup.spacing_m / 2 - 0.015
-    assert kept.min() >= -half_span - 1e-12 and kept.max() <= half_span + 1e-12 and len(kept) == 47
+    half_span = setup.depth_m * 0.475 - setup.spacing_m / 2 - 0.015  # 20.6 cm: the 1 cm steps keep +-20 cm
+    assert kept.min() >= -half_span - 1e-12 and kept.max() <= half_span + 1e-12 and len(kept) == 41
 
 
 def test_experiment_streams_are_independent():

@@ -105,5 +105,5 @@ def test_frame_accounting_and_calibration_in_view(run, name):
     assert r["n_missing"] == r["no_position_frames"]
     assert r["detected_frames"] == r["n"] + r["no_position_frames"] + r["false_alarm_frames"]
     assert 0 <= r["extrapolated_frames"] <= r["n"]
-    assert r["calibration_points_outside_view"] == (2 if name == "intrusion" else 4)
+    assert r["calibration_points_outside_view"] == (6 if name == "intrusion" else 4)
     assert np.max(r["calibration_rms_residual_m"]) < 1e-3
