@@ -334,3 +334,20 @@ def test_experiment_streams_are_independent():
     a["calibration"].normal(size=1000)  # more calibration draws ...
     assert a["scene"].random() == b["scene"].random()  # ... same scene
     assert exp.streams(Setup(seed=5), ("scene",))["scene"].random() != b["scene"].random()
+
+
+@settings(deadline=None, max_examples=30)
+@given(
+    a=hnp.arrays(np.float64, (6, 9), elements=st.floats(0.0, 1.0)),
+    b=hnp.arrays(np.float64, (6, 9), elements=st.floats(0.0, 1.0)),
+)
+def test_two_objects_entering_at_once_give_the_weighted_mean_of_their_centroids(a, b):
+    """Paper Sec. 4.1: two intruders at once are located between them, at the mean of their centroids weighted
+    by their total changes (Eq. 4 on Eq. 1 measurements of the sum)."""
+    if a.sum() < 1e-6 or b.sum() < 1e-6:
+        return
+    x, _ = _ramp_images(a.shape)
+    both = a + b
+    dp = [float(ideal_measurement(m, both)) for m in (x, 1 - x)]
+    expected = (centroid(a, x) * a.sum() + centroid(b, x) * b.sum()) / both.sum()
+    assert intrusion_position(dp[0], dp[1]) == pytest.approx(expected, abs=1e-12)
