@@ -351,3 +351,17 @@ def test_two_objects_entering_at_once_give_the_weighted_mean_of_their_centroids(
     dp = [float(ideal_measurement(m, both)) for m in (x, 1 - x)]
     expected = (centroid(a, x) * a.sum() + centroid(b, x) * b.sum()) / both.sum()
     assert intrusion_position(dp[0], dp[1]) == pytest.approx(expected, abs=1e-12)
+
+
+def test_read_out_edge_inputs():
+    """An empty frame set reads out (background and threshold only); all-dark input and NaN irradiances are
+    refused with a message that says so (they failed with numpy's 'zero-size array' or an exposure error)."""
+    from mincam_sim.readout import read_out
+
+    sensor = SensorModel.paper_prototype()
+    empty = read_out(np.zeros((0, 2)), np.ones(2), sensor, np.random.default_rng(0))
+    assert empty.frames_dn.shape == (0, 2) and empty.change_dn.shape == (0, 2) and empty.threshold_dn > 0
+    with pytest.raises(ValueError, match="every irradiance is 0"):
+        read_out(np.zeros((3, 2)), np.zeros(2), sensor, np.random.default_rng(0))
+    with pytest.raises(ValueError, match="NaN"):
+        read_out(np.array([[np.nan, 1.0]]), np.ones(2), sensor, np.random.default_rng(0))
