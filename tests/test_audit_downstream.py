@@ -365,3 +365,22 @@ def test_read_out_edge_inputs():
         read_out(np.zeros((3, 2)), np.zeros(2), sensor, np.random.default_rng(0))
     with pytest.raises(ValueError, match="NaN"):
         read_out(np.array([[np.nan, 1.0]]), np.ones(2), sensor, np.random.default_rng(0))
+
+
+def test_design_training_converts_irradiance_to_dn_with_the_sensor_slope():
+    """Finding: the mask optimiser's linear read-out model used ``expected(1 W/m^2) - expected(0)`` as its DN per
+    W/m^2; its training readings peak near 0.013 W/m^2, so 1 W/m^2 saturates and the training signals were 55x
+    too small against the (correctly computed) sensor noise. It now uses the sensor's slope, which maps the
+    training peak onto the exposure fill."""
+    import dataclasses
+
+    from mincam_sim.design import optimise as op
+    from mincam_sim.design import tracking as tr
+
+    task = dataclasses.replace(tr.TrackingTask.quick(), frames_per_depth=8, strata=2)
+    problem = op.build_problem(task)
+    film = task.film()
+    peak = max(float((a * film.t_max).sum(axis=1).max()) for a in problem.matrices)
+    s = tr.sensor().auto_exposed(peak, tr.EXPOSURE_FILL)
+    assert problem.dn_per_w_m2 * peak == pytest.approx(float(s.expected(peak) - s.expected(0.0)), rel=1e-9)
+    assert problem.dn_per_w_m2 * peak == pytest.approx(tr.EXPOSURE_FILL * s.max_dn, rel=1e-3)
