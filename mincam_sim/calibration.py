@@ -13,7 +13,9 @@ conditioning of the least-squares problem no longer depends on where the data li
 metres. Both classes save to and load from plain JSON. Applying a calibration outside the range it was fitted
 on (1D: the observed interval; 2D: the convex hull of the observed points) still evaluates the polynomial but
 warns once per calibration with :class:`ExtrapolationWarning`, and ``apply(..., return_extrapolated=True)``
-also returns the mask of such points.
+(or ``outside_range``) returns the mask of such points. A fit that is not one-to-one over its range (1D: not
+monotonic; 2D: the Jacobian determinant changes sign in the hull) warns with
+:class:`NonMonotonicCalibrationWarning` (property ``monotonic``).
 
 The paper's error rates are in :mod:`mincam_sim.metrics`.
 """
@@ -34,6 +36,13 @@ _RANGE_TOLERANCE = 1e-9  # relative to the fitted range: points this close to it
 
 class ExtrapolationWarning(UserWarning):
     """A calibration was applied outside the range of the points it was fitted on."""
+
+
+class NonMonotonicCalibrationWarning(UserWarning):
+    """A fitted calibration is not one-to-one over its fitted range: different observations map to one position."""
+
+
+_MONOTONIC_GRID = 2001  # derivative samples over the fitted range (1D); 2D uses a 61 x 61 grid in the hull
 
 
 def _finite_pairs(observed: np.ndarray, true: np.ndarray, drop_nonfinite: bool, what: str) -> tuple:
@@ -174,7 +183,31 @@ class Calibration1D:
         coefficients, rms = _lstsq(basis, true, "Calibration1D.fit")
         calibration.coefficients = coefficients
         calibration.rms_residual_m = rms
+        if not calibration.monotonic:
+            warnings.warn(
+                f"Calibration1D.fit: the degree-{degree} polynomial is not monotonic over the fitted range "
+                f"[{lo:.6g}, {hi:.6g}], so different observations map to the same position; the calibration "
+                "points are too noisy or too few for this degree, or the observed position folds (check "
+                "`monotonic` before trusting it)",
+                NonMonotonicCalibrationWarning,
+                stacklevel=2,
+            )
         return calibration
+
+    @property
+    def monotonic(self) -> bool:
+        """True if the polynomial is strictly monotonic over ``fit_range`` (its derivative keeps one sign on a
+        fine grid; a degree-0 map is not)."""
+        derivative = np.polynomial.polynomial.polyder(np.asarray(self.coefficients, dtype=np.float64))
+        slope = np.polynomial.polynomial.polyval(np.linspace(-1.0, 1.0, _MONOTONIC_GRID), derivative)
+        return bool(np.all(slope > 0) or np.all(slope < 0))
+
+    def outside_range(self, observed: ArrayLike) -> np.ndarray:
+        """Boolean mask of finite ``observed`` values outside ``fit_range`` (what :meth:`apply` extrapolates);
+        no warning."""
+        with np.errstate(invalid="ignore"):
+            u = self._scaled(np.asarray(observed, dtype=np.float64))
+            return np.isfinite(u) & (np.abs(u) > 1.0 + _RANGE_TOLERANCE)
 
     def _scaled(self, observed: np.ndarray) -> np.ndarray:
         lo, hi = self.fit_range
@@ -191,8 +224,7 @@ class Calibration1D:
         obs = np.asarray(observed, dtype=np.float64)
         u = self._scaled(obs)
         predicted = np.polynomial.polynomial.polyval(u, np.asarray(self.coefficients, dtype=np.float64))
-        with np.errstate(invalid="ignore"):
-            extrapolated = np.isfinite(u) & (np.abs(u) > 1.0 + _RANGE_TOLERANCE)
+        extrapolated = self.outside_range(obs)
         _warn_extrapolation(self, int(np.count_nonzero(extrapolated)), int(obs.size))
         return (predicted, extrapolated) if return_extrapolated else predicted
 
@@ -355,7 +387,55 @@ class Calibration2D:
         coefficients, _ = _lstsq(basis, true, "Calibration2D.fit")
         calibration.coefficients = coefficients
         calibration.rms_residual_m = np.sqrt(np.mean((true - basis @ coefficients) ** 2, axis=0))
+        if not calibration.monotonic:
+            warnings.warn(
+                "Calibration2D.fit: the fitted map folds over inside the convex hull of the calibration points "
+                "(its Jacobian determinant changes sign), so different observations map to the same position; "
+                "the points are too noisy or too few for this degree (check `monotonic` before trusting it)",
+                NonMonotonicCalibrationWarning,
+                stacklevel=2,
+            )
         return calibration
+
+    def jacobian_determinant(self, obs_xy: ArrayLike) -> np.ndarray:
+        """``det d(x_m, y_m) / d(obs_x, obs_y)`` at the given observed points [m^2 per unit^2], shape (n,)."""
+        obs = np.atleast_2d(np.asarray(obs_xy, dtype=np.float64))
+        uv = self._scaled(obs)
+        half_width = 0.5 * (self.fit_box[:, 1] - self.fit_box[:, 0])
+        du = np.zeros((len(obs), 2))
+        dv = np.zeros((len(obs), 2))
+        for k, (i, j) in enumerate(self.exponents):
+            if i:
+                du += np.outer(i * uv[:, 0] ** (i - 1) * uv[:, 1] ** j, self.coefficients[k])
+            if j:
+                dv += np.outer(j * uv[:, 0] ** i * uv[:, 1] ** (j - 1), self.coefficients[k])
+        du /= half_width[0]
+        dv /= half_width[1]
+        return du[:, 0] * dv[:, 1] - dv[:, 0] * du[:, 1]
+
+    @property
+    def monotonic(self) -> bool:
+        """True if the map is one-to-one in the small everywhere in the fitted hull: its Jacobian determinant
+        keeps one sign on a 61 x 61 grid of the fitted box clipped to the hull (and at the hull's vertices)."""
+        grid = np.linspace(0.0, 1.0, 61)
+        gu, gv = np.meshgrid(grid, grid)
+        lo, span = self.fit_box[:, 0], self.fit_box[:, 1] - self.fit_box[:, 0]
+        points = np.column_stack([lo[0] + gu.ravel() * span[0], lo[1] + gv.ravel() * span[1]])
+        if len(self.fit_hull) >= 3:
+            points = points[~_outside_hull(points, self.fit_hull, 0.0)]
+        det = self.jacobian_determinant(np.vstack([points, self.fit_hull]))
+        return bool(np.all(det > 0) or np.all(det < 0))
+
+    def outside_range(self, obs_xy: ArrayLike) -> np.ndarray:
+        """Boolean mask (n,) of finite points outside the convex hull of the calibration points (what
+        :meth:`apply` extrapolates); no warning."""
+        obs2 = np.atleast_2d(np.asarray(obs_xy, dtype=np.float64))
+        finite = np.all(np.isfinite(obs2), axis=1)
+        extrapolated = np.zeros(len(obs2), dtype=bool)
+        if np.any(finite):
+            tolerance = _RANGE_TOLERANCE * float(np.max(self.fit_box[:, 1] - self.fit_box[:, 0]))
+            extrapolated[finite] = _outside_hull(obs2[finite], self.fit_hull, tolerance)
+        return extrapolated
 
     def _scaled(self, obs: np.ndarray) -> np.ndarray:
         centre = self.fit_box.mean(axis=1)
@@ -378,11 +458,7 @@ class Calibration2D:
         if obs2.ndim != 2 or obs2.shape[1] != 2:
             raise ValueError(f"Calibration2D.apply: obs_xy must have shape (n, 2) or (2,), got {obs.shape}")
         predicted = self._basis(obs2) @ self.coefficients
-        finite = np.all(np.isfinite(obs2), axis=1)
-        extrapolated = np.zeros(len(obs2), dtype=bool)
-        if np.any(finite):
-            tolerance = _RANGE_TOLERANCE * float(np.max(self.fit_box[:, 1] - self.fit_box[:, 0]))
-            extrapolated[finite] = _outside_hull(obs2[finite], self.fit_hull, tolerance)
+        extrapolated = self.outside_range(obs2)
         _warn_extrapolation(self, int(np.count_nonzero(extrapolated)), len(obs2))
         if single:
             predicted, extrapolated = predicted[0], extrapolated[0]

@@ -375,6 +375,64 @@ def scene_frequency(omega_df_rad_per_m: float, d_f_m: float, depth_m: ArrayLike)
     return float(result) if result.ndim == 0 else result
 
 
+class AliasingError(ValueError):
+    """A speed lies at or above the Nyquist limit of the sampled sinusoid signal (see :func:`nyquist_speed`)."""
+
+
+def nyquist_speed(sample_rate_hz: float, omega_d_rad_per_m: float) -> float:
+    """Highest speed [m/s] a sinusoid mixel sampled at ``sample_rate_hz`` can measure: ``pi f_s / omega_d``.
+
+    At that speed the signal's angular frequency ``omega_d v`` (Eq. 13) reaches the Nyquist frequency
+    ``pi f_s`` [rad/s]; a faster scene gives a signal that is indistinguishable from a slower one
+    (:func:`aliased_speed`), so no estimator working on the samples alone can tell them apart.
+
+    Parameters
+    ----------
+    sample_rate_hz : float
+        Mixel sampling rate [Hz] (> 0).
+    omega_d_rad_per_m : float
+        Angular frequency of the mask on the scene plane [rad/m] (Eq. 10, :func:`scene_frequency`), in the
+        same length unit as the speed (rad/px for a speed in px/s).
+    """
+    if not np.isfinite(sample_rate_hz) or sample_rate_hz <= 0:
+        raise ValueError(f"sample_rate_hz must be a finite number > 0, got {sample_rate_hz!r}")
+    if not np.isfinite(omega_d_rad_per_m) or omega_d_rad_per_m <= 0:
+        raise ValueError(f"omega_d_rad_per_m must be finite and > 0, got {omega_d_rad_per_m!r}")
+    return float(np.pi * sample_rate_hz / omega_d_rad_per_m)
+
+
+def aliased_speed(speed_m_s: ArrayLike, sample_rate_hz: float, omega_d_rad_per_m: float) -> np.ndarray | float:
+    """The speed [m/s] whose sampled signal is identical to that of ``|speed_m_s|``: the true one below the
+    Nyquist limit ``v_N`` (:func:`nyquist_speed`), folded into ``[0, v_N]`` above it (``2 v_N - v`` for
+    ``v_N < v < 2 v_N``, and so on). This is what the FFT peak of the samples reports."""
+    v_n = nyquist_speed(sample_rate_hz, omega_d_rad_per_m)
+    folded = np.mod(np.abs(np.asarray(speed_m_s, dtype=np.float64)), 2 * v_n)
+    folded = np.where(folded > v_n, 2 * v_n - folded, folded)
+    return float(folded) if folded.ndim == 0 else folded
+
+
+def check_below_nyquist(speed_m_s: ArrayLike, sample_rate_hz: float, omega_d_rad_per_m: float,
+                        what: str = "speed") -> None:
+    """Raise :class:`AliasingError` if any ``|speed_m_s|`` is at or above :func:`nyquist_speed`.
+
+    The message names the limit, the speed the samples would show instead and the two ways out (a higher
+    sample rate, or a coarser mask / larger depth, i.e. a lower ``omega_d``).
+    """
+    v = np.abs(np.atleast_1d(np.asarray(speed_m_s, dtype=np.float64)))
+    v_n = nyquist_speed(sample_rate_hz, omega_d_rad_per_m)
+    if np.any(~np.isfinite(v)):
+        raise ValueError(f"{what} must be finite, got {speed_m_s!r}")
+    bad = v[v >= v_n]
+    if bad.size:
+        shown = aliased_speed(bad[0], sample_rate_hz, omega_d_rad_per_m)
+        raise AliasingError(
+            f"{what} {bad[0]:.6g} is at or above the Nyquist limit pi f_s / omega_d = {v_n:.6g} "
+            f"(f_s = {sample_rate_hz:.6g} Hz, omega_d = {omega_d_rad_per_m:.6g} rad per length unit): its samples "
+            f"look like a speed of {shown:.6g}; sample faster than {bad.max() * omega_d_rad_per_m / np.pi:.6g} Hz "
+            "or use a coarser mask period"
+        )
+
+
 def speed_from_frequency(omega_p_rad_s: ArrayLike, omega_d_rad_per_m: float) -> np.ndarray | float:
     """Speed ``v = omega_p / omega_d`` [m/s] (paper Eq. 14)."""
     if not np.isfinite(omega_d_rad_per_m) or omega_d_rad_per_m <= 0:
@@ -384,15 +442,25 @@ def speed_from_frequency(omega_p_rad_s: ArrayLike, omega_d_rad_per_m: float) -> 
 
 
 def speed_from_signal(
-    signal: ArrayLike, sample_rate_hz: float, omega_d_rad_per_m: float, window: WindowName = "hann", **kwargs
+    signal: ArrayLike,
+    sample_rate_hz: float,
+    omega_d_rad_per_m: float,
+    window: WindowName = "hann",
+    max_speed_m_s: float | None = None,
+    **kwargs,
 ) -> float:
     """Speed [m/s] of a mixel with a sinusoidal mask from its signal: ``dominant_frequency / omega_d``.
 
     The sign of the motion is not observable from one sinusoid (the result is a speed, >= 0). The Nyquist
-    limit gives the highest measurable speed: ``pi sample_rate_hz / omega_d``. The mask's constant term A0
-    passes the scene's slow brightness variations, which can outweigh the sinusoid on real textures: pass
+    limit gives the highest measurable speed, :func:`nyquist_speed` ``= pi sample_rate_hz / omega_d``: a
+    faster scene aliases to :func:`aliased_speed`, which the samples cannot reveal. The result is therefore
+    always below that limit; pass ``max_speed_m_s`` (the fastest speed the set-up must measure) to have
+    :class:`AliasingError` raised when it is not measurable, instead of a wrong speed. The mask's constant term
+    A0 passes the scene's slow brightness variations, which can outweigh the sinusoid on real textures: pass
     ``min_frequency_hz = omega_d v_min / (2 pi)`` for the lowest speed ``v_min`` of interest.
     """
+    if max_speed_m_s is not None:
+        check_below_nyquist(max_speed_m_s, sample_rate_hz, omega_d_rad_per_m, "max_speed_m_s")
     omega_p = dominant_frequency(signal, sample_rate_hz, window, **kwargs)
     return float(speed_from_frequency(omega_p, omega_d_rad_per_m))
 

@@ -2,7 +2,9 @@
 
 The position error is ``|predicted - true|`` (Euclidean distance in 2D) as a percentage of the calibrated range
 (paper Sec. 4.1.2, 4.2.2); the speed error is ``|predicted - true|`` as a percentage of the true speed
-(Sec. 4.3.2). Rows with NaN/inf (frames without a detection) are counted, not scored.
+(Sec. 4.3.2). Rows with a NaN/inf prediction but a ground truth (frames without a detection) are counted as
+missed (``n_missing``, ``missing_pct``), not scored; rows without a ground truth are counted apart
+(``n_without_truth``). The paper does not say how it treated missed frames; report the two together.
 """
 
 from __future__ import annotations
@@ -11,17 +13,24 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 
-def _error_summary(errors_pct: np.ndarray) -> dict[str, float | int]:
+def _error_summary(errors_pct: np.ndarray, truth_ok: np.ndarray) -> dict[str, float | int]:
+    """Summary of per-row errors [%]; ``truth_ok`` marks the rows that have a finite ground truth."""
     finite = np.isfinite(errors_pct)
     valid = errors_pct[finite]
     if valid.size == 0:
-        raise ValueError("no finite predictions to evaluate (all NaN/inf)")
+        raise ValueError(
+            f"no finite predictions to evaluate: {int(np.count_nonzero(truth_ok))} rows with a ground truth, all "
+            "predicted NaN/inf (e.g. no detection)" if errors_pct.size else "no rows to evaluate (empty input)"
+        )
+    n_missing = int(np.count_nonzero(truth_ok & ~finite))
     return {
         "max_error_pct": float(valid.max()),
         "avg_error_pct": float(valid.mean()),
         "rms_error_pct": float(np.sqrt(np.mean(valid**2))),
         "n": int(valid.size),
-        "n_missing": int(np.count_nonzero(~finite)),
+        "n_missing": n_missing,
+        "n_without_truth": int(np.count_nonzero(~truth_ok)),
+        "missing_pct": 100.0 * n_missing / max(1, int(np.count_nonzero(truth_ok))),
     }
 
 
@@ -39,8 +48,10 @@ def error_rates(predicted: ArrayLike, truth: ArrayLike, calibrated_range: float)
     Returns
     -------
     dict
-        ``max_error_pct``, ``avg_error_pct``, ``rms_error_pct`` over the ``n`` rows with finite values, and
-        ``n_missing``, the number of rows with NaN/inf (e.g. frames without detection), which are excluded.
+        ``max_error_pct``, ``avg_error_pct``, ``rms_error_pct`` over the ``n`` rows where both are finite;
+        ``n_missing``: rows with a finite truth but a NaN/inf prediction (missed: no detection or no position),
+        excluded from the averages and counted here; ``missing_pct``: their share of the rows with a truth [%];
+        ``n_without_truth``: rows whose truth is NaN/inf (nothing to score, whatever was predicted).
     """
     pred = np.asarray(predicted, dtype=np.float64)
     true = np.asarray(truth, dtype=np.float64)
@@ -49,7 +60,8 @@ def error_rates(predicted: ArrayLike, truth: ArrayLike, calibrated_range: float)
     if not np.isfinite(calibrated_range) or calibrated_range <= 0:
         raise ValueError(f"calibrated_range must be a finite length > 0, got {calibrated_range!r}")
     error = np.abs(pred - true) if pred.ndim == 1 else np.sqrt(np.sum((pred - true) ** 2, axis=1))
-    return _error_summary(100.0 * error / calibrated_range)
+    truth_ok = np.isfinite(true) if true.ndim == 1 else np.all(np.isfinite(true), axis=1)
+    return _error_summary(100.0 * error / calibrated_range, truth_ok)
 
 
 def speed_error_rates(pred_v: ArrayLike, true_v: ArrayLike) -> dict[str, float | int]:
@@ -60,4 +72,6 @@ def speed_error_rates(pred_v: ArrayLike, true_v: ArrayLike) -> dict[str, float |
         raise ValueError(f"pred_v and true_v must be 1D arrays of one length, got {pred.shape}, {true.shape}")
     if np.any(true == 0):
         raise ValueError("true_v contains zero speeds: a percentage of the true speed is undefined there")
-    return _error_summary(100.0 * np.abs(pred - true) / np.abs(true))
+    with np.errstate(invalid="ignore"):
+        errors = 100.0 * np.abs(pred - true) / np.abs(true)
+    return _error_summary(errors, np.isfinite(true))

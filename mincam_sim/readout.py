@@ -43,8 +43,7 @@ class Readout:
         var = self.sensor.expected_std_dn(frame_irradiance) ** 2
         var = var + self.sensor.expected_std_dn(background_irradiance) ** 2 / self.n_background_frames
         if mc_stderr_w_m2 is not None:
-            gain = self.sensor.expected(1.0) - self.sensor.expected(0.0)  # DN per W/m^2 (linear model)
-            var = var + (gain * np.asarray(mc_stderr_w_m2)) ** 2
+            var = var + (self.sensor.dn_per_irradiance * np.asarray(mc_stderr_w_m2)) ** 2
         return np.sqrt(var)
 
 
@@ -64,7 +63,7 @@ def read_out(
     Parameters
     ----------
     frame_irradiance_w_m2 : (frames, mixels) array
-        Rendered irradiance on each detector [W/m^2].
+        Rendered irradiance on each detector [W/m^2] (finite; zero frames give an empty read-out).
     background_irradiance_w_m2 : (mixels,) array
         Irradiance of the empty scene [W/m^2].
     sensor : SensorModel
@@ -72,12 +71,20 @@ def read_out(
     rng : numpy.random.Generator
         Source of the sensor noise.
     """
-    peak = float(max(np.max(frame_irradiance_w_m2), np.max(background_irradiance_w_m2)))
+    frames_in = np.asarray(frame_irradiance_w_m2, dtype=np.float64)
+    background_in = np.asarray(background_irradiance_w_m2, dtype=np.float64)
+    for name, values in (("frame_irradiance_w_m2", frames_in), ("background_irradiance_w_m2", background_in)):
+        if not np.all(np.isfinite(values)):
+            raise ValueError(f"read_out: {name} has NaN/inf values; a read-out needs finite irradiances")
+    peak = float(max(np.max(frames_in, initial=0.0), np.max(background_in, initial=0.0)))
+    if not peak > 0:
+        raise ValueError("read_out: every irradiance is 0 (or there are none), so there is no exposure to set; "
+                         "the mixels see nothing lit")
     exposed = sensor.auto_exposed(peak, exposure_fill)
     shape = (n_background_frames, *np.shape(background_irradiance_w_m2))
     bg_frames = exposed.measure(np.broadcast_to(background_irradiance_w_m2, shape), rng)
     background, threshold = noise_threshold(bg_frames, n_sigma=n_sigma)
-    frames = exposed.measure(frame_irradiance_w_m2, rng)
+    frames = exposed.measure(frames_in, rng)
     return Readout(frames, background, float(threshold), exposed, n_background_frames)
 
 

@@ -167,6 +167,11 @@ class SensorModel:
         return PLANCK_J_S * SPEED_OF_LIGHT_M_S / self.wavelength_m
 
     @property
+    def dn_per_irradiance(self) -> float:
+        """Slope of :meth:`expected` below saturation [DN per W/m^2]: ``electrons_per_irradiance / gain``."""
+        return self.electrons_per_irradiance / self.gain
+
+    @property
     def electrons_per_irradiance(self) -> float:
         """Mean signal photoelectrons per pixel per exposure for 1 W/m^2 [e- m^2 / W] (no dark current)."""
         return self.pixel_area_m2 * self.exposure_s / self.photon_energy_j * self.quantum_efficiency
@@ -220,10 +225,11 @@ class SensorModel:
             digital values. ``"aggregate"`` (default) draws the sum over the N pixels directly: the sum of N
             Poisson draws is Poisson(N mean) and the sum of N Gaussian read noises is Gaussian with variance
             N sigma^2, both exact; the N per-pixel roundings are replaced by one Gaussian of variance N/12
-            DN^2 (exact in mean and variance when the per-pixel noise exceeds ~0.5 DN), and saturation and
-            clipping are applied to the sum rather than per pixel (identical for a uniformly lit detector
-            except within a few noise sigmas of full well). With N = 1 both methods follow the same
-            distribution.
+            DN^2 (exact in mean and variance when the per-pixel noise exceeds ~0.5 DN). A sum cannot clip
+            per pixel, so values whose pixels come within 10 noise sigmas of 0 DN or of full well / the ADC's
+            top (:meth:`near_clipping`; e.g. a dark mixel, whose read noise each pixel's ADC clips at 0) are
+            simulated pixel by pixel, from a child of ``rng`` (``SeedSequence.spawn``: the other values keep
+            their draws). With N = 1 both methods follow the same distribution.
 
         Returns
         -------
@@ -235,12 +241,12 @@ class SensorModel:
                 f"rng must be a numpy.random.Generator, got {type(rng).__name__}; "
                 "pass np.random.default_rng(seed) (no global random state is used)"
             )
-        mean_electrons = self.electrons(irradiance_w_m2)
-        if method == "per_pixel":
-            return self._measure_per_pixel(mean_electrons, rng)
-        if method == "aggregate":
-            return self._measure_aggregate(mean_electrons, rng)
-        raise ValueError(f"method must be 'aggregate' or 'per_pixel', got {method!r}")
+        if method not in ("aggregate", "per_pixel"):
+            raise ValueError(f"method must be 'aggregate' or 'per_pixel', got {method!r}")
+        mean_electrons = np.asarray(self.electrons(irradiance_w_m2), dtype=np.float64)
+        flat = mean_electrons.reshape(-1)  # a scalar irradiance used to fail (numpy scalars from rng.poisson)
+        measure = self._measure_per_pixel if method == "per_pixel" else self._measure_aggregate
+        return measure(flat, rng).reshape(mean_electrons.shape)
 
     def _measure_per_pixel(self, mean_electrons: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         n = self.pixels_averaged
@@ -250,6 +256,14 @@ class SensorModel:
         digital = np.clip(np.rint(self._to_dn(electrons)), 0.0, self.max_dn)
         return digital.mean(axis=-1)
 
+    def near_clipping(self, mean_electrons: ArrayLike, n_sigma: float = 10.0) -> np.ndarray:
+        """Where a pixel's value can reach the clipping limits: within ``n_sigma`` noise standard deviations
+        (shot + read) of 0 DN or of the smaller of the full well and the ADC's top [e-] (boolean array)."""
+        lam = np.asarray(mean_electrons, dtype=np.float64)
+        spread = n_sigma * np.sqrt(lam + self.read_noise_e**2) + 1.0
+        top = min(self.full_well_e, (self.max_dn + 0.5) * self.gain)
+        return (lam - spread < 0.5 * self.gain) | (lam + spread > top)
+
     def _measure_aggregate(self, mean_electrons: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         n = self.pixels_averaged
         electrons_sum = np.minimum(rng.poisson(n * mean_electrons).astype(np.float64), n * self.full_well_e)
@@ -258,7 +272,20 @@ class SensorModel:
         digital_sum = self._to_dn(electrons_sum)
         if n > 1:
             digital_sum += rng.normal(0.0, np.sqrt(n / 12.0), size=mean_electrons.shape)
-        return np.clip(np.rint(digital_sum) / n, 0.0, self.max_dn)
+        digital = np.clip(np.rint(digital_sum) / n, 0.0, self.max_dn)
+        if n > 1:
+            # The sum cannot reproduce per-pixel clipping: near 0 DN (each pixel's negative read noise is
+            # clipped, raising the mean) or near full well / the ADC's top. Simulate those values pixel by
+            # pixel, from a child stream (seed-sequence spawn) so the other values keep their draws.
+            edge = self.near_clipping(mean_electrons)
+            if np.any(edge):
+                child = _child_generator(rng)
+                lam = mean_electrons[edge]
+                chunk = max(1, (1 << 22) // n)  # ~32 MiB of float64 per chunk
+                digital[edge] = np.concatenate(
+                    [self._measure_per_pixel(lam[i : i + chunk], child) for i in range(0, lam.size, chunk)]
+                )
+        return digital
 
     # ----------------------------------------------------------------------------------------------- exposure
     def exposure_for(self, irradiance_peak_w_m2: float, fill: float = 0.8) -> float:
@@ -299,3 +326,12 @@ def _validated_irradiance(irradiance_w_m2: ArrayLike) -> np.ndarray:
             "per area and cannot be negative: check signs or subtract backgrounds after measuring, not before"
         )
     return irradiance
+
+
+def _child_generator(rng: np.random.Generator) -> np.random.Generator:
+    """A generator independent of ``rng`` that does not advance its stream (its seed sequence spawns a child;
+    deterministic for a given seed and history). Falls back to drawing a seed from ``rng`` if it has none."""
+    seed_seq = getattr(rng.bit_generator, "seed_seq", None)
+    if isinstance(seed_seq, np.random.SeedSequence):
+        return np.random.Generator(type(rng.bit_generator)(seed_seq.spawn(1)[0]))
+    return np.random.default_rng(rng.integers(0, 2**63))

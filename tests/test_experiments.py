@@ -91,3 +91,19 @@ def test_two_mixel_trajectory_from_side_speeds(run):
         assert abs(est_v / true_v - 1) <= 1 / periods
     assert r["estimated_turn_radius_m"] > 0  # turning left, as simulated
     assert 0 < r["estimated_heading_change_rad"] < 2 * r["true_heading_change_rad"]
+
+
+@pytest.mark.parametrize("name", ["intrusion", "tracking"])
+def test_frame_accounting_and_calibration_in_view(run, name):
+    """Every ground-truth frame is scored, missed (not detected) or without a position (Eq. 4 / 7 denominator
+    within the threshold), and the error rates count the last as missing; the calibration keeps only squares
+    that every mixel sees whole, and its cubic then fits the screen to a fraction of a millimetre (it was 3 cm
+    in x for tracking when the rim squares, out of one mixel's view, were fitted)."""
+    _, results = run
+    r = results[name]
+    assert r["ground_truth_frames"] == r["n"] + r["missed_frames"] + r["no_position_frames"]
+    assert r["n_missing"] == r["no_position_frames"]
+    assert r["detected_frames"] == r["n"] + r["no_position_frames"] + r["false_alarm_frames"]
+    assert 0 <= r["extrapolated_frames"] <= r["n"]
+    assert r["calibration_points_outside_view"] == (6 if name == "intrusion" else 4)
+    assert np.max(r["calibration_rms_residual_m"]) < 1e-3

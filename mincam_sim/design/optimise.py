@@ -83,7 +83,7 @@ def build_problem(task: tr.TrackingTask, show_progress: bool = False):
     # Fixed exposure: the brightest training reading of a fully clear print fills EXPOSURE_FILL of the range.
     peak = max(float((a * film.t_max).sum(axis=1).max()) for a in matrices)
     s = tr.sensor().auto_exposed(peak, tr.EXPOSURE_FILL)
-    gain = float(s.expected(1.0) - s.expected(0.0))
+    gain = s.dn_per_irradiance  # DN per W/m^2 (expected(1) - expected(0) saturates: peaks are ~0.01 W/m^2)
     index, weight = par.bilinear_upsample(task.grid, dots)
     problem = dz.DesignProblem(
         matrices=matrices, upsample_index=index, upsample_weight=weight, targets=targets,

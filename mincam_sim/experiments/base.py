@@ -43,7 +43,7 @@ class ExperimentResult:
     def as_dict(self) -> dict:
         """Flat JSON form (the ``results.json`` entry): details, then the headline numbers and the paper's."""
         out = dict(self.details)
-        if self.max_error_pct is not None:
+        if self.max_error_pct is not None or self.n is not None:
             out.update(max_error_pct=self.max_error_pct, avg_error_pct=self.avg_error_pct, n=self.n)
         if self.paper is not None:
             out["paper"] = self.paper.as_dict()
@@ -52,8 +52,12 @@ class ExperimentResult:
 
     @classmethod
     def from_rates(cls, name: str, rates: dict, paper: PaperNumbers | None, details: dict) -> ExperimentResult:
-        """From an error-rate dict (:func:`~mincam_sim.metrics.error_rates`) plus details."""
-        return cls(name, float(rates["max_error_pct"]), float(rates["avg_error_pct"]), int(rates["n"]), paper,
+        """From an error-rate dict (:func:`~mincam_sim.metrics.error_rates`) plus details; rates of ``None``
+        (nothing could be scored) stay ``None`` and ``n`` is then 0."""
+        def number(key: str) -> float | None:
+            return None if rates.get(key) is None else float(rates[key])
+
+        return cls(name, number("max_error_pct"), number("avg_error_pct"), int(rates.get("n") or 0), paper,
                    {**{k: v for k, v in rates.items() if k not in ("max_error_pct", "avg_error_pct", "n")},
                     **details})
 
@@ -87,6 +91,13 @@ class Experiment(ABC):
     def rng(self, setup: Setup) -> np.random.Generator:
         """This experiment's random stream: the set-up's seed plus the experiment's own ``seed_offset``."""
         return np.random.default_rng(setup.seed + self.seed_offset)
+
+    def streams(self, setup: Setup, purposes: tuple[str, ...]) -> dict[str, np.random.Generator]:
+        """Independent random streams, one per purpose (children of the seed sequence of the set-up's seed plus
+        ``seed_offset``): what one purpose draws (e.g. the calibration's sensor noise, whose amount depends on
+        how many squares are swept) never shifts another's numbers (e.g. the table's printed texture)."""
+        children = np.random.SeedSequence(setup.seed + self.seed_offset).spawn(len(purposes))
+        return {name: np.random.default_rng(child) for name, child in zip(purposes, children, strict=True)}
 
     def calibrate(self, setup: Setup, params: Any, rng: np.random.Generator, out_dir: Path) -> Any:
         """Fit what maps measurements to the quantity of interest (``None`` if the estimator needs nothing)."""

@@ -16,7 +16,7 @@ from .base import Experiment, ExperimentResult, PaperNumbers
 from .ground_truth import GroundTruthCamera
 from .layouts import intrusion_mincam
 from .pipeline import locate_in_world
-from .screen_calibration import fit_calibration_1d, screen_sweep_1d, sweep_change_dn
+from .screen_calibration import fit_calibration_1d, screen_sweep_1d, sweep_change_dn, visible_sweep
 from .setup import Setup
 from .tabletop_world import make_tabletop, tabletop_world
 
@@ -90,6 +90,7 @@ class Intrusion(Experiment):
         """Sweep a white square along the boundary on the screen; fit the cubic f(x_obs) -> true position."""
         cam = intrusion_mincam(setup, params.boundary_x_m, params.band_m)
         sweep = screen_sweep_1d(setup, params.boundary_x_m, params.calibration_positions, params.calibration_square_m)
+        sweep, n_unseen = visible_sweep(cam, setup, sweep)
         change, reached = sweep_change_dn(cam, setup, sweep, rng, params.calibration_rel_stderr)
         observed = intrusion_position(change[:, 0], change[:, 1])
         true = sweep.positions_m[:, 1]
@@ -97,7 +98,7 @@ class Intrusion(Experiment):
                                                   "depth_m": setup.depth_m, "spacing_m": setup.spacing_m})
         cal.to_json(out_dir / "intrusion_calibration.json")
         return {"true_m": true, "change_dn": change, "observed": observed, "calibration": cal,
-                "mc_rel_stderr": reached}
+                "mc_rel_stderr": reached, "points_outside_view": n_unseen}
 
     def scene(self, setup: Setup, params: IntrusionParams, rng: np.random.Generator) -> IntrusionScene:
         cars = {"car_a": objects.toy_car(albedo=0.9), "car_b": objects.toy_car(albedo=0.75)}
@@ -113,9 +114,9 @@ class Intrusion(Experiment):
     def run(self, setup: Setup, params: IntrusionParams, out_dir: Path,
             show_progress: bool = False) -> ExperimentResult:
         out_dir.mkdir(parents=True, exist_ok=True)
-        rng = self.rng(setup)
-        cal = self.calibrate(setup, params, rng, out_dir)
-        scene = self.scene(setup, params, rng)
+        rng = self.streams(setup, ("calibration", "scene", "readout"))
+        cal = self.calibrate(setup, params, rng["calibration"], out_dir)
+        scene = self.scene(setup, params, rng["scene"])
         camera = GroundTruthCamera.for_setup(setup)
         cam = intrusion_mincam(setup, params.boundary_x_m, params.band_m)
         world = tabletop_world(setup, scene.table, cam, camera)
@@ -124,11 +125,15 @@ class Intrusion(Experiment):
         def predict(c, min_total_dn):
             return calibration.apply(intrusion_position(c[:, 0], c[:, 1], min_total_dn))
 
+        def outside(c, min_total_dn):
+            return calibration.outside_range(intrusion_position(c[:, 0], c[:, 1], min_total_dn))
+
         rows, cols = np.indices((camera.pixels, camera.pixels))
         xy = camera.pixel_to_table(rows, cols, (camera.pixels, camera.pixels))
         band = np.abs(xy[..., 0] - params.boundary_x_m) <= params.band_m / 2
-        found = locate_in_world(world, camera, scene.frames, scene.background, setup, rng, predict,
-                                setup.tabletop_spp, region=band, axis=1, show_progress=show_progress)
+        found = locate_in_world(world, camera, scene.frames, scene.background, setup, rng["readout"], predict,
+                                setup.tabletop_spp, region=band, axis=1, show_progress=show_progress,
+                                extrapolated=outside)
         a = found.arrays
         plot_calibration_1d(cal["true_m"], cal["change_dn"], cal["observed"], calibration,
                             out_dir / "intrusion_calibration.png", names=("y", "1-y"))
@@ -142,4 +147,6 @@ class Intrusion(Experiment):
         return ExperimentResult.from_rates(self.name, found.summary, self.paper, {
             "calibration_rms_residual_m": calibration.rms_residual_m,
             "calibration_mc_worst_rel_stderr": cal["mc_rel_stderr"],
+            "calibration_points": len(cal["true_m"]),
+            "calibration_points_outside_view": cal["points_outside_view"],
         })

@@ -45,7 +45,8 @@ def locate_in_world(world: WorldRenderer, camera: GroundTruthCamera, frames: Seq
                     setup: Setup, rng: np.random.Generator, predict: Callable[[np.ndarray, float], np.ndarray],
                     spp: int,
                     region: np.ndarray | None = None, axis: int | None = None,
-                    show_progress: bool = False) -> Located:
+                    show_progress: bool = False,
+                    extrapolated: Callable[[np.ndarray, float], np.ndarray] | None = None) -> Located:
     """Render dP of every frame (``setup.dp_estimator``: the stratified estimator with the plain budget ``spp`` /
     ``STRATIFIED_SHARE`` rays per pass, or the plain correlated one with ``spp``), read it out, detect, predict
     positions with
@@ -56,7 +57,14 @@ def locate_in_world(world: WorldRenderer, camera: GroundTruthCamera, frames: Seq
     shadow's darkening cancel; such frames count as missed, not as wild positions.
 
     ``axis`` picks one coordinate (1D experiments); ``region`` restricts the ground truth (e.g. the boundary
-    band).
+    band). ``extrapolated(change_dn, min_total_dn)``, if given, marks the frames whose observation lies outside
+    the calibrated range (counted in the summary as ``extrapolated_frames``).
+
+    Frame accounting (summary): ``frames`` = ``ground_truth_frames`` + frames without a ground truth; of the
+    ground-truth frames, ``missed_frames`` were not detected, ``no_position_frames`` were detected but the ratio
+    estimator gave no position (denominator within the threshold), and ``n`` were scored. ``n_missing`` (the
+    error rates' count) equals ``no_position_frames``; ``unscored_frames_pct`` is the share of ground-truth
+    frames that got no score for either reason. If no frame can be scored the error rates are ``None``.
     """
     rays = spp // STRATIFIED_SHARE if setup.dp_estimator == "stratified" else spp
     dp, _ = world.measure_changes(frames, background, spp=rays, seed=setup.seed, show_progress=show_progress,
@@ -91,20 +99,37 @@ def locate_in_world(world: WorldRenderer, camera: GroundTruthCamera, frames: Seq
         images.append(image)
     world.update(background)
 
-    ok = detected & _finite_rows(truth) & _finite_rows(predicted)
+    has_truth = _finite_rows(truth)
+    scored = detected & has_truth  # frames to score: a NaN prediction among them counts as missing
+    ok = scored & _finite_rows(predicted)
     sigma_norm = sigma if sigma.ndim == 1 else np.hypot(*sigma.T)
     with np.errstate(divide="ignore", invalid="ignore"):
         dp_rel = np.abs(dp.stderr_w_m2 / dp.irradiance_w_m2)
+    n_missed = int((has_truth & ~detected).sum())
+    n_no_position = int((scored & ~_finite_rows(predicted)).sum())
+
+    def rates(pred: np.ndarray, true: np.ndarray) -> dict | None:
+        both = _finite_rows(pred) & _finite_rows(true)
+        return error_rates(pred, true, setup.field_m) if both.any() else None
+
+    headline = rates(predicted[scored], truth[scored]) or {
+        "max_error_pct": None, "avg_error_pct": None, "rms_error_pct": None, "n": 0,
+        "n_missing": n_no_position, "n_without_truth": 0, "missing_pct": 100.0 if scored.any() else None}
     summary = {
-        **error_rates(predicted[ok], truth[ok], setup.field_m),
+        **headline,
         "frames": len(frames),
         "detected_frames": int(detected.sum()),
-        "ground_truth_frames": int(_finite_rows(truth).sum()),
-        "missed_frames": int((_finite_rows(truth) & ~detected).sum()),
-        "false_alarm_frames": int((~_finite_rows(truth) & detected).sum()),
-        "noiseless": error_rates(predicted_ideal[ok], truth[ok], setup.field_m),
-        "signed_centroid_vs_ground_truth": error_rates(signed[ok], truth[ok], setup.field_m),
-        "vs_signed_centroid": error_rates(predicted[ok], signed[ok], setup.field_m),
+        "ground_truth_frames": int(has_truth.sum()),
+        "missed_frames": n_missed,
+        "no_position_frames": n_no_position,
+        "unscored_frames_pct": (100.0 * (n_missed + n_no_position) / int(has_truth.sum())
+                                if has_truth.any() else None),
+        "false_alarm_frames": int((~has_truth & detected).sum()),
+        "extrapolated_frames": (int((extrapolated(change, readout.threshold_dn) & ok).sum())
+                                if extrapolated is not None else None),
+        "noiseless": rates(predicted_ideal[ok], truth[ok]),
+        "signed_centroid_vs_ground_truth": rates(signed[ok], truth[ok]),
+        "vs_signed_centroid": rates(predicted[ok], signed[ok]),
         "noise_sigma_median_pct": float(100 * np.median(sigma_norm[ok]) / setup.field_m) if ok.any() else None,
         "dP_worst_rel_stderr": float(np.nanmax(dp_rel[ok])) if ok.any() else None,
         "spp_per_mixel_per_frame": rays,

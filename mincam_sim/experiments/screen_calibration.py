@@ -27,6 +27,40 @@ def screen_sweep_2d(setup: Setup, n_per_axis: int, square_m: float) -> Sweep:
     return Sweep(sweep.positions_m[keep], square_m)
 
 
+def seen_by_every_mixel(mincam, setup: Setup, sweep: Sweep) -> np.ndarray:
+    """Boolean mask of the sweep's squares that every mixel sees whole through its full aperture.
+
+    ``mincam`` is the experiment's mincam (turned to the screen here). A screen point at distance ``d`` is seen
+    by every point of a mixel's detector, through the mask, within ``|x - p_x| <= d tan_x`` with
+    ``tan_x = (mask_width - detector_size) / (2 d_f)`` (and likewise in y); beyond that lies the penumbra, where
+    the housing cuts the view until, at ``(mask_width + detector_size) / (2 d_f)``
+    (:meth:`~mincam_sim.optics.Mixel.half_fov_tan`), nothing is seen. Eq. 4 / 7 assume every mixel sees the
+    whole change: a square in one mixel's penumbra or out of its view reads a ratio folded towards the wrong
+    end (with the tracking cross at 0.5 m, the square at x = -25 cm, out of the right-hand 1 - x mixel's view,
+    read x_obs = 1), and such points corrupt the whole cubic fit, so the calibration leaves them out.
+    """
+    screen_cam = mincam_on_screen(mincam, setup)
+    centres = np.asarray(sweep.positions_m, dtype=np.float64)
+    half = 0.5 * sweep.size_m
+    keep = np.ones(len(centres), dtype=bool)
+    for m in screen_cam:
+        p = np.asarray(m.pose.position_m, dtype=np.float64)
+        distance = setup.depth_m + p[2]  # the screen is at z = -depth, the mixels look along -z
+        tan = (np.array([m.mask.width_m, m.mask.height_m]) - m.detector_size_m) / (2 * m.d_f_m)
+        keep &= np.all(np.abs(centres - p[:2]) + half <= distance * tan + 1e-12, axis=1)
+    return keep
+
+
+def visible_sweep(mincam, setup: Setup, sweep: Sweep) -> tuple[Sweep, int]:
+    """The squares of ``sweep`` that every mixel sees whole (:func:`seen_by_every_mixel`) and how many were
+    left out; refuses a sweep left with fewer than 10 squares."""
+    keep = seen_by_every_mixel(mincam, setup, sweep)
+    if keep.sum() < 10:
+        raise ValueError(f"only {int(keep.sum())} of {len(keep)} calibration squares lie inside every mixel's field "
+                         "of view: reduce the spacing, the field or the square, or move the screen further away")
+    return Sweep(sweep.positions_m[keep], sweep.size_m, sweep.radiance), int((~keep).sum())
+
+
 def sweep_change_dn(mincam, setup: Setup, sweep: Sweep, rng: np.random.Generator,
                     target_rel_stderr: float) -> tuple[np.ndarray, float]:
     """Read-out change [DN] of every sweep position (rows) and mixel (columns) on the set-up's screen, rendered

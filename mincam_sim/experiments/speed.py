@@ -20,7 +20,16 @@ from pathlib import Path
 import numpy as np
 
 from .. import objects
-from ..estimators import scene_frequency, spectrum, speed_from_signal, trajectory_from_speeds
+from ..errors import ConfigError
+from ..estimators import (
+    AliasingError,
+    check_below_nyquist,
+    nyquist_speed,
+    scene_frequency,
+    spectrum,
+    speed_from_signal,
+    trajectory_from_speeds,
+)
 from ..geometry import Pose
 from ..metrics import speed_error_rates
 from ..optics import Mincam
@@ -62,7 +71,8 @@ class SpeedParams:
     vehicle_speeds_m_s : tuple of float
         Speeds of the physical vehicle [m/s].
     vehicle_rate_hz : float
-        Mixel sample rate [1/s]: above twice omega_d v_max / 2 pi (~530 Hz at 16 m/s).
+        Mixel sample rate [1/s]: above the Nyquist rate 2 x omega_d v_max / (2 pi) (the signal is ~530 Hz at 16
+        m/s, so > ~1070 Hz); :func:`check_nyquist` refuses speeds at or above the limit.
     vehicle_frames, vehicle_spp : int
         Samples per speed and rays per sample.
     turn_frames, turn_spp : int
@@ -106,6 +116,40 @@ def _speed(signal: np.ndarray, rate_hz: float, omega_d: float, v_min: float, ord
                                    max_frequency_hz=f_max))
 
 
+TURN_WIDTH_M, TURN_SPEED_M_S, TURN_RADIUS_M = 1.6, 10.0, 5.0  # the turning vehicle: mixel separation, speed, radius
+
+
+def video_omega_d_rad_per_px(setup: Setup, params: SpeedParams) -> float:
+    """Mask frequency on the screen in rad per display pixel (Eq. 10 times the pixel pitch)."""
+    screen = setup.with_(screen_resolution=tuple(params.video_resolution)).screen()
+    omega_d = float(scene_frequency(2 * np.pi / params.mask_period_m, setup.d_f_m, setup.depth_m))
+    return omega_d * screen.texel_size_m[0]
+
+
+def check_nyquist(setup: Setup, params: SpeedParams) -> dict:
+    """Refuse (:class:`ConfigError`) speeds the sampled sinusoid cannot measure (at or above the Nyquist limit
+    ``pi f_s / omega_d``, where the FFT peak would report an aliased, wrong speed); return the limits."""
+    video = nyquist_speed(params.video_frame_rate_hz, video_omega_d_rad_per_px(setup, params))
+    vehicle_omega = float(scene_frequency(2 * np.pi / params.mask_period_m, setup.d_f_m, params.vehicle_height_m))
+    vehicle = nyquist_speed(params.vehicle_rate_hz, vehicle_omega)
+    turn_fastest = TURN_SPEED_M_S * (1 + TURN_WIDTH_M / (2 * TURN_RADIUS_M))  # the outer side
+    checks = (
+        ("[speed] video_shifts_px x video_frame_rate_hz (px/s)",
+         params.video_frame_rate_hz * max(params.video_shifts_px), params.video_frame_rate_hz,
+         video_omega_d_rad_per_px(setup, params)),
+        ("[speed] vehicle_speeds_m_s (with vehicle_rate_hz)", max(params.vehicle_speeds_m_s),
+         params.vehicle_rate_hz, vehicle_omega),
+        (f"the turning vehicle's outer side speed (vehicle_rate_hz; {TURN_SPEED_M_S:g} m/s on a "
+         f"{TURN_RADIUS_M:g} m circle)", turn_fastest, params.vehicle_rate_hz, vehicle_omega),
+    )
+    for what, fastest, rate, omega in checks:
+        try:
+            check_below_nyquist(fastest, rate, omega, what)
+        except AliasingError as err:
+            raise ConfigError(str(err)) from None
+    return {"video_nyquist_speed_px_s": video, "vehicle_nyquist_speed_m_s": vehicle}
+
+
 class Speed(Experiment):
     """One sinusoid mixel (Eq. 9-14): speed of a road video on the screen and of a physical vehicle; two mixels
     give a turning vehicle's trajectory."""
@@ -134,8 +178,7 @@ class Speed(Experiment):
         road = self.scene(setup, params, rng)
         shifts = params.video_shifts_px
         rate = params.video_frame_rate_hz
-        pitch_m = screen.texel_size_m[0]
-        omega_d_px = float(scene_frequency(2 * np.pi / params.mask_period_m, setup.d_f_m, setup.depth_m)) * pitch_m
+        omega_d_px = video_omega_d_rad_per_px(setup, params)
         v_min, v_max = rate * min(shifts), rate * max(shifts)
         true_v, pred_v, plain_v, spectra = [], [], [], []
         for k in progress(shifts, desc="road video speeds", disable=not show_progress):
@@ -207,7 +250,7 @@ class Speed(Experiment):
                            show_progress: bool) -> dict:
         """Two sinusoid mixels, one on each side of a vehicle turning on a circle, give the two side speeds;
         with the vehicle's width they give the turn radius and heading change (paper Sec. 4.3, last paragraph)."""
-        d, width, v, radius = params.vehicle_height_m, 1.6, 10.0, 5.0  # [m], [m], [m/s], [m] (turning left)
+        d, width, v, radius = params.vehicle_height_m, TURN_WIDTH_M, TURN_SPEED_M_S, TURN_RADIUS_M  # turning left
         rate, n_frames = params.vehicle_rate_hz, params.turn_frames
         cam = Mincam(tuple(
             sinusoid_mixel(setup, params.mask_period_m,
@@ -260,9 +303,13 @@ class Speed(Experiment):
 
     def run(self, setup: Setup, params: SpeedParams, out_dir: Path, show_progress: bool = False) -> ExperimentResult:
         out_dir.mkdir(parents=True, exist_ok=True)
+        limits = check_nyquist(setup, params)  # before any rendering
         rng = self.rng(setup)
         video = self.road_video(setup, params, rng, out_dir, show_progress)
+        video["nyquist_speed_px_s"] = limits["video_nyquist_speed_px_s"]
+        vehicle_limit = limits["vehicle_nyquist_speed_m_s"]
         vehicle = self.vehicle(setup, params, rng, out_dir, show_progress)
         trajectory = self.vehicle_trajectory(setup, params, rng, show_progress)
+        vehicle["nyquist_speed_m_s"] = vehicle_limit
         return ExperimentResult.from_rates(self.name, video, self.paper,
                                            {"vehicle": vehicle, "vehicle_trajectory": trajectory})

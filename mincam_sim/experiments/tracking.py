@@ -17,7 +17,7 @@ from .base import Experiment, ExperimentResult, PaperNumbers
 from .ground_truth import GroundTruthCamera
 from .layouts import tracking_mincam
 from .pipeline import locate_in_world
-from .screen_calibration import fit_calibration_2d, screen_sweep_2d, sweep_change_dn
+from .screen_calibration import fit_calibration_2d, screen_sweep_2d, sweep_change_dn, visible_sweep
 from .setup import Setup
 from .tabletop_world import make_tabletop, tabletop_world
 
@@ -92,13 +92,16 @@ class Tracking(Experiment):
 
     def calibrate(self, setup: Setup, params: TrackingParams, rng: np.random.Generator, out_dir: Path) -> dict:
         """A grid of white squares on the screen; fit the bivariate cubic from Eq. 7's output to positions."""
-        sweep = screen_sweep_2d(setup, params.calibration_grid, params.calibration_square_m)
-        change, reached = sweep_change_dn(tracking_mincam(setup), setup, sweep, rng, params.calibration_rel_stderr)
+        cam = tracking_mincam(setup)
+        sweep, n_unseen = visible_sweep(cam, setup, screen_sweep_2d(setup, params.calibration_grid,
+                                                                     params.calibration_square_m))
+        change, reached = sweep_change_dn(cam, setup, sweep, rng, params.calibration_rel_stderr)
         observed = track_4(change)
         cal = fit_calibration_2d(observed, sweep.positions_m, {"experiment": self.name, "depth_m": setup.depth_m,
                                                                "spacing_m": setup.spacing_m})
         cal.to_json(out_dir / "tracking_calibration.json")
-        return {"true_m": sweep.positions_m, "observed": observed, "calibration": cal, "mc_rel_stderr": reached}
+        return {"true_m": sweep.positions_m, "observed": observed, "calibration": cal, "mc_rel_stderr": reached,
+                "points_outside_view": n_unseen}
 
     def scene(self, setup: Setup, params: TrackingParams, rng: np.random.Generator) -> TrackingScene:
         toys = {kind: objects.windup_toy(kind, size_m=params.toy_size_m) for kind in params.toys}
@@ -117,9 +120,9 @@ class Tracking(Experiment):
     def run(self, setup: Setup, params: TrackingParams, out_dir: Path,
             show_progress: bool = False) -> ExperimentResult:
         out_dir.mkdir(parents=True, exist_ok=True)
-        rng = self.rng(setup)
-        cal = self.calibrate(setup, params, rng, out_dir)
-        scene = self.scene(setup, params, rng)
+        rng = self.streams(setup, ("calibration", "scene", "readout"))
+        cal = self.calibrate(setup, params, rng["calibration"], out_dir)
+        scene = self.scene(setup, params, rng["scene"])
         camera = GroundTruthCamera.for_setup(setup)
         world = tabletop_world(setup, scene.table, tracking_mincam(setup), camera)
         calibration: Calibration2D = cal["calibration"]
@@ -127,8 +130,11 @@ class Tracking(Experiment):
         def predict(c, min_total_dn):
             return calibration.apply(track_4(c, min_total_dn))
 
-        found = locate_in_world(world, camera, scene.frames, scene.background, setup, rng, predict,
-                                setup.tabletop_spp, show_progress=show_progress)
+        def outside(c, min_total_dn):
+            return calibration.outside_range(track_4(c, min_total_dn))
+
+        found = locate_in_world(world, camera, scene.frames, scene.background, setup, rng["readout"], predict,
+                                setup.tabletop_spp, show_progress=show_progress, extrapolated=outside)
         a = found.arrays
         predicted, truth = a["predicted_m"], a["truth_m"]
         plot_calibration_2d(cal["true_m"], cal["observed"], calibration, out_dir / "tracking_calibration.png")
@@ -141,6 +147,7 @@ class Tracking(Experiment):
         return ExperimentResult.from_rates(self.name, found.summary, self.paper, {
             "toys": list(params.toys),
             "calibration_points": len(cal["true_m"]),
+            "calibration_points_outside_view": cal["points_outside_view"],
             "calibration_rms_residual_m": np.asarray(calibration.rms_residual_m).tolist(),  # (x, y)
             "calibration_mc_worst_rel_stderr": cal["mc_rel_stderr"],
         })
