@@ -159,6 +159,53 @@ class Mincam:
     def names(self) -> list[str]:
         return [m.name for m in self.mixels]
 
+    @property
+    def centre_m(self) -> np.ndarray:
+        """Mean position of the mixels' detectors [m] (world)."""
+        return np.mean([m.pose.position_m for m in self.mixels], axis=0)
+
+    def translated(self, offset_m) -> Mincam:
+        """The same mincam moved by ``offset_m`` [m] (world)."""
+        return Mincam(tuple(m.with_pose(m.pose.translated(tuple(np.asarray(offset_m, dtype=float))))
+                            for m in self.mixels), allow_overlap=self.allow_overlap)
+
+
+def seen_whole_by_every_mixel(mincam: Mincam, centres_m: np.ndarray, half_size_m: np.ndarray | float,
+                              plane_z_m: float) -> np.ndarray:
+    """Which squares on the plane ``z = plane_z_m`` every detector point of every mixel sees whole through its mask.
+
+    For mixels facing the plane (forward along -z), a point at distance ``d`` is seen by every detector point
+    within ``|x - p_x| <= d (mask_width - detector_size) / (2 d_f)`` (and likewise in y); beyond that lies the
+    penumbra, where the housing cuts part of the detector's view, until nothing is seen at
+    :meth:`Mixel.half_fov_tan`. Ratio estimators (Eq. 4 / 7) assume every mixel sees the whole change.
+
+    Parameters
+    ----------
+    centres_m : (n, 2) float
+        Square centres (x, y) on the plane [m].
+    half_size_m : float or (n,) float
+        Half the squares' side [m].
+    plane_z_m : float
+        The plane's z [m] (below the mixels).
+    """
+    centres = np.asarray(centres_m, dtype=np.float64).reshape(-1, 2)
+    half = np.broadcast_to(np.asarray(half_size_m, dtype=np.float64), (len(centres),))
+    keep = np.ones(len(centres), dtype=bool)
+    for m in mincam:
+        left, up, forward = m.pose.axes()
+        if not np.allclose(forward, (0.0, 0.0, -1.0), atol=1e-9):
+            raise ValueError(f"mixel {m.name!r} must face the plane (forward (0, 0, -1)), got {m.pose.forward}")
+        p = np.asarray(m.pose.position_m, dtype=np.float64)
+        distance = p[2] - plane_z_m
+        if distance <= 0:
+            raise ValueError(f"mixel {m.name!r} at z = {p[2]} m is not above the plane z = {plane_z_m} m")
+        tan = (np.array([m.mask.width_m, m.mask.height_m]) - m.detector_size_m) / (2 * m.d_f_m)
+        axes = np.stack([left[:2], up[:2]])  # the mask's width runs along local x (left), its height along y
+        offset = np.abs((centres - p[:2]) @ axes.T)  # (n, 2) from the mixel's axis, along each mask axis
+        extent = half[:, None] * np.abs(axes).sum(axis=1)[None, :]  # half the square's shadow on each axis
+        keep &= np.all(offset + extent <= distance * tan + 1e-12, axis=1)
+    return keep
+
 
 def bodies_overlap(a: Mixel, b: Mixel, tolerance_m: float = 1e-9) -> bool:
     """True if the two mixels' body boxes share interior volume (separating-axis test of two oriented boxes)."""
@@ -213,12 +260,15 @@ def layout(
 
 def pair_layout(spacing_m: float = PAPER_SPACING_M, resolution: int = 256, mask_size_m: float = DEFAULT_MASK_SIZE_M,
                 **kw) -> Mincam:
-    """The paper's 1D intrusion mincam: masks x (left mixel) and 1 - x (right mixel), ``spacing_m`` apart;
-    ``kw`` goes to :func:`layout` (centre pose, d_f_m, detector_size_m)."""
+    """The paper's 1D intrusion mincam: masks x (right mixel) and 1 - x (left mixel), ``spacing_m`` apart;
+    ``kw`` goes to :func:`layout` (centre pose, d_f_m, detector_size_m).
+
+    Each ramp is brightest on its own mixel's side, where that mixel sees objects nearest its axis (see
+    :func:`cross_layout`)."""
     _check_spacing(spacing_m)
     return layout(
         [ramp("x", resolution, mask_size_m), ramp("1-x", resolution, mask_size_m)],
-        [(-spacing_m / 2, 0.0), (spacing_m / 2, 0.0)],
+        [(spacing_m / 2, 0.0), (-spacing_m / 2, 0.0)],
         names=["x", "1-x"],
         **kw,
     )
@@ -228,14 +278,19 @@ def cross_layout(spacing_m: float = PAPER_SPACING_M, resolution: int = 256, mask
                  **kw) -> Mincam:
     """The paper's tracking mincam: 4 outer mixels (x, 1 - x, y, 1 - y) around a centre camera.
 
-    The mixels sit ``spacing_m`` from the centre: x on the left, 1 - x on the right, y above, 1 - y below;
-    ``kw`` goes to :func:`layout` (centre pose, d_f_m, detector_size_m).
+    The mixels sit ``spacing_m`` from the centre: x on the right, 1 - x on the left, y above, 1 - y below (seen
+    from behind the mincam); ``kw`` goes to :func:`layout` (centre pose, d_f_m, detector_size_m). Each ramp is
+    brightest on its own mixel's side, where that mixel sees objects nearest its axis. With the x pair the other
+    way round (as this package had it before), objects on the right were weighed most by the mixel that sees
+    them 3.3 cm further off its axis, at the edge of its view: the tracking experiment's x was compressed
+    (slope 0.40 against the change's centroid, y 1.20) and its error was 9.6 / 10.1 / 8.1 % (quick, seeds 0-2)
+    against 7.7 / 5.0 / 7.4 % in this layout.
     """
     _check_spacing(spacing_m)
     s = spacing_m
     return layout(
         [ramp(k, resolution, mask_size_m) for k in ("x", "1-x", "y", "1-y")],
-        [(-s, 0.0), (s, 0.0), (0.0, s), (0.0, -s)],
+        [(s, 0.0), (-s, 0.0), (0.0, s), (0.0, -s)],
         names=["x", "1-x", "y", "1-y"],
         **kw,
     )

@@ -19,8 +19,8 @@ def test_example_schema_is_the_default():
     assert cfg.run.form == "response_map"
     assert cfg.mincam.names == ["x", "1-x"]
     assert cfg.frames.shape == (26, 144, 256)
-    left, right = cfg.mincam
-    assert np.isclose(right.pose.position_m[0] - left.pose.position_m[0], 0.033)
+    x, one_minus_x = cfg.mincam  # each ramp brightest on its own side: x on the right (world +x here)
+    assert np.isclose(x.pose.position_m[0] - one_minus_x.pose.position_m[0], 0.033)
 
 
 @pytest.mark.parametrize("path", sorted((ROOT / "scenes").glob("*.toml")), ids=lambda p: p.name)
@@ -250,3 +250,15 @@ def test_shipped_reproduce_config_loads_and_bad_ones_name_the_field(tmp_path):
         with pytest.raises(ConfigError) as err:
             load_reproduce_config(doc)
         assert all(w in str(err.value) for w in words), (doc, str(err.value))
+
+
+def test_results_table_prints_unscored_experiments(capsys):
+    """An experiment with no scored frame has None errors: the table prints '-' rather than crashing."""
+    from mincam_sim.cli import _print_table
+
+    paper = {"max_error_pct": 7.1, "avg_error_pct": 2.0}
+    _print_table({"intrusion": {"max_error_pct": None, "avg_error_pct": None, "n": 0, "paper": paper},
+                  "tracking": {"max_error_pct": 3.25, "avg_error_pct": 1.0, "n": 9, "paper": paper}})
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[1].split()[:4] == ["intrusion", "-", "/", "-"]
+    assert lines[2].split()[:4] == ["tracking", "3.25", "/", "1.00"]

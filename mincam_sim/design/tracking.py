@@ -18,7 +18,7 @@ import numpy as np
 from .. import masks as masks_mod
 from ..geometry import Pose
 from ..masks import Mask, PrintedFilm
-from ..optics import Mincam, layout
+from ..optics import Mincam, layout, seen_whole_by_every_mixel
 from ..sensor import SensorModel
 
 SPACING_M = 0.033  # [m] distance from the centre to each mixel (paper's prototype)
@@ -113,14 +113,16 @@ def mincam(masks: list[Mask]) -> Mincam:
 
 
 def paper_masks(resolution: int = 256) -> list[Mask]:
-    """The paper's hand-derived ramps x, 1 - x, y, 1 - y (exact profiles)."""
+    """The paper's hand-derived ramps x, 1 - x, y, 1 - y (exact profiles), x on the left mixel: the layout
+    :func:`~mincam_sim.optics.cross_layout` built before 2026-12 (the design's baseline, kept so that its
+    numbers stay comparable)."""
     return [masks_mod.ramp(k, resolution, MASK_SIZE_M) for k in NAMES]
 
 
 def paper_masks_swapped_x(resolution: int = 256) -> list[Mask]:
     """The paper's ramps with the x pair exchanged (1 - x on the left mixel, x on the right): then, as for the
     y pair, each ramp is brightest on its own mixel's side, where that mixel sees objects nearest its axis
-    (a hand-made reference, not the paper's layout as this package builds it)."""
+    (found by this design; :func:`~mincam_sim.optics.cross_layout` builds this layout since 2026-12)."""
     return [masks_mod.ramp(k, resolution, MASK_SIZE_M) for k in ("1-x", "x", "y", "1-y")]
 
 
@@ -146,11 +148,15 @@ def random_objects(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.nda
 
 def calibration_positions(n_per_axis: int) -> np.ndarray:
     """Square centres [m] of the calibration sweep at 0.5 m: a grid clipped to the working disc
-    (``WORKING_RADIUS`` of the 50 cm field, the range in which objects are tracked)."""
+    (``WORKING_RADIUS`` of the 50 cm field, the range in which objects are tracked), without the squares that
+    some mixel does not see whole through its full aperture (:func:`~mincam_sim.optics.seen_whole_by_every_mixel`:
+    there Eq. 7's ratio folds, and such points bend the whole cubic)."""
     half = WORKING_RADIUS * FIELD_M * CALIBRATION_DEPTH_M / CALIBRATION_DEPTH_M
     g = np.linspace(-half, half, n_per_axis)
     xy = np.array([(x, y) for y in g[::-1] for x in g])
-    return xy[np.hypot(*xy.T) <= half + 1e-9]
+    xy = xy[np.hypot(*xy.T) <= half + 1e-9]
+    seen = seen_whole_by_every_mixel(mincam(paper_masks(2)), xy, CALIBRATION_SQUARE_M / 2, -CALIBRATION_DEPTH_M)
+    return xy[seen]
 
 
 CALIBRATION_SQUARE_M = 0.03  # [m] side of the calibration squares (paper Sec. 4.2.1)

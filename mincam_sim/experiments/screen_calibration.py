@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..calibration import Calibration1D, Calibration2D
+from ..optics import seen_whole_by_every_mixel
 from ..readout import read_out
 from ..render.screen_engine import render_frames
 from ..scene.display import Sweep, grid_sweep, line_sweep
@@ -39,16 +40,8 @@ def seen_by_every_mixel(mincam, setup: Setup, sweep: Sweep) -> np.ndarray:
     end (with the tracking cross at 0.5 m, the square at x = -25 cm, out of the right-hand 1 - x mixel's view,
     read x_obs = 1), and such points corrupt the whole cubic fit, so the calibration leaves them out.
     """
-    screen_cam = mincam_on_screen(mincam, setup)
     centres = np.asarray(sweep.positions_m, dtype=np.float64)
-    half = 0.5 * sweep.size_m
-    keep = np.ones(len(centres), dtype=bool)
-    for m in screen_cam:
-        p = np.asarray(m.pose.position_m, dtype=np.float64)
-        distance = setup.depth_m + p[2]  # the screen is at z = -depth, the mixels look along -z
-        tan = (np.array([m.mask.width_m, m.mask.height_m]) - m.detector_size_m) / (2 * m.d_f_m)
-        keep &= np.all(np.abs(centres - p[:2]) + half <= distance * tan + 1e-12, axis=1)
-    return keep
+    return seen_whole_by_every_mixel(mincam_on_screen(mincam, setup), centres, 0.5 * sweep.size_m, -setup.depth_m)
 
 
 def visible_sweep(mincam, setup: Setup, sweep: Sweep) -> tuple[Sweep, int]:
