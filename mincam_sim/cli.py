@@ -370,6 +370,11 @@ def _render_demo(out_dir: Path) -> None:
                f"worst relative stderr {m.meta['reached_rel_stderr']:.1e}) -> {out_dir}")
 
 
+def _pct(value, width: int, align: str = ">") -> str:
+    """A percentage for the tables, or '-' when nothing was scored (None)."""
+    return f"{'-' if value is None else f'{value:.2f}':{align}{width}}"
+
+
 def _print_table(results: dict) -> None:
     from .experiments import EXPERIMENTS
 
@@ -378,11 +383,11 @@ def _print_table(results: dict) -> None:
         if name in results:
             r = results[name]
             p = r["paper"]
-            typer.echo(f"{name:<12} {r['max_error_pct']:>10.2f} / {r['avg_error_pct']:<10.2f}        "
-                       f"{p['max_error_pct']:>8.2f} / {p['avg_error_pct']:<8.2f}        {r['n']}")
+            typer.echo(f"{name:<12} {_pct(r['max_error_pct'], 10)} / {_pct(r['avg_error_pct'], 10, '<')}        "
+                       f"{_pct(p['max_error_pct'], 8)} / {_pct(p['avg_error_pct'], 8, '<')}        {r['n']}")
     if "speed" in results and "vehicle" in results["speed"]:
         v = results["speed"]["vehicle"]
-        typer.echo(f"{'(vehicle)':<12} {v['max_error_pct']:>10.2f} / {v['avg_error_pct']:<10.2f}        "
+        typer.echo(f"{'(vehicle)':<12} {_pct(v['max_error_pct'], 10)} / {_pct(v['avg_error_pct'], 10, '<')}        "
                    f"{'-':>8} / {'-':<8}        {v['n']}")
 
 
@@ -529,7 +534,7 @@ def design(
                f"over {r['gradient_check']['n_checked']} parameters")
     typer.echo("masks          avg / max error [% of field]   n")
     for key, label in (("baseline", "paper ramps"), ("designed", "designed")):
-        typer.echo(f"{label:<14} {r[key]['avg_error_pct']:>6.2f} / {r[key]['max_error_pct']:<8.2f}"
+        typer.echo(f"{label:<14} {_pct(r[key]['avg_error_pct'], 6)} / {_pct(r[key]['max_error_pct'], 8, '<')}"
                    f"              {r[key]['n']}")
     typer.echo(f"# goal (designed <= half the baseline): {'met' if r['goal']['met'] else 'not met'} "
                f"(ratio {r['goal']['designed_over_baseline_avg']:.2f}); design.json, masks, plots in {out_dir}")

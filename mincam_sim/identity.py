@@ -40,6 +40,11 @@ PROVENANCE_META_KEYS = frozenset({"source"})
 #: Distributions whose versions can change the numbers.
 VERSIONED_LIBRARIES = ("mincam_sim", "mitsuba", "drjit", "numpy")
 
+#: The method's own version, part of every stored result's identity: raise it with any change to the code that
+#: changes the numbers for the same inputs (a fixed bias, a new sampling), so that no store made before is reused.
+#: The package version alone does not move between releases.
+METHOD_VERSION = "2026-12-01"
+
 
 def array_digest(array: np.ndarray) -> str:
     """sha256 hex digest of an array's dtype, shape and C-ordered bytes."""
@@ -241,7 +246,7 @@ def frames_fingerprint(frames: np.ndarray | Iterable[np.ndarray], frame_ndim: in
 
 def library_versions() -> dict[str, str]:
     """Installed versions of the libraries whose changes can change the numbers (without importing them)."""
-    versions = {}
+    versions = {"mincam_sim method": METHOD_VERSION}
     for dist in VERSIONED_LIBRARIES:
         try:
             versions[dist] = importlib.metadata.version(dist)

@@ -64,10 +64,10 @@ def test_correlated_seeds_cancel_noise_in_changes(moving_box):
 
 def test_change_target_noise_and_resume(moving_box, tmp_path):
     world, frames, background = moving_box
-    dp, _ = world.measure_changes(frames, background, spp=1 << 16, seed=2, target_rel_stderr=0.05)
-    assert dp.meta["pilot_worst_rel_stderr"] > 0.05  # the pilot alone was not enough
-    assert dp.meta["reached_rel_stderr"] <= 0.05
-    assert dp.meta["spp_per_mixel_per_frame"] > 1 << 16
+    dp, _ = world.measure_changes(frames, background, spp=1 << 14, seed=2, target_rel_stderr=0.1)
+    assert dp.meta["pilot_worst_rel_stderr"] > 0.1  # the pilot alone was not enough
+    assert dp.meta["reached_rel_stderr"] <= 0.1
+    assert dp.meta["spp_per_mixel_per_frame"] > 1 << 14
     a, _ = world.measure_changes(frames, background, spp=1 << 14, seed=3, out_dir=tmp_path)
     b, _ = world.measure_changes(frames, background, spp=1 << 14, seed=3, out_dir=tmp_path)  # all frames done
     np.testing.assert_array_equal(a.irradiance_w_m2, b.irradiance_w_m2)

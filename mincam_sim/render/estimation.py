@@ -71,6 +71,38 @@ def samples_for_target(pilot_samples: int, pilot_rel: float, target_rel: float, 
     return int(min(cap, max(pilot_samples, np.ceil(need))))
 
 
+PILOT_ROUNDS = 3  # pilots at most, each at the count the previous one extrapolated
+UNSEEN_GROWTH = 16  # samples x this when a pilot measured no change significantly (nothing to extrapolate from)
+
+
+def pilot_to_target(measure, pilot_samples: int, target_rel: float, cap: int, significance: float = 3.0,
+                    rounds: int = PILOT_ROUNDS) -> tuple[int, list[dict]]:
+    """Samples with which the pilot measurements reach ``target_rel``, and the trail of pilots.
+
+    ``measure(samples)`` returns ``(values, stderr)`` of the pilot frames. A value within ``significance``
+    sigma of zero has no measurable relative error, so one pilot can miss a small change that, measured with
+    more samples, turns out to be the worst: each later pilot runs at the count the previous one
+    extrapolated (``UNSEEN_GROWTH`` times more when nothing was significant), until a pilot meets the target
+    itself (then that count is used, and the pilot frames are known to meet it: same seed, same numbers) or
+    ``rounds`` pilots have run (then the last extrapolation, or the first count if no pilot measured any
+    change: a change that stays invisible is not worth more samples).
+    """
+    samples, trail, extrapolated = int(pilot_samples), [], int(pilot_samples)
+    for _ in range(rounds):
+        worst = worst_relative_stderr(*measure(samples), significance=significance)
+        trail.append({"samples": samples, "worst_rel_stderr": worst if np.isfinite(worst) else None})
+        if np.isfinite(worst):
+            if worst <= target_rel:
+                return samples, trail
+            following = extrapolated = samples_for_target(samples, worst, target_rel, cap)
+        else:
+            following = min(cap, samples * UNSEEN_GROWTH)
+        if following <= samples:
+            break
+        samples = following
+    return extrapolated, trail
+
+
 def warn_unreached(m: Measurements) -> None:
     """Warn when a mixel's value is 0 with standard error 0: no sample reached anything bright, which is not
     a measurement of exactly zero (and its relative error is undefined)."""
@@ -83,6 +115,23 @@ def warn_unreached(m: Measurements) -> None:
             f"(first: {frames[0]}): 0 +/- 0 W/m^2 there means 'not seen', not a certain zero; check that the "
             "frames show something inside the mixels' fields of view, or raise the samples",
             UnseenWarning, stacklevel=3)
+
+
+class TargetNotReachedWarning(UserWarning):
+    """A run that asked for a relative standard error and did not reach it everywhere."""
+
+
+def warn_target_missed(reached: float, target: float, samples: int, cap: int) -> None:
+    """Warn when the worst relative standard error ``reached`` is above a requested ``target`` (> 0)."""
+    if target > 0 and not np.isfinite(reached):
+        warnings.warn(f"no change was measured significantly (> 3 sigma) with {samples} samples, so the target "
+                      f"relative standard error {target:.3g} could not be checked; raise the samples if the frames "
+                      "should change what the mixels see", TargetNotReachedWarning, stacklevel=3)
+    elif target > 0 and reached > target:
+        why = "the sample cap" if samples >= cap else "a change the pilot frames did not show"
+        warnings.warn(f"reached a worst relative standard error of {reached:.3g} > target {target:.3g} with "
+                      f"{samples} samples (limited by {why}); see meta['reached_rel_stderr'], or raise the "
+                      "pilot's samples", TargetNotReachedWarning, stacklevel=3)
 
 
 class UnseenWarning(UserWarning):

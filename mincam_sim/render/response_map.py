@@ -142,7 +142,9 @@ def response_maps(
         raise ValueError(f"samples_per_texel must be an integer >= 2, got {samples_per_texel!r}")
     if isinstance(replicates, bool) or int(replicates) != replicates or not 2 <= replicates <= samples_per_texel:
         raise ValueError(f"replicates must be an integer in [2, samples_per_texel], got {replicates!r}")
+    user_mincam, user_screen = mincam, screen
     world = MincamScene.display(mincam, screen)
+    mincam, screen = world.mincam, world.screen  # moved around the mincam (float32 precision far from the origin)
     scene = world.fast_scene  # screen + the mixels' bodies: the visibility rays' scene
     mi = backend.mitsuba()
     import drjit as dr
@@ -243,7 +245,7 @@ def response_maps(
         "masks": {mincam[k].name: mask_model_meta(mincam[k].mask) for k in indices},
         "optics": {mincam[k].name: optics_meta(mincam[k]) for k in indices},
         **backend.describe(),
-        **geometry_meta(Mincam(tuple(mincam[k] for k in indices), allow_overlap=True), screen),
+        **geometry_meta(Mincam(tuple(user_mincam[k] for k in indices), allow_overlap=True), user_screen),
         "mixel_bodies": "occluding" if mincam.occluding_bodies else "ignored (idealised overlapping mincam)",
     }
     if keys:

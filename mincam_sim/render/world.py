@@ -35,7 +35,7 @@ from ..store import ResultStore
 from . import backend
 from .change_region import ApertureRegions, change_points, mixel_regions
 from .elements import transform_update, vertex_update
-from .estimation import derive_seed, samples_for_target, warn_unreached, worst_relative_stderr
+from .estimation import derive_seed, pilot_to_target, warn_target_missed, warn_unreached, worst_relative_stderr
 from .mask_eval import mask_model_meta
 from .mincam_scene import CAMERA_KEY, SENSOR_KEY, MincamScene, geometry_meta
 from .scene_dicts import mincam_body_shapes
@@ -78,9 +78,8 @@ class WorldRenderer:
         # The scene is built around the mincam: Mitsuba offsets every secondary ray by ~1e-4 x (1 + max|p|)
         # scene units, so a table 50 m (1 km) from the origin lost 1.2 % (3.7 %) of a toy's dP to shadow rays
         # that started past it. Positions in (updates to) the user's elements are shifted on their way in.
-        self.scene_origin_m = np.mean([m.pose.position_m for m in mincam], axis=0)
-        self.scene_mincam = Mincam(tuple(m.with_pose(m.pose.translated(tuple(-self.scene_origin_m)))
-                                         for m in mincam), allow_overlap=mincam.allow_overlap)
+        self.scene_origin_m = mincam.centre_m
+        self.scene_mincam = mincam.translated(-self.scene_origin_m)
         self.world = MincamScene.world(self.scene_mincam, elements, max_depth, camera)
         self.scene = self.world.fast_scene
         self.sensor = self.world.sensor(SENSOR_KEY)
@@ -182,12 +181,17 @@ class WorldRenderer:
         budget: dict = {}
         if target_rel_stderr > 0 and len(frames):
             pilot_idx = np.unique(np.linspace(0, len(frames) - 1, min(4, len(frames))).astype(int))
-            pilot, _ = self.measure_changes([frames[i] for i in pilot_idx], background, spp, seed, correlated,
-                                            estimator=estimator, strata_shares=strata_shares,
-                                            strata_expansions=strata_expansions)
-            worst = worst_relative_stderr(pilot.irradiance_w_m2, pilot.stderr_w_m2, significance=3.0)
-            budget = {"pilot_spp": int(spp), "pilot_worst_rel_stderr": worst, "target_rel_stderr": target_rel_stderr}
-            spp = samples_for_target(spp, worst, target_rel_stderr, MAX_SPP)
+
+            def pilot(samples: int):
+                dp, _ = self.measure_changes([frames[i] for i in pilot_idx], background, samples, seed, correlated,
+                                             estimator=estimator, strata_shares=strata_shares,
+                                             strata_expansions=strata_expansions)
+                return dp.irradiance_w_m2, dp.stderr_w_m2
+
+            first = int(spp)
+            spp, trail = pilot_to_target(pilot, first, target_rel_stderr, MAX_SPP)
+            budget = {"pilot_spp": first, "pilot_worst_rel_stderr": trail[0]["worst_rel_stderr"],
+                      "pilot_trail": trail, "target_rel_stderr": target_rel_stderr}
         self.update(background)
         bg_spp = spp if estimator == "plain" else BACKGROUND_PASSES * spp  # traced once: P = background + dP
         bg = self.estimates(bg_spp, seed)
@@ -232,6 +236,7 @@ class WorldRenderer:
         meta.update(budget)
         reached = worst_relative_stderr(values[:, :n], errors[:, :n], significance=3.0)
         meta["reached_rel_stderr"] = reached if np.isfinite(reached) else None
+        warn_target_missed(reached, target_rel_stderr, int(spp), MAX_SPP)
         names = self.mincam.names
         warn_unreached(Measurements(values[:, n:], errors[:, n:], names))
         dp = Measurements(values[:, :n], errors[:, :n], names, {**meta, "quantity": "dP = P(frame) - P(background)"})
