@@ -318,7 +318,7 @@ def screen_polygon_local_m(screen: Screen, mixel) -> np.ndarray:
 def visible_screen_polygon_local_m(screen: Screen, mixel) -> np.ndarray:
     """The part of the screen (polygon (k, 3) [m], mixel's local frame) that some detector point sees.
 
-    A point ``p`` beyond the mask plane (``z > d_f``) is seen by some detector point through the aperture iff
+    A point ``p`` beyond the mask plane (``z > d_f (1 + 1e-9)``) is seen by some detector point through the aperture iff
     ``|x| <= tx z - s/2`` and ``|y| <= ty z - s/2`` (``tx, ty`` from :meth:`Mixel.half_fov_tan`, ``s`` the
     detector side): the union of the detector points' view pyramids, whose apex lies at ``z = s / (2 tx)``
     (slightly narrower than the pyramid of the widest rays from the origin). Mask transmission is ignored.
@@ -326,7 +326,8 @@ def visible_screen_polygon_local_m(screen: Screen, mixel) -> np.ndarray:
     poly = screen_polygon_local_m(screen, mixel)
     tx, ty = mixel.half_fov_tan()
     half_s = mixel.detector_size_m / 2
-    poly = _clip_halfspace(poly, np.array([0.0, 0.0, 1.0]), -mixel.d_f_m)
+    # strictly beyond the mask: a screen lying on the mask plane is seen by no ray that crosses the mask
+    poly = _clip_halfspace(poly, np.array([0.0, 0.0, 1.0]), -mixel.d_f_m * (1 + 1e-9))
     for normal in ((-1.0, 0.0, tx), (1.0, 0.0, tx), (0.0, -1.0, ty), (0.0, 1.0, ty)):
         poly = _clip_halfspace(poly, np.array(normal), -half_s)
     return poly
