@@ -20,7 +20,7 @@ from mincam_sim.quadrature import (
     open_aperture_view_factor_irradiance,
     visible_polygon_screen_m,
 )
-from mincam_sim.render.screen_engine import render_frames
+from mincam_sim.render.screen_engine import render_frames, response_maps
 from mincam_sim.scene.display import check_visible
 
 
@@ -196,7 +196,11 @@ def _geometry(name: str) -> tuple[Mixel, Screen]:
 
 
 GEOMETRIES = ["tilt30-rolled-sinusoid", "close-2x3-ramp-tilt20", "short-df-0.05mm-sinusoid", "long-df-60mm-ramp"]
-FORMS = [("response_map", {"samples_per_texel": 256}), ("fast", {"spp": 1 << 20}), ("reference", {"spp": 1 << 20})]
+FORMS = [("response_map", {"samples_per_texel": 1024}), ("fast", {"spp": 1 << 22}), ("reference", {"spp": 1 << 22})]
+# brute-force reference rays rarely pass a 4 x 6 mm aperture 60 mm away: 2^25 rays (~20 s) for sigma < 1 %
+CASES = [pytest.param(name, form, {"spp": 1 << 25}, marks=pytest.mark.slow, id=f"{name}-{form}")
+         if (name, form) == ("long-df-60mm-ramp", "reference") else pytest.param(name, form, kw, id=f"{name}-{form}")
+         for name in GEOMETRIES for form, kw in FORMS]
 
 
 def _oracle(mixel: Mixel, screen: Screen) -> float:
@@ -216,9 +220,10 @@ def test_geometry_is_valid_and_cut_by_the_screen_edge(name):
     assert abs(coarse / value - 1) < 1e-4, f"oracle not converged: {coarse} vs {value}"
 
 
-@pytest.mark.parametrize("form, kw", FORMS, ids=[f for f, _ in FORMS])
-@pytest.mark.parametrize("name", GEOMETRIES)
+@pytest.mark.parametrize("name, form, kw", CASES)
 def test_forms_match_exact_shadow_oracle(name, form, kw):
+    """Uniform white screen whose edge cuts the view: each form within 4.5 sigma of the exact-shadow oracle,
+    with sigma < 1 % (response maps: ~0.05-0.15 %, fast ~0.05-0.3 %, reference ~0.05-0.5 %)."""
     mixel, screen = _geometry(name)
     expected = _oracle(mixel, screen)
     frame = np.ones((1, *screen.shape))  # uniform white (radiance 1): the oracle's region is the whole screen
@@ -226,3 +231,19 @@ def test_forms_match_exact_shadow_oracle(name, form, kw):
     value, sigma = m.irradiance_w_m2[0, 0], m.stderr_w_m2[0, 0]
     assert sigma / expected < 0.01, f"{form} too noisy to mean anything (sigma {sigma / expected:.2e})"
     assert_close_mc(value, expected, sigma, what=f"{form} on {name} vs exact-shadow quadrature")
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "FINDING (render/response_map.py, not fixed here): a block's texel strata are its detector strata shifted "
+    "by one random (s_x, s_y) per block, so as k grows a block converges to an integral over a 2D sub-manifold "
+    "of the 4D (detector x texel) domain: unbiased over the shifts, but the noise falls only with the number of "
+    "blocks (replicates), not with samples_per_texel. Close 2 x 3 mm ramp, 4 blocks: sigma 5.8e-4 at 256 and "
+    "5.1e-4 at 65536 samples/texel (relative), spread over 6 seeds the same; 16 blocks: 2.6e-4 at any count."))
+def test_response_map_noise_falls_with_samples_per_texel():
+    """64x the samples per texel should cut the (honest) standard error by far more than 2x."""
+    mixel, screen = _geometry("close-2x3-ramp-tilt20")
+    sigma = {}
+    for spt in (256, 16384):
+        maps = response_maps(Mincam((mixel,)), screen, samples_per_texel=spt, seed=5, replicates=4)
+        sigma[spt] = float(np.sqrt(maps.variance_sr2[0].sum()))
+    assert sigma[16384] < 0.5 * sigma[256], f"sigma {sigma[256]:.3g} -> {sigma[16384]:.3g} with 64x the samples"
