@@ -238,7 +238,9 @@ def test_forms_match_exact_shadow_oracle(name, form, kw):
     "by one random (s_x, s_y) per block, so as k grows a block converges to an integral over a 2D sub-manifold "
     "of the 4D (detector x texel) domain: unbiased over the shifts, but the noise falls only with the number of "
     "blocks (replicates), not with samples_per_texel. Close 2 x 3 mm ramp, 4 blocks: sigma 5.8e-4 at 256 and "
-    "5.1e-4 at 65536 samples/texel (relative), spread over 6 seeds the same; 16 blocks: 2.6e-4 at any count."))
+    "5.1e-4 at 65536 samples/texel (relative), spread over 6 seeds the same; 16 blocks: 2.6e-4 at any count. "
+    "So render_frames(target_rel_stderr=2e-4) climbs to the 16384 cap and "
+    "stops at 5.1e-4, and (screen_engine never calls warn_target_missed) without a TargetNotReachedWarning."))
 def test_response_map_noise_falls_with_samples_per_texel():
     """64x the samples per texel should cut the (honest) standard error by far more than 2x."""
     mixel, screen = _geometry("close-2x3-ramp-tilt20")
