@@ -285,15 +285,77 @@ def grid_sweep(
     return Sweep(np.column_stack([gx.ravel(), gy.ravel()]), size_m, radiance)
 
 
-def check_visible(screen: Screen, mixels) -> None:
-    """Raise ``ValueError`` if a mixel is behind the screen or sees none of it through its aperture.
+def _clip_halfspace(poly_m: np.ndarray, normal: np.ndarray, offset_m: float) -> np.ndarray:
+    """Part of the convex polygon ``poly_m`` (k, 3) [m] where ``normal . p + offset_m >= 0`` (Sutherland-Hodgman)."""
+    if len(poly_m) == 0:
+        return poly_m
+    side = poly_m @ normal + offset_m
+    out = []
+    for j in range(len(poly_m)):
+        k = (j + 1) % len(poly_m)
+        if side[j] >= 0:
+            out.append(poly_m[j])
+        if (side[j] >= 0) != (side[k] >= 0):
+            t = side[j] / (side[j] - side[k])
+            out.append(poly_m[j] + t * (poly_m[k] - poly_m[j]))
+    return np.array(out) if out else np.zeros((0, 3))
 
-    Visibility is tested on a 65 x 65 grid of screen points against the mixel's widest rays (detector edge to
-    the far mask edge); it is a sanity check of the set-up, the measurements themselves come from rays.
+
+def _polygon_area_m2(poly_m: np.ndarray) -> float:
+    """Area [m^2] of a planar polygon (k, 3) [m] (0 for fewer than 3 vertices)."""
+    if len(poly_m) < 3:
+        return 0.0
+    return 0.5 * float(np.linalg.norm(np.sum(np.cross(poly_m, np.roll(poly_m, -1, axis=0)), axis=0)))
+
+
+def screen_polygon_local_m(screen: Screen, mixel) -> np.ndarray:
+    """The screen rectangle's corners (4, 3) [m] in ``mixel``'s local frame (x left, y up, z forward)."""
+    hw, hh = screen.width_m / 2, screen.height_m / 2
+    corners = screen.to_world(np.array([-hw, hw, hw, -hw]), np.array([-hh, -hh, hh, hh]))
+    return mixel.pose.to_local(corners)
+
+
+def visible_screen_polygon_local_m(screen: Screen, mixel) -> np.ndarray:
+    """The part of the screen (polygon (k, 3) [m], mixel's local frame) that some detector point sees.
+
+    A point ``p`` beyond the mask plane (``z > d_f (1 + 1e-9)``) is seen by some detector point through the aperture iff
+    ``|x| <= tx z - s/2`` and ``|y| <= ty z - s/2`` (``tx, ty`` from :meth:`Mixel.half_fov_tan`, ``s`` the
+    detector side): the union of the detector points' view pyramids, whose apex lies at ``z = s / (2 tx)``
+    (slightly narrower than the pyramid of the widest rays from the origin). Mask transmission is ignored.
     """
-    xs, ys = np.meshgrid(np.linspace(-0.5, 0.5, 65) * screen.width_m, np.linspace(-0.5, 0.5, 65) * screen.height_m)
-    points = screen.to_world(xs, ys).reshape(-1, 3)
+    poly = screen_polygon_local_m(screen, mixel)
+    tx, ty = mixel.half_fov_tan()
+    half_s = mixel.detector_size_m / 2
+    # strictly beyond the mask: a screen lying on the mask plane is seen by no ray that crosses the mask
+    poly = _clip_halfspace(poly, np.array([0.0, 0.0, 1.0]), -mixel.d_f_m * (1 + 1e-9))
+    for normal in ((-1.0, 0.0, tx), (1.0, 0.0, tx), (0.0, -1.0, ty), (0.0, 1.0, ty)):
+        poly = _clip_halfspace(poly, np.array(normal), -half_s)
+    return poly
+
+
+def screen_in_body_polygon_local_m(screen: Screen, mixel, tolerance_m: float = 1e-12) -> np.ndarray:
+    """The part of the screen (polygon (k, 3) [m], local frame) inside the mixel's body box, shrunk by
+    ``tolerance_m`` on every side so that a screen touching a face (e.g. lying on the mask) is not counted."""
+    poly = screen_polygon_local_m(screen, mixel)
+    hw, hh = mixel.mask.width_m / 2, mixel.mask.height_m / 2
+    for normal, offset in (((1.0, 0.0, 0.0), hw), ((-1.0, 0.0, 0.0), hw), ((0.0, 1.0, 0.0), hh),
+                           ((0.0, -1.0, 0.0), hh), ((0.0, 0.0, 1.0), 0.0), ((0.0, 0.0, -1.0), mixel.d_f_m)):
+        poly = _clip_halfspace(poly, np.array(normal), offset - tolerance_m)
+    return poly
+
+
+def check_visible(screen: Screen, mixels) -> None:
+    """Raise ``ValueError`` if a mixel is behind the screen, if the screen passes through a mixel's body, or if
+    a mixel sees none of the screen through its aperture.
+
+    Exact: the screen rectangle, as a polygon in each mixel's local frame, is clipped by the half-spaces of the
+    mixel's view (:func:`visible_screen_polygon_local_m`: beyond the mask plane, inside the union of the
+    detector points' view pyramids through the aperture) and, separately, by its body box (detector plane to
+    mask plane, of the mask's width x height). The set-up is refused when the visible part has no area or the
+    part inside the body has some. Mask transmission and the other mixels' bodies are not considered.
+    """
     normal = screen.pose.axes()[2]
+    screen_area_m2 = screen.width_m * screen.height_m
     for mixel in mixels:
         offset = np.asarray(mixel.pose.position_m) - np.asarray(screen.pose.position_m)
         if float(offset @ normal) <= 0:
@@ -302,13 +364,21 @@ def check_visible(screen: Screen, mixels) -> None:
                 "displays emit only from their front: move the mixel in front of the screen (along the screen's "
                 f"forward {screen.pose.forward}) or turn the screen round"
             )
-        local = mixel.pose.to_local(points)
-        tx, ty = mixel.half_fov_tan()
-        z = local[:, 2]
-        seen = (z > mixel.d_f_m) & (np.abs(local[:, 0]) <= tx * z) & (np.abs(local[:, 1]) <= ty * z)
-        if not seen.any():
+        tol_m = 1e-9 * min(mixel.mask.width_m, mixel.mask.height_m, mixel.d_f_m)
+        inside = screen_in_body_polygon_local_m(screen, mixel, tol_m)
+        if _polygon_area_m2(inside) > 0:
+            raise ValueError(
+                f"the screen passes through mixel {mixel.name!r}'s body (the {mixel.mask.width_m * 1e3:g} x "
+                f"{mixel.mask.height_m * 1e3:g} x {mixel.d_f_m * 1e3:g} mm housing from its detector to its mask, "
+                f"at {mixel.pose.position_m} m): move the screen (or the mixel) so that the screen lies beyond "
+                "the mask"
+            )
+        visible = visible_screen_polygon_local_m(screen, mixel)
+        if _polygon_area_m2(visible) <= 1e-14 * screen_area_m2:
+            tx, ty = mixel.half_fov_tan()
             raise ValueError(
                 f"the screen lies entirely outside mixel {mixel.name!r}'s field of view "
                 f"(+/-{np.degrees(np.arctan(tx)):.1f} x +/-{np.degrees(np.arctan(ty)):.1f} deg about its forward "
-                f"{mixel.pose.forward}): point the mixel at the screen or move the screen in front of it"
+                f"{mixel.pose.forward}, beyond its mask at {mixel.d_f_m * 1e3:g} mm): point the mixel at the "
+                "screen or move the screen in front of it"
             )
