@@ -50,3 +50,51 @@ def test_the_cap_bounds_every_pilot():
     measure, calls = _measure([1.0], sigma_at_one_sample=10.0)
     samples, _ = pilot_to_target(measure, 1000, TARGET, cap=50_000)
     assert max(calls) <= 50_000 and samples == 50_000
+
+
+def test_a_missed_target_is_a_warning_not_silence(monkeypatch):
+    """Response maps at their sample cap: the reached noise is above the target, and the run says so."""
+    import pytest
+
+    from mincam_sim.optics import pair_layout
+    from mincam_sim.render import screen_engine
+    from mincam_sim.render.estimation import TargetNotReachedWarning
+    from mincam_sim.scene.display import Screen
+
+    monkeypatch.setattr(screen_engine, "MAX_SAMPLES_PER_TEXEL", 64)
+    screen = Screen(resolution=(32, 18))
+    frame = np.zeros((1, 18, 32))
+    frame[0, 8:10, 15:17] = 1.0
+    with pytest.warns(TargetNotReachedWarning, match="cap of 64 samples"):
+        m, _ = screen_engine.render_frames(pair_layout(), screen, frame, target_rel_stderr=1e-6)
+    assert m.meta["reached_rel_stderr"] > 1e-6 and m.meta["samples_per_texel"] == 64
+
+
+def test_render_frames_passes_replicates_to_the_response_maps():
+    from mincam_sim.optics import pair_layout
+    from mincam_sim.render.screen_engine import render_frames
+    from mincam_sim.scene.display import Screen
+
+    screen = Screen(resolution=(16, 9))
+    frame = np.ones((1, 9, 16))
+    default, _ = render_frames(pair_layout(), screen, frame, samples_per_texel=64)
+    sixteen, _ = render_frames(pair_layout(), screen, frame, samples_per_texel=64, replicates=16)
+    assert default.meta["replicate_blocks"] == 4 and sixteen.meta["replicate_blocks"] == 16
+
+
+def test_the_response_map_search_always_moves_on(monkeypatch):
+    """Samples per texel are traced as replicates x k^2: doubling 16 (k = 2) rounds back to 16, and the search
+    for a target just out of reach used to repeat that attempt forever. Each step now adds a stratum."""
+    from mincam_sim.optics import pair_layout
+    from mincam_sim.render import screen_engine
+    from mincam_sim.scene.display import Screen
+
+    screen = Screen(resolution=(32, 18))
+    frame = np.zeros((1, 18, 32))
+    frame[0, 8:10, 15:17] = 1.0
+    first, _ = screen_engine.render_frames(pair_layout(), screen, frame, samples_per_texel=16)
+    target = 0.97 * first.meta["reached_rel_stderr"]  # need ~1.06 x 16 samples: 2 x 16 would round to 16
+    m, _ = screen_engine.render_frames(pair_layout(), screen, frame, target_rel_stderr=target)
+    traced = [t["samples_per_texel"] for t in m.meta["budget_trail"]]
+    assert traced[0] == 16 and bool(np.all(np.diff(traced) > 0))
+    assert m.meta["reached_rel_stderr"] <= target

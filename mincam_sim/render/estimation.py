@@ -124,14 +124,14 @@ class TargetNotReachedWarning(UserWarning):
 def warn_target_missed(reached: float, target: float, samples: int, cap: int) -> None:
     """Warn when the worst relative standard error ``reached`` is above a requested ``target`` (> 0)."""
     if target > 0 and not np.isfinite(reached):
-        warnings.warn(f"no change was measured significantly (> 3 sigma) with {samples} samples, so the target "
-                      f"relative standard error {target:.3g} could not be checked; raise the samples if the frames "
-                      "should change what the mixels see", TargetNotReachedWarning, stacklevel=3)
+        warnings.warn(f"no measurement was significantly non-zero (> 3 sigma) with {samples} samples, so the "
+                      f"target relative standard error {target:.3g} could not be checked; raise the samples if the "
+                      "frames should change what the mixels see", TargetNotReachedWarning, stacklevel=3)
     elif target > 0 and reached > target:
-        why = "the sample cap" if samples >= cap else "a change the pilot frames did not show"
+        why = f"the cap of {cap} samples" if samples >= cap else "pilots that did not show the worst measurement"
         warnings.warn(f"reached a worst relative standard error of {reached:.3g} > target {target:.3g} with "
-                      f"{samples} samples (limited by {why}); see meta['reached_rel_stderr'], or raise the "
-                      "pilot's samples", TargetNotReachedWarning, stacklevel=3)
+                      f"{samples} samples (limited by {why}): the values are unbiased, only noisier than asked; "
+                      "see meta['reached_rel_stderr']", TargetNotReachedWarning, stacklevel=3)
 
 
 class UnseenWarning(UserWarning):

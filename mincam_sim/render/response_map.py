@@ -9,14 +9,19 @@ estimated from pairs (x_d on the detector, x_s in the texel); x_m is where the s
 and V is a visibility ray in the mincam's scene (the other mixels' bodies included).
 
 Sampling: the samples of a texel form ``replicates`` independent blocks of ``k x k`` samples. Within a
-block, sample ``(jx, jy)`` takes detector stratum ``(jx, jy)`` and texel stratum
-``((k - 1 - jy + s_x) mod k, (jx + s_y) mod k)`` with random shifts ``s_x, s_y`` drawn per (texel, block):
-both factors stay stratified; the transposition keeps the texel's x stratum independent of the detector's x
-stratum (the detector blur couples them along the same axis); and since every sample's texel stratum is
-uniform over the ``k x k`` strata, every sample is uniform over the product domain, so each block is unbiased
-whatever the integrand couples (tilted masks, rotated screens). A *fixed* pairing converges to an integral
-over a sub-manifold of the product domain, and identical pairings across blocks hide that from the standard
-error. The variance of each weight comes from the spread of the independent blocks.
+block, sample ``(jx, jy)`` takes detector stratum ``(jx, jy)`` and texel stratum ``(pi_x(jy), pi_y(jx))``
+with random permutations ``pi_x, pi_y`` of ``0..k-1`` drawn per (texel, block): both factors stay stratified;
+the transposition keeps the texel's x stratum independent of the detector's x stratum (the detector blur
+couples them along the same axis: that part of the integrand is summed over the full k x k grid of pairs);
+and since every sample's texel stratum is uniform over the ``k x k`` strata, every sample is uniform over the
+product domain, so each block is unbiased whatever the integrand couples (tilted masks, rotated screens).
+Shifts (``pi(j) = j + s mod k``) in place of permutations were unbiased too, but a block then converged to an
+integral along one line of strata pairs chosen by its shift: the noise fell with the number of blocks only,
+not with the samples per texel (close 2 x 3 mm ramp, 4 blocks: relative sigma 5.8e-4 at 256 and 5.1e-4 at
+65,536 samples per texel). With random permutations the terms that couple different axes average over
+``k`` random pairs. A *fixed* pairing converges to an integral over a sub-manifold of the product domain,
+and identical pairings across blocks hide that from the standard error. The variance of each weight comes
+from the spread of the independent blocks.
 """
 
 from __future__ import annotations
@@ -189,11 +194,11 @@ def response_maps(
         lane = dr.arange(mi.UInt32, count * spt)
         texel = lane // spt + start
         j = lane % block  # detector stratum within the block
-        block_id = texel * replicates + (lane % spt) // block
-        shift_x, shift_y = mi.sample_tea_32(block_id, mi.UInt32(derive_seed(seed, "pairing", k)))
         jx, jy = j % strata, j // strata
-        mx = (strata - 1 - jy + shift_x % strata) % strata  # texel stratum paired with (jx, jy) in this block
-        my = (jx + shift_y % strata) % strata
+        pi_x, pi_y = _block_permutations(derive_seed(seed, "pairing", k, start), count * replicates, strata)
+        local_block = lane // block
+        mx = dr.gather(mi.UInt32, pi_x, local_block * strata + jy)  # texel stratum paired with (jx, jy)
+        my = dr.gather(mi.UInt32, pi_y, local_block * strata + jx)
         col = mi.Float(texel % cols)
         row = mi.Float(texel // cols)
         jitter_det = sampler.next_2d()
@@ -239,7 +244,8 @@ def response_maps(
         "samples_per_texel": spt,
         "replicate_blocks": replicates,
         "strata_per_block": f"{strata}x{strata}",
-        "pairing": "detector stratum (jx, jy) with texel stratum (k-1-jy+s_x, jx+s_y) mod k, s random per block",
+        "pairing": "detector stratum (jx, jy) with texel stratum (pi_x(jy), pi_y(jx)), pi random permutations of "
+                   "0..k-1 per block",
         "seed": seed,
         "units": "sr (W/m^2 on the detector per W m^-2 sr^-1 of texel radiance)",
         "masks": {mincam[k].name: mask_model_meta(mincam[k].mask) for k in indices},
@@ -252,6 +258,17 @@ def response_maps(
         meta["cache_keys"] = {mincam[k].name: keys[k] for k in indices}
     return ResponseMaps(weights.reshape(len(indices), rows, cols), variance.reshape(len(indices), rows, cols),
                         names, meta)
+
+
+def _block_permutations(seed: int, n_blocks: int, strata: int):
+    """Two random permutations of ``0..strata-1`` per block, flattened (block-major) as Dr.Jit UInt32 arrays."""
+    mi = backend.mitsuba()
+    if strata == 1:
+        zeros = mi.UInt32(np.zeros(n_blocks, dtype=np.uint32))
+        return zeros, zeros
+    rng = np.random.default_rng(seed)
+    perms = rng.random((2 * n_blocks, strata)).argsort(axis=1).astype(np.uint32)
+    return mi.UInt32(perms[:n_blocks].ravel()), mi.UInt32(perms[n_blocks:].ravel())
 
 
 def _mixel_key(mincam: Mincam, k: int, screen: Screen, spt: int, replicates: int, seed: int, max_lanes: int) -> str:

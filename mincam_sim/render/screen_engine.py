@@ -33,6 +33,7 @@ from .estimation import (
     derive_seed,
     replicate_mean_stderr,
     samples_for_target,
+    warn_target_missed,
     warn_unreached,
 )
 from .estimation import worst_relative_stderr as _worst
@@ -142,6 +143,7 @@ class ScreenRenderer:
 
 
 MAX_SAMPLES_PER_TEXEL = 1 << 14
+DEFAULT_MAP_BLOCKS = 4  # response maps: independent blocks of samples per texel
 MAX_SPP = 1 << 28
 FRAME_CHUNK_BYTES = 1 << 27  # frames measured per chunk: at most 128 MiB of frame data in memory
 
@@ -175,7 +177,7 @@ def _check_radiance(stack: np.ndarray, indices: np.ndarray) -> None:
 def response_maps_to_target(
     mincam: Mincam, screen: Screen, frames, target_rel_stderr: float, seed: int = 0,
     max_samples_per_texel: int = MAX_SAMPLES_PER_TEXEL, cache: ContentCache | None = None,
-    show_progress: bool = False,
+    show_progress: bool = False, replicates: int = 4,
 ) -> tuple[ResponseMaps, list[dict]]:
     """Response maps whose measurements of ``frames`` all reach ``target_rel_stderr`` (if the cap allows).
 
@@ -189,7 +191,8 @@ def response_maps_to_target(
     trail: list[dict] = []
 
     def attempt(n: int) -> tuple[ResponseMaps, float]:
-        maps = response_maps(mincam, screen, n, seed, cache=cache, show_progress=show_progress)
+        maps = response_maps(mincam, screen, max(n, replicates), seed, cache=cache, show_progress=show_progress,
+                             replicates=replicates)
         m = measure_stream(maps, frames, show_progress=show_progress, desc=f"target search ({n} samples/texel)")
         rel = worst_relative_stderr(m)
         trail.append({"samples_per_texel": int(maps.meta["samples_per_texel"]), "worst_rel_stderr": rel})
@@ -197,16 +200,21 @@ def response_maps_to_target(
 
     maps, rel = attempt(16)
     n, step_cap = int(maps.meta["samples_per_texel"]), 8
+    strata = int(round(np.sqrt(n / replicates)))  # traced: replicates blocks of strata^2 samples per texel
+    max_strata = max(1, int(np.sqrt(max_samples_per_texel / replicates)))
     rate = 0.5  # plain Monte Carlo until two attempts measure the stratified rate
-    while rel > target_rel_stderr and n < max_samples_per_texel:
+    while rel > target_rel_stderr and strata < max_strata:
         if len(trail) >= 2:
             (n_a, r_a), (n_b, r_b) = ((t["samples_per_texel"], t["worst_rel_stderr"]) for t in trail[-2:])
             if r_a > 0 and r_b > 0 and n_b > n_a:
                 rate = float(np.clip(np.log(r_a / r_b) / np.log(n_b / n_a), 0.5, 1.5))
         need = samples_for_target(n, rel, target_rel_stderr, max_samples_per_texel, rate)
-        n = int(min(max_samples_per_texel, max(2 * n, min(need, step_cap * n))))  # at most x8 per step
-        maps, rel = attempt(n)
-        n = int(maps.meta["samples_per_texel"])  # what was traced (rounded to replicates x k^2)
+        want = min(max_samples_per_texel, max(2 * n, min(need, step_cap * n)))  # at least x2, at most x8 per step
+        # the count is traced as replicates x strata^2: every step adds at least one stratum per axis (2 x n
+        # could round back down to n, and the search would never end)
+        strata = min(max_strata, max(strata + 1, int(np.sqrt(want / replicates))))
+        maps, rel = attempt(replicates * strata * strata)
+        n = int(maps.meta["samples_per_texel"])
     return maps, trail
 
 
@@ -238,7 +246,7 @@ def render_frames(
     samples_per_texel: int = 64,
     target_rel_stderr: float = 0.0,
     seed: int = 0,
-    replicates: int = 8,
+    replicates: int | None = None,
     out_dir: str | Path | None = None,
     show_progress: bool = False,
     chunk: int = 64,
@@ -257,7 +265,11 @@ def render_frames(
         Sample counts when ``target_rel_stderr`` is 0.
     target_rel_stderr : float
         If > 0, pilots measure the noise and the sample count is extrapolated so that the worst non-zero
-        measurement reaches this relative standard error; the reached value is in ``meta["reached_rel_stderr"]``.
+        measurement reaches this relative standard error; the reached value is in ``meta["reached_rel_stderr"]``
+        (a ``TargetNotReachedWarning`` when it is above the target, e.g. at the sample cap).
+    replicates : int, optional
+        Independent estimates whose spread gives the standard error: rays split into ``replicates`` groups
+        (fast, reference; default 8), or blocks of samples per texel (response maps; default 4).
     out_dir : path, optional
         Per-frame results are written as they are computed (``out_dir/values.npy`` ..., locked while running)
         and response maps are cached by content in ``out_dir/cache``: an interrupted run resumes there, a
@@ -272,6 +284,8 @@ def render_frames(
         raise ValueError(f"form must be 'response_map', 'fast' or 'reference', got {form!r}")
     if not (np.isfinite(target_rel_stderr) and target_rel_stderr >= 0):
         raise ValueError(f"target_rel_stderr must be >= 0 (0 = use the given sample counts), got {target_rel_stderr}")
+    if replicates is None:
+        replicates = DEFAULT_MAP_BLOCKS if form == "response_map" else 8
     frames = as_frame_source(frames)
     if tuple(frames.frame_shape) != tuple(screen.shape):
         raise ValueError(f"frames have shape {frames.frame_shape} but this screen's frames are {screen.shape} "
@@ -283,11 +297,13 @@ def render_frames(
     maps = None
     if form == "response_map":
         if target_rel_stderr > 0:
-            maps, trail = response_maps_to_target(mincam, screen, frames, target_rel_stderr, seed, cache=cache,
-                                                  show_progress=show_progress)
+            maps, trail = response_maps_to_target(mincam, screen, frames, target_rel_stderr, seed,
+                                                  max_samples_per_texel=MAX_SAMPLES_PER_TEXEL, cache=cache,
+                                                  show_progress=show_progress, replicates=replicates)
             provenance["budget_trail"] = trail
         else:
-            maps = response_maps(mincam, screen, samples_per_texel, seed, cache=cache, show_progress=show_progress)
+            maps = response_maps(mincam, screen, samples_per_texel, seed, cache=cache, show_progress=show_progress,
+                                 replicates=replicates)
         budget["samples_per_texel"] = int(maps.meta["samples_per_texel"])
         meta = dict(maps.meta)
 
@@ -336,5 +352,10 @@ def render_frames(
     result = Measurements(values, errors, mincam.names, {**meta, **budget, **provenance,
                                                            "frames": frames_id, "identity_key": run_key(identity)})
     result.meta["reached_rel_stderr"] = worst_relative_stderr(result)
+    if form == "response_map":
+        used, cap = int(maps.meta["samples_per_texel"]), MAX_SAMPLES_PER_TEXEL
+    else:
+        used, cap = int(spp), MAX_SPP
+    warn_target_missed(result.meta["reached_rel_stderr"], target_rel_stderr, used, cap)
     warn_unreached(result)
     return result, maps
