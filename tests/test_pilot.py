@@ -98,3 +98,20 @@ def test_the_response_map_search_always_moves_on(monkeypatch):
     traced = [t["samples_per_texel"] for t in m.meta["budget_trail"]]
     assert traced[0] == 16 and bool(np.all(np.diff(traced) > 0))
     assert m.meta["reached_rel_stderr"] <= target
+
+
+def test_a_store_of_other_replicates_is_not_reused(tmp_path):
+    """256 samples per texel are 4 blocks of 8^2 or 16 blocks of 4^2: different maps, different numbers, so a
+    store written with one is refused for the other."""
+    import pytest
+
+    from mincam_sim.errors import StoreError
+    from mincam_sim.optics import pair_layout
+    from mincam_sim.render.screen_engine import render_frames
+    from mincam_sim.scene.display import Screen
+
+    screen = Screen(resolution=(16, 9))
+    frame = np.ones((1, 9, 16))
+    render_frames(pair_layout(), screen, frame, samples_per_texel=256, replicates=4, out_dir=tmp_path)
+    with pytest.raises(StoreError, match="replicates"):
+        render_frames(pair_layout(), screen, frame, samples_per_texel=256, replicates=16, out_dir=tmp_path)

@@ -305,6 +305,7 @@ def render_frames(
             maps = response_maps(mincam, screen, samples_per_texel, seed, cache=cache, show_progress=show_progress,
                                  replicates=replicates)
         budget["samples_per_texel"] = int(maps.meta["samples_per_texel"])
+        budget["replicates"] = int(replicates)  # 4 x 8^2 and 16 x 4^2 samples per texel are different maps
         meta = dict(maps.meta)
 
         def measure(idx):
