@@ -89,3 +89,22 @@ def look_at(position_m: Vec3, target_m: Vec3, up: Vec3 = (0.0, 1.0, 0.0)) -> Pos
         raise ValueError("look_at: target coincides with position")
     return Pose(tuple(position_m), tuple(fwd), tuple(up))
 
+
+def clip_polygon_halfspace(polygon: np.ndarray, normal: np.ndarray, offset: float) -> np.ndarray:
+    """Part of the convex polygon ``polygon`` (k, d) where ``normal . p + offset >= 0`` (Sutherland-Hodgman).
+
+    Any dimension ``d`` (a half-plane in 2D, a half-space in 3D); an empty (0, d) array when nothing is left.
+    """
+    polygon = np.asarray(polygon, dtype=np.float64)
+    if len(polygon) == 0:
+        return polygon
+    side = polygon @ np.asarray(normal, dtype=np.float64) + offset
+    out = []
+    for j in range(len(polygon)):
+        k = (j + 1) % len(polygon)
+        if side[j] >= 0:
+            out.append(polygon[j])
+        if (side[j] >= 0) != (side[k] >= 0):
+            t = side[j] / (side[j] - side[k])
+            out.append(polygon[j] + t * (polygon[k] - polygon[j]))
+    return np.array(out) if out else np.zeros((0, polygon.shape[1]))

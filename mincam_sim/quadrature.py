@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import ConvexHull
 
+from .geometry import clip_polygon_halfspace
 from .masks.profiles import NUMPY_OPS
 from .optics import Mixel
 from .scene.display import Screen
@@ -198,22 +199,6 @@ def open_aperture_view_factor_irradiance(
 
 
 # ---------------------------------------------------------------------------------------------- exact shadow
-def _clip_halfplane(poly: np.ndarray, a: float, b: float, c: float) -> np.ndarray:
-    """Part of the convex 2D polygon ``poly`` (k, 2) where ``a x + b y + c >= 0`` (Sutherland-Hodgman)."""
-    if len(poly) == 0:
-        return poly
-    side = a * poly[:, 0] + b * poly[:, 1] + c
-    out = []
-    for j in range(len(poly)):
-        k = (j + 1) % len(poly)
-        if side[j] >= 0:
-            out.append(poly[j])
-        if (side[j] >= 0) != (side[k] >= 0):
-            t = side[j] / (side[j] - side[k])
-            out.append(poly[j] + t * (poly[k] - poly[j]))
-    return np.array(out) if out else np.zeros((0, 2))
-
-
 def _triangle_rule(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Collapsed (Duffy) Gauss-Legendre rule on the reference triangle (0,0), (1,0), (1,1) -> barycentric form.
 
@@ -251,7 +236,7 @@ def visible_polygon_screen_m(mixel: Mixel, screen: Screen, detector_point_world_
         planes.append((n, d))
     for n, q in planes:
         n = n / np.linalg.norm(n)
-        poly = _clip_halfplane(poly, float(n @ right), float(n @ up), float(n @ (center - q)))
+        poly = clip_polygon_halfspace(poly, np.array([n @ right, n @ up]), float(n @ (center - q)))
         if len(poly) < 3:
             return np.zeros((0, 2))
     return poly

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..geometry import Pose
+from ..geometry import Pose, clip_polygon_halfspace
 
 INCH_M = 0.0254  # [m]
 
@@ -285,22 +285,6 @@ def grid_sweep(
     return Sweep(np.column_stack([gx.ravel(), gy.ravel()]), size_m, radiance)
 
 
-def _clip_halfspace(poly_m: np.ndarray, normal: np.ndarray, offset_m: float) -> np.ndarray:
-    """Part of the convex polygon ``poly_m`` (k, 3) [m] where ``normal . p + offset_m >= 0`` (Sutherland-Hodgman)."""
-    if len(poly_m) == 0:
-        return poly_m
-    side = poly_m @ normal + offset_m
-    out = []
-    for j in range(len(poly_m)):
-        k = (j + 1) % len(poly_m)
-        if side[j] >= 0:
-            out.append(poly_m[j])
-        if (side[j] >= 0) != (side[k] >= 0):
-            t = side[j] / (side[j] - side[k])
-            out.append(poly_m[j] + t * (poly_m[k] - poly_m[j]))
-    return np.array(out) if out else np.zeros((0, 3))
-
-
 def _polygon_area_m2(poly_m: np.ndarray) -> float:
     """Area [m^2] of a planar polygon (k, 3) [m] (0 for fewer than 3 vertices)."""
     if len(poly_m) < 3:
@@ -327,9 +311,9 @@ def visible_screen_polygon_local_m(screen: Screen, mixel) -> np.ndarray:
     tx, ty = mixel.half_fov_tan()
     half_s = mixel.detector_size_m / 2
     # strictly beyond the mask: a screen lying on the mask plane is seen by no ray that crosses the mask
-    poly = _clip_halfspace(poly, np.array([0.0, 0.0, 1.0]), -mixel.d_f_m * (1 + 1e-9))
+    poly = clip_polygon_halfspace(poly, np.array([0.0, 0.0, 1.0]), -mixel.d_f_m * (1 + 1e-9))
     for normal in ((-1.0, 0.0, tx), (1.0, 0.0, tx), (0.0, -1.0, ty), (0.0, 1.0, ty)):
-        poly = _clip_halfspace(poly, np.array(normal), -half_s)
+        poly = clip_polygon_halfspace(poly, np.array(normal), -half_s)
     return poly
 
 
@@ -340,7 +324,7 @@ def screen_in_body_polygon_local_m(screen: Screen, mixel, tolerance_m: float = 1
     hw, hh = mixel.mask.width_m / 2, mixel.mask.height_m / 2
     for normal, offset in (((1.0, 0.0, 0.0), hw), ((-1.0, 0.0, 0.0), hw), ((0.0, 1.0, 0.0), hh),
                            ((0.0, -1.0, 0.0), hh), ((0.0, 0.0, 1.0), 0.0), ((0.0, 0.0, -1.0), mixel.d_f_m)):
-        poly = _clip_halfspace(poly, np.array(normal), offset - tolerance_m)
+        poly = clip_polygon_halfspace(poly, np.array(normal), offset - tolerance_m)
     return poly
 
 
