@@ -14,10 +14,12 @@ Two estimators of ``dP`` (``measure_changes(estimator=...)``):
   (:mod:`.change_region`: the moving shapes' bounds and their shadow volumes from the emitting shapes, for both
   the frame and the background) gets most rays, the rest of the aperture a few, both strata unbiased
   (:mod:`.stratified`). The frame and the background are traced with the same seed, counts and regions, so
-  their rays pair up lane by lane; the background's full-aperture value (for ``P``) is traced once, with
-  :data:`BACKGROUND_PASSES` times a pass's rays. Kernels are compiled once and reused (same code every frame,
-  per-frame bounds are array inputs); each frame costs one parameter update (one acceleration-structure rebuild)
-  for the frame and one back to the background.
+  their rays pair up lane by lane; inter-reflection bounces are guided toward the moving shapes
+  (:mod:`.guided_path`); the background's whole-aperture value (for ``P``) is traced once per run, on a
+  jittered aperture grid with at least :data:`BACKGROUND_MIN_SPP` rays. Kernels are compiled once and reused
+  (same code every frame and budget: per-frame bounds, guides and ray counts are array or opaque inputs); each
+  frame costs one parameter update (one acceleration-structure rebuild) for the frame and one back to the
+  background.
 """
 
 from __future__ import annotations
@@ -36,16 +38,17 @@ from . import backend
 from .change_region import ApertureRegions, change_points, mixel_regions
 from .elements import transform_update, vertex_update
 from .estimation import derive_seed, pilot_to_target, warn_target_missed, warn_unreached, worst_relative_stderr
+from .guided_path import guide_sphere
 from .mask_eval import mask_model_meta
 from .mincam_scene import CAMERA_KEY, SENSOR_KEY, MincamScene, geometry_meta
 from .scene_dicts import mincam_body_shapes
-from .stratified import check_strata, stratified_estimates
+from .stratified import check_strata, stratified_estimates, whole_aperture_estimates
 
 MAX_SPP = 1 << 26  # cap of the target-noise budget, samples per mixel per frame
 ESTIMATORS = ("plain", "stratified")
 STRATA_EXPANSIONS = (1.0, 2.0, 4.0, 8.0)  # nested rectangles: the change region, then scaled about its centre
-STRATA_SHARES = (0.4, 0.1, 0.12, 0.18, 0.2)  # rays per stratum (region, rings, rest): ~Neyman on the bench scene
-BACKGROUND_PASSES = 4  # stratified: the background's whole-aperture value (for P, once per run) costs 4 passes
+STRATA_SHARES = (0.6, 0.1, 0.1, 0.1, 0.1)  # rays per stratum (region, rings, rest): near Neyman, guided, bench scene
+BACKGROUND_MIN_SPP = 1 << 16  # stratified: rays per mixel (at least) for the background's whole-aperture value
 Updates = Mapping[str, np.ndarray]
 __all__ = ["CAMERA_KEY", "SENSOR_KEY", "WorldRenderer", "transform_update", "vertex_update"]
 
@@ -131,6 +134,7 @@ class WorldRenderer:
         estimator: str = "plain",
         strata_shares: Sequence[float] = STRATA_SHARES,
         strata_expansions: Sequence[float] = STRATA_EXPANSIONS,
+        guide_bounces: bool = True,
     ) -> tuple[Measurements, Measurements]:
         """Measure each frame's change from the background: ``dP = P(frame) - P(background)``.
 
@@ -162,6 +166,11 @@ class WorldRenderer:
         strata_expansions : sequence of float
             Scale factors of the nested rectangles about the region's centre, starting at 1 (one fewer than the
             shares).
+        guide_bounces : bool
+            Stratified only: draw half of the inter-reflection bounces toward a sphere around the moving shapes
+            and their shadows (:mod:`.guided_path`; unbiased, the same expectation as the ``path`` integrator).
+            Light the object throws onto the rest of the scene is then met by many rays with small weights
+            instead of a few with large ones. Ignored at ``max_depth`` the guided path does not cover.
 
         Returns
         -------
@@ -185,7 +194,7 @@ class WorldRenderer:
             def pilot(samples: int):
                 dp, _ = self.measure_changes([frames[i] for i in pilot_idx], background, samples, seed, correlated,
                                              estimator=estimator, strata_shares=strata_shares,
-                                             strata_expansions=strata_expansions)
+                                             strata_expansions=strata_expansions, guide_bounces=guide_bounces)
                 return dp.irradiance_w_m2, dp.stderr_w_m2
 
             first = int(spp)
@@ -193,8 +202,13 @@ class WorldRenderer:
             budget = {"pilot_spp": first, "pilot_worst_rel_stderr": trail[0]["worst_rel_stderr"],
                       "pilot_trail": trail, "target_rel_stderr": target_rel_stderr}
         self.update(background)
-        bg_spp = spp if estimator == "plain" else BACKGROUND_PASSES * spp  # traced once: P = background + dP
-        bg = self.estimates(bg_spp, seed)
+        if estimator == "plain":
+            bg_spp = spp
+            bg = self.estimates(bg_spp, seed)
+        else:  # traced once per run, P = background + dP: a jittered aperture, at least BACKGROUND_MIN_SPP rays
+            bg_spp = max(int(spp), BACKGROUND_MIN_SPP)
+            bg = whole_aperture_estimates(self.scene, self.sensor, self.mincam, self.replicates, bg_spp,
+                                          derive_seed(seed, "background"))
         columns = [f"dP_{m}" for m in self.mincam.names] + [f"P_{m}" for m in self.mincam.names]
         values = np.full((len(frames), 2 * n), np.nan)
         errors = np.full_like(values, np.nan)
@@ -208,7 +222,8 @@ class WorldRenderer:
                         "versions": library_versions()}
             if estimator != "plain":
                 identity.update(estimator=estimator, strata_shares=shares.tolist(),
-                                strata_expansions=[float(e) for e in strata_expansions])
+                                strata_expansions=[float(e) for e in strata_expansions],
+                                guide_bounces=bool(guide_bounces))
             store = ResultStore(out_dir, len(frames), columns, identity, overwrite=overwrite)
             values[:], errors[:] = store.values, store.stderr
             todo = store.pending()
@@ -219,7 +234,8 @@ class WorldRenderer:
                                    show_progress)
             else:
                 strata = self._measure_stratified_into(frames, background, todo, spp, seed, correlated,
-                                                       (shares, tuple(strata_expansions)), bg, values, errors,
+                                                       (shares, tuple(strata_expansions), bool(guide_bounces)), bg,
+                                                       values, errors,
                                                        store, show_progress)
         finally:
             if store is not None:
@@ -261,7 +277,7 @@ class WorldRenderer:
     def _measure_stratified_into(self, frames, background, todo, spp, seed, correlated, strata, bg, values,
                                  errors, store, show_progress) -> dict:
         r = self.replicates
-        shares, expansions = strata
+        shares, expansions, guided = strata
         check_strata([1] * len(shares), expansions)
         per_rep = -(-int(spp) // r)
         counts = [max(1, int(round(per_rep * s / shares.sum()))) for s in shares]
@@ -275,13 +291,14 @@ class WorldRenderer:
             regions = self.change_regions(changed)
             for name in changed:
                 regions = regions.union(bg_regions[name])
+            guide = self.change_guide(changed) if guided else None
             frame_seed = derive_seed(seed, "stratified") if correlated else derive_seed(seed, "stratified", int(i))
             est = stratified_estimates(self.scene, self.sensor, self.mincam, regions, r, counts, frame_seed,
-                                       expansions)
+                                       expansions, guide=guide, max_depth=self.world.max_depth)
             self.update(background)
             bg_seed = frame_seed if correlated else derive_seed(seed, "stratified-background", int(i))
             bg_est = stratified_estimates(self.scene, self.sensor, self.mincam, regions, r, counts, bg_seed,
-                                          expansions)
+                                          expansions, guide=guide, max_depth=self.world.max_depth)
             diff = est - bg_est
             frame = bg + diff  # P(frame): the background traced once over the whole aperture, plus the change
             row_v = np.concatenate([diff.mean(0), frame.mean(0)])
@@ -294,6 +311,14 @@ class WorldRenderer:
                 "rays_per_mixel_per_frame": 2 * r * sum(counts),
                 "moving_shapes": sorted(moving),
                 "region_area_fraction_mean": float(np.mean(fractions)) if fractions else None}
+
+    def change_guide(self, moving: Sequence[str]) -> tuple[np.ndarray, float] | None:
+        """Sphere (centre, radius [m], scene coordinates) around the named shapes, in their current place, and
+        their shadow volumes: where guided bounces aim (:mod:`.guided_path`); None if unbounded."""
+        points = [_change_points(self.scene, [name]) for name in sorted(moving)]
+        if not points or any(p is None for p in points):
+            return None
+        return guide_sphere(np.concatenate(points))
 
     def change_regions(self, moving: Sequence[str]) -> ApertureRegions:
         """Aperture regions (per mixel) that the named shapes, in their current place, and their shadows reach:
