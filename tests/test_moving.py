@@ -352,7 +352,7 @@ def test_background_that_leaves_out_a_moved_parameter_means_the_scene_as_built(e
 
 def test_stratified_run_killed_midway_resumes_to_the_same_numbers(tmp_path, monkeypatch):
     """A stratified run stopped after two of four frames resumes with them kept and gives the uninterrupted run's
-    numbers; the same out dir refuses other strata shares or the plain estimator."""
+    numbers; the same out dir refuses other strata shares, unguided bounces or the plain estimator."""
     import mincam_sim.render.world as world_module
     from mincam_sim.errors import StaleResultError
 
@@ -376,6 +376,7 @@ def test_stratified_run_killed_midway_resumes_to_the_same_numbers(tmp_path, monk
     assert len(calls) == 4, f"the resumed run traced {len(calls) // 2} frames, not the 2 left"
     np.testing.assert_array_equal(resumed.irradiance_w_m2, whole.irradiance_w_m2)
     np.testing.assert_array_equal(resumed.stderr_w_m2, whole.stderr_w_m2)
-    for other in ({"estimator": "plain"}, {"estimator": "stratified", "strata_shares": (0.5, 0.1, 0.1, 0.1, 0.2)}):
+    for other in ({"estimator": "plain"}, {"estimator": "stratified", "strata_shares": (0.5, 0.1, 0.1, 0.1, 0.2)},
+                  {"estimator": "stratified", "guide_bounces": False}):
         with pytest.raises(StaleResultError):
             world.measure_changes(fr, bg, spp=1 << 12, seed=7, out_dir=tmp_path, **other)
