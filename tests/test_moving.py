@@ -113,6 +113,26 @@ def test_reported_sigma_matches_spread_over_seeds():
     assert 0.45 < ratio < 1.7, f"spread / reported variance = {ratio:.2f}"
 
 
+def test_jittered_background_agrees_with_plain_and_reports_its_spread():
+    """The background's whole-aperture value of the stratified runs (aperture points on a jittered grid) is the
+    independent estimator's value within sigma, and its reported sigma is the spread over 8 seeds."""
+    from mincam_sim.render.stratified import whole_aperture_estimates
+
+    world, frames, bg = _world({}, (0.04, 0.02, 0.02))
+    world.update(bg)
+    plain = world.estimates(1 << 16, seed=3)
+    runs = [whole_aperture_estimates(world.scene, world.sensor, world.mincam, 8, 1 << 14, seed=40 + s)
+            for s in range(8)]
+    means = np.stack([r.mean(0) for r in runs])  # (seeds, mixels)
+    sigma = np.stack([r.std(0, ddof=1) / np.sqrt(8) for r in runs])
+    plain_sigma = plain.std(0, ddof=1) / np.sqrt(8)
+    assert_close_mc(means[0], plain.mean(0), np.hypot(sigma[0], plain_sigma), what="jittered vs plain background")
+    ratio = float(np.mean(means.var(axis=0, ddof=1) / np.mean(sigma**2, axis=0)))  # 4 mixels x 7 dof
+    assert 0.35 < ratio < 2.0, f"spread / reported variance = {ratio:.2f}"
+    equal_rays_plain_sigma = 2.0 * plain_sigma  # the plain estimate had 4x the rays
+    assert np.all(sigma[0] < 0.7 * equal_rays_plain_sigma), "the jittered grid should be less noisy at equal rays"
+
+
 def test_same_seed_same_numbers():
     world, frames, bg = _world({}, (0.04, 0.02, 0.02))
     fr = frames([(0.03, 0.02, 0.0)])
