@@ -8,6 +8,7 @@ up, so world +x is the viewer's right.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,19 +63,24 @@ class Pose:
 
     def matrix(self) -> np.ndarray:
         """4x4 local-to-world matrix (columns: left, up, forward, position)."""
+        return self._matrix.copy()
+
+    @functools.cached_property
+    def _matrix(self) -> np.ndarray:  # a frozen pose: computed once (per-frame region bounds map points with it)
         m = np.eye(4)
         m[:3, 0], m[:3, 1], m[:3, 2] = self.axes()
         m[:3, 3] = self.position_m
+        m.setflags(write=False)
         return m
 
     def to_world(self, points_local: np.ndarray) -> np.ndarray:
         """Map local points (..., 3) [m] to world coordinates [m]."""
-        m = self.matrix()
+        m = self._matrix
         return np.asarray(points_local) @ m[:3, :3].T + m[:3, 3]
 
     def to_local(self, points_world: np.ndarray) -> np.ndarray:
         """Map world points (..., 3) [m] to local coordinates [m]."""
-        m = self.matrix()
+        m = self._matrix
         return (np.asarray(points_world) - m[:3, 3]) @ m[:3, :3]
 
     def translated(self, offset_m: Vec3) -> Pose:

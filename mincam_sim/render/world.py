@@ -288,10 +288,10 @@ class WorldRenderer:
         for i in progress(todo, desc="frames", disable=not show_progress):
             changed = _changed_shapes(frames[i], background)
             self.update({**background, **frames[i]})
-            regions = self.change_regions(changed)
+            regions, guide = self._change(changed)
             for name in changed:
                 regions = regions.union(bg_regions[name])
-            guide = self.change_guide(changed) if guided else None
+            guide = guide if guided else None
             frame_seed = derive_seed(seed, "stratified") if correlated else derive_seed(seed, "stratified", int(i))
             est = stratified_estimates(self.scene, self.sensor, self.mincam, regions, r, counts, frame_seed,
                                        expansions, guide=guide, max_depth=self.world.max_depth)
@@ -315,22 +315,23 @@ class WorldRenderer:
     def change_guide(self, moving: Sequence[str]) -> tuple[np.ndarray, float] | None:
         """Sphere (centre, radius [m], scene coordinates) around the named shapes, in their current place, and
         their shadow volumes: where guided bounces aim (:mod:`.guided_path`); None if unbounded."""
-        points = [_change_points(self.scene, [name]) for name in sorted(moving)]
-        if not points or any(p is None for p in points):
-            return None
-        return guide_sphere(np.concatenate(points))
+        return self._change(moving)[1]
 
     def change_regions(self, moving: Sequence[str]) -> ApertureRegions:
         """Aperture regions (per mixel) that the named shapes, in their current place, and their shadows reach:
         the bounding rectangle of each shape's own region (so that far-apart shapes, one of them out of view,
         do not make one hull spanning both); the whole aperture if one of them is unbounded."""
+        return self._change(moving)[0]
+
+    def _change(self, moving: Sequence[str]) -> tuple[ApertureRegions, tuple[np.ndarray, float] | None]:
+        """:meth:`change_regions` and :meth:`change_guide` from one look at the scene."""
+        points = {name: _change_points(self.scene, [name]) for name in sorted(moving)}
+        if any(p is None for p in points.values()):
+            return ApertureRegions.full(self.mincam), None
         regions = ApertureRegions.empty(self.mincam)
-        for name in sorted(moving):
-            points = _change_points(self.scene, [name])
-            if points is None:
-                return ApertureRegions.full(self.mincam)
-            regions = regions.union(mixel_regions(self.scene_mincam, points))
-        return regions
+        for p in points.values():
+            regions = regions.union(mixel_regions(self.scene_mincam, p))
+        return regions, (guide_sphere(np.concatenate(list(points.values()))) if points else None)
 
     def content_fingerprint(self) -> str:
         """Content key of the scene as Mitsuba holds it: every traversable parameter's value (meshes,
