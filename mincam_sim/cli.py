@@ -391,6 +391,13 @@ def _print_table(results: dict) -> None:
                    f"{'-':>8} / {'-':<8}        {v['n']}")
 
 
+def _print_reused(results: dict, out_dir: Path) -> None:
+    reused = results.get("meta", {}).get("reused") or []
+    if reused:
+        typer.echo(f"# reused from an earlier run in {out_dir} (same set-up, parameters and versions): "
+                   f"{', '.join(reused)}; --overwrite recomputes")
+
+
 def _reproduce_config(config: Path | None, quick: bool, **flags: Any) -> tuple[Any, dict]:
     """Set-up and parameters from an optional reproduce config, then the command-line flags given."""
     from .experiments import load_reproduce_config
@@ -423,6 +430,9 @@ def reproduce(
     spacing_m: Annotated[float | None, typer.Option(help="mixel spacing [m] [default 0.033, the paper's]")] = None,
     depth_m: Annotated[float | None, typer.Option(help="mincam to table/screen distance [m] [default 0.5]")] = None,
     bit_depth: Annotated[int | None, typer.Option(help="ADC bits [default 12, the paper's]")] = None,
+    overwrite: Annotated[bool, typer.Option("--overwrite", help="replace results of another set-up in --out "
+                                                                "(otherwise refused; same set-up: finished "
+                                                                "experiments are reused)")] = False,
 ) -> None:
     """Reproduce the paper's experiments in simulation; print the error table beside the paper's."""
     from .experiments import EXPERIMENTS
@@ -437,8 +447,9 @@ def reproduce(
     check_out_dir(out_dir)
     _announce_variant()
     with lock_out_dir(out_dir):
-        results = run(names, setup, out_dir, show_progress=_show_progress(), params=params)
+        results = run(names, setup, out_dir, show_progress=_show_progress(), params=params, overwrite=overwrite)
     _print_table(results)
+    _print_reused(results, out_dir)
     typer.echo(f"# results.json and plots in {out_dir}")
 
 
@@ -498,11 +509,13 @@ def demo(
     _render_demo(out_dir / "render")
     setup, params = _reproduce_config(None, quick=True)
     with lock_out_dir(out_dir / "repro"):
-        results = run(list(EXPERIMENTS), setup, out_dir / "repro", show_progress=_show_progress(), params=params)
+        # the demo's folder is the demo's own: a run of older code or another set-up there is replaced
+        results = run(list(EXPERIMENTS), setup, out_dir / "repro", show_progress=_show_progress(), params=params,
+                      overwrite=True)
     _print_table(results)
     studies = [name for name in REGISTRY if name not in EXPERIMENTS]
     with lock_out_dir(out_dir / "study"):
-        run(studies, setup, out_dir / "study", show_progress=_show_progress(), params=params)
+        run(studies, setup, out_dir / "study", show_progress=_show_progress(), params=params, overwrite=True)
     typer.echo(f"demo: wrote {out_dir}/render, {out_dir}/repro (results.json, plots), {out_dir}/study")
 
 

@@ -12,8 +12,10 @@ from typing import Any
 
 from ..atomic import atomic_write_text
 from ..config import dataclass_from_section, read_sections
-from ..errors import ConfigError
+from ..errors import ConfigError, StaleResultError, StoreError
+from ..identity import fingerprint, library_versions
 from ..render import backend
+from ..store import check_identity
 from .base import Experiment, ExperimentResult
 from .intrusion import Intrusion
 from .setup import Setup
@@ -56,24 +58,75 @@ def load_reproduce_config(source: str | Path | dict | None, quick: bool = False,
 
 
 def reproduce(names, setup: Setup, out_dir: str | Path, show_progress: bool = False,
-              params: dict[str, Any] | None = None) -> dict:
+              params: dict[str, Any] | None = None, overwrite: bool = False) -> dict:
     """Run experiments by name; write ``results.json`` (atomically, after each experiment) and plots.
 
-    Returns the results as written: one entry per experiment (:meth:`ExperimentResult.as_dict`) and ``meta``.
+    An out dir belongs to one set-up: the set-up, the library versions and the backend are recorded in
+    ``reproduce_identity.json``. A rerun with the same record reuses every experiment already in
+    ``results.json`` with the same parameters (so a killed ``reproduce all`` resumes with the next experiment)
+    and runs the others; a different record is refused, naming what changed, unless ``overwrite`` (then the
+    old results are dropped first), so ``results.json`` never holds numbers of two set-ups under one ``meta``.
+
+    Returns the results as written: one entry per experiment (:meth:`ExperimentResult.as_dict` plus its
+    ``params`` and their ``params_key``) and ``meta`` (``meta["reused"]``: the experiments of ``names`` that
+    were taken from an earlier run).
     """
+    for name in names:
+        experiment(name)  # unknown names fail before anything is written
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     results_path = out_dir / "results.json"
-    results: dict = json.loads(results_path.read_text()) if results_path.exists() else {}
+    if results_path.exists() and not (out_dir / IDENTITY_NAME).exists() and not overwrite:
+        raise StaleResultError(f"{results_path} has no record of the set-up it was made with (an older "
+                               "mincam_sim); rerun with --overwrite (overwrite=True) to replace it, or choose "
+                               "another output directory")
+    identity = {"setup": setup.as_dict(), "versions": library_versions(), "variant": backend.variant()}
+    same = check_identity(out_dir, identity, overwrite=overwrite, name=IDENTITY_NAME)
+    if same:
+        results = _read_results(results_path)
+    else:
+        results_path.unlink(missing_ok=True)  # another set-up's numbers must not survive a kill of this run
+        results = {}
+    reused = []
     for name in names:
         exp = experiment(name)
         p = (params or {}).get(name) or exp.params(setup.quick)
+        params_key = fingerprint(_jsonable(p))
+        old = results.get(name)
+        if isinstance(old, dict) and old.get("params_key") == params_key:
+            reused.append(name)
+            continue
         t = time.perf_counter()
         result: ExperimentResult = exp.run(setup, p, out_dir, show_progress=show_progress)
         result.seconds = time.perf_counter() - t
-        results[name] = {**result.as_dict(), "params": _jsonable(p)}
-        results["meta"] = {"setup": setup.as_dict(), **backend.describe(), "definitions": DEFINITIONS}
+        results[name] = {**result.as_dict(), "params": _jsonable(p), "params_key": params_key}
+        results["meta"] = _meta(setup, reused)
         atomic_write_text(results_path, json.dumps(results, indent=1, default=float))
+    if reused:
+        results["meta"] = _meta(setup, reused)
+        atomic_write_text(results_path, json.dumps(results, indent=1, default=float))
+    return results
+
+
+IDENTITY_NAME = "reproduce_identity.json"
+
+
+def _meta(setup: Setup, reused: list[str]) -> dict:
+    return {"setup": setup.as_dict(), **backend.describe(), "definitions": DEFINITIONS, "reused": list(reused)}
+
+
+def _read_results(path: Path) -> dict:
+    """The experiments' entries of an earlier run of the same set-up (empty if there is none yet)."""
+    if not path.exists():
+        return {}
+    try:
+        results = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise StoreError(f"{path} is torn or unreadable ({err}); rerun with --overwrite (overwrite=True) to "
+                         "recompute it, or choose another output directory") from None
+    if not isinstance(results, dict):
+        raise StoreError(f"{path} is not a reproduce results file (a JSON object); rerun with --overwrite "
+                         "(overwrite=True) to recompute it, or choose another output directory")
     return results
 
 

@@ -1,4 +1,4 @@
-"""Two-stratum estimates of the fast sensor: most rays where a frame can change things, a few everywhere else.
+"""Stratified estimates of the fast sensor: most rays where a frame can change things, a few everywhere else.
 
 For every ray the detector point ``x_d`` is drawn uniformly (as in :mod:`.mixel_sensor`); given ``x_d``, the
 aperture ``[0, 1]^2`` (aperture-sample units, the whole mask) is split into the *region* rectangle ``R(x_d)``
@@ -17,7 +17,11 @@ everywhere the scenes agree. Values are summed in float64 in a fixed order (as :
 
 The region's rays sit on a jittered grid in the region's own coordinates (every cell the same number of times,
 a uniform point in it): unbiased, and less variance from where the object's edges cut the region. The detector
-point stays independent per ray, so no fixed pairing of strata across factors arises.
+point stays independent per ray, so no fixed pairing of strata across factors arises. Where the region is
+degenerate for a detector point (unbounded, empty, or off the aperture) the rings would be empty: there every
+stratum samples the whole aperture and is weighted by its share of the rays, which is again unbiased and spends
+no ray on nothing. Rays are traced by the scene's integrator, or by :mod:`.guided_path` when a guide is given
+(inter-reflection bounces drawn partly toward the moving shapes; same expectation).
 """
 
 from __future__ import annotations
