@@ -17,11 +17,12 @@ everywhere the scenes agree. Values are summed in float64 in a fixed order (as :
 
 The region's rays sit on a jittered grid in the region's own coordinates (every cell the same number of times,
 a uniform point in it): unbiased, and less variance from where the object's edges cut the region. The detector
-point stays independent per ray, so no fixed pairing of strata across factors arises. Where the region is
-degenerate for a detector point (unbounded, empty, or off the aperture) the rings would be empty: there every
-stratum samples the whole aperture and is weighted by its share of the rays, which is again unbiased and spends
-no ray on nothing. Rays are traced by the scene's integrator, or by :mod:`.guided_path` when a guide is given
-(inter-reflection bounces drawn partly toward the moving shapes; same expectation).
+point stays independent per ray, so no fixed pairing of strata across factors arises. Where a stratum is
+empty for a detector point (a ring beyond the aperture's edge; a region that is empty, off the aperture, or
+unbounded and so the whole aperture) its rays pool with the outermost non-empty stratum's, weighted by their
+share of that stratum's rays: again unbiased, and no ray is spent on nothing. Rays are traced by the scene's
+integrator, or by :mod:`.guided_path` when a guide is given (inter-reflection bounces drawn partly toward the
+moving shapes; same expectation).
 """
 
 from __future__ import annotations
@@ -125,10 +126,8 @@ def stratified_estimates(scene, sensor, mincam: Mincam, regions: ApertureRegions
         position = mi.Point2f((mi.Float(k) + 0.5 + (u.x - 0.5) * DETECTOR_SHRINK) / n, u.y)
         x_d = (u.x - 0.5) * DETECTOR_SHRINK * c[8]
         y_d = (u.y - 0.5) * c[8]
-        pooled_weight = mi.Float(0.0)  # a degenerate region's strata all cover the aperture: weight n_s / n
-        for s, count in enumerate(counts):
-            pooled_weight = dr.select(stratum == s, dr.opaque(mi.Float, count / per), pooled_weight)
-        aperture, scale = _stratum_sample(dr, mi, c, x_d, y_d, v, pick, stratum, list(expansions), pooled_weight)
+        rays = [dr.opaque(mi.Float, float(count)) for count in counts]
+        aperture, scale = _stratum_sample(dr, mi, c, x_d, y_d, v, pick, stratum, list(expansions), rays)
         ray, weight = sensor.sample_ray_differential(0.0, wavelength, position, aperture)
         if guided:
             radiance = guided_path.guided_radiance(scene, sampler, ray, int(max_depth), guide)
@@ -158,11 +157,17 @@ def _jittered_region(dr, mi, v, j, n_region: int):
     return mi.Point2f(dr.select(on_grid, gx, v.x), dr.select(on_grid, gy, v.y))
 
 
-def _stratum_sample(dr, mi, c, x_d, y_d, v, pick, stratum, expansions, pooled_weight):
+def _stratum_sample(dr, mi, c, x_d, y_d, v, pick, stratum, expansions, rays):
     """Aperture sample in [0, 1]^2 and its weight: stratum s is the ring between nested rectangle s - 1 (a
-    point for s = 0) and rectangle s (the whole aperture for the last), weighted by its measure. Where the
-    region is degenerate (unbounded: the whole aperture; or empty) every stratum samples the whole aperture
-    and is weighted by its share of the rays (``pooled_weight``), so that no ray is spent on an empty ring."""
+    point for s = 0) and rectangle s (the whole aperture for the last), clipped to the aperture, weighted by
+    its measure.
+
+    For a detector point where a stratum is empty (a ring beyond the aperture's edge, a region off the
+    aperture or empty; an unbounded region is the whole aperture and leaves every ring empty) its rays
+    sample the outermost non-empty stratum instead, and every ray that samples a stratum ``e`` is weighted
+    by ``|e| n_own / M_e`` (``n_own`` the rays of its own stratum, ``M_e`` those of all strata that sample
+    ``e``): the strata's parts still sum to the aperture's integral for every detector point (unbiased), and
+    no ray is spent on nothing. ``rays`` holds each stratum's ray count per group."""
     lo_x = c[0] + dr.minimum(c[4] * x_d, c[5] * x_d)
     lo_y = c[1] + dr.minimum(c[6] * y_d, c[7] * y_d)
     hi_x = c[2] + dr.maximum(c[4] * x_d, c[5] * x_d)
@@ -180,18 +185,46 @@ def _stratum_sample(dr, mi, c, x_d, y_d, v, pick, stratum, expansions, pooled_we
         return [dr.select(empty & ~full, 0.0, x) for x in box]
 
     rects = [rect(e) for e in expansions] + [rect(None)]
-    inner = [mi.Float(0.0)] * 4
-    outer = list(rects[0])
-    for s in range(1, len(rects)):
-        sel = stratum == s
-        inner = [dr.select(sel, a, b) for a, b in zip(rects[s - 1], inner, strict=True)]
-        outer = [dr.select(sel, a, b) for a, b in zip(rects[s], outer, strict=True)]
-    at_corner = stratum == 0  # the innermost stratum: a ring around a point at its corner
-    inner = [dr.select(at_corner, outer[i % 2], inner[i]) for i in range(4)]
+    n_strata = len(rects)
+
+    def bounds(s):
+        """(inner, outer) rectangles of stratum s; stratum 0 is a ring around a point at its corner."""
+        outer = list(rects[s])
+        inner = [outer[0], outer[1], outer[0], outer[1]] if s == 0 else list(rects[s - 1])
+        return inner, outer
+
+    def strips(inner, outer):
+        ix0, iy0, ix1, iy1 = inner
+        ox0, oy0, ox1, oy1 = outer
+        # bottom, top strips, then left and right of the inner rectangle
+        return ((ox1 - ox0) * (iy0 - oy0), (ox1 - ox0) * (oy1 - iy1), (ix0 - ox0) * (iy1 - iy0),
+                (ox1 - ix1) * (iy1 - iy0))
+
+    areas = [sum(strips(*bounds(s))) for s in range(n_strata)]
+    target = [mi.UInt32(s) for s in range(n_strata)]  # the stratum each stratum's rays sample here
+    outermost = mi.UInt32(0)
+    for s in range(n_strata):
+        outermost = dr.select(areas[s] > 0.0, s, outermost)
+    for s in range(n_strata):
+        target[s] = dr.select(areas[s] > 0.0, s, outermost)
+    own_target = mi.UInt32(0)
+    own_rays = mi.Float(0.0)
+    for s in range(n_strata):
+        own_target = dr.select(stratum == s, target[s], own_target)
+        own_rays = dr.select(stratum == s, rays[s], own_rays)
+    sharing = mi.Float(0.0)  # rays of every stratum that samples the same stratum as this ray
+    for s in range(n_strata):
+        sharing += dr.select(target[s] == own_target, rays[s], 0.0)
+
+    inner, outer = bounds(0)
+    for s in range(1, n_strata):
+        sel = own_target == s
+        b_inner, b_outer = bounds(s)
+        inner = [dr.select(sel, a, b) for a, b in zip(b_inner, inner, strict=True)]
+        outer = [dr.select(sel, a, b) for a, b in zip(b_outer, outer, strict=True)]
     ox0, oy0, ox1, oy1 = outer
     ix0, iy0, ix1, iy1 = inner
-    a0, a1 = (ox1 - ox0) * (iy0 - oy0), (ox1 - ox0) * (oy1 - iy1)  # bottom, top strips
-    a2, a3 = (ix0 - ox0) * (iy1 - iy0), (ox1 - ix1) * (iy1 - iy0)  # left, right of the inner rectangle
+    a0, a1, a2, a3 = strips(inner, outer)
     area = a0 + a1 + a2 + a3
     t = pick * area
     first, second, third = t < a0, t < a0 + a1, t < a0 + a1 + a2
@@ -200,10 +233,7 @@ def _stratum_sample(dr, mi, c, x_d, y_d, v, pick, stratum, expansions, pooled_we
     y0 = dr.select(first, oy0, dr.select(second, iy1, iy0))
     y1 = dr.select(first, iy0, dr.select(second, oy1, iy1))
     aperture = mi.Point2f(x0 + (x1 - x0) * v.x, y0 + (y1 - y0) * v.y)
-    widest = rects[-2]  # the largest nested rectangle, clipped: no area means every ring is empty for this x_d
-    degenerate = full | empty | ((widest[2] - widest[0]) * (widest[3] - widest[1]) <= 0.0)
-    aperture = mi.Point2f(dr.select(degenerate, v.x, aperture.x), dr.select(degenerate, v.y, aperture.y))
-    return aperture, dr.select(degenerate, pooled_weight, area)
+    return aperture, area * own_rays / sharing
 
 
 def whole_aperture_estimates(scene, sensor, mincam: Mincam, replicates: int, spp: int, seed: int) -> np.ndarray:
