@@ -430,9 +430,10 @@ def reproduce(
     spacing_m: Annotated[float | None, typer.Option(help="mixel spacing [m] [default 0.033, the paper's]")] = None,
     depth_m: Annotated[float | None, typer.Option(help="mincam to table/screen distance [m] [default 0.5]")] = None,
     bit_depth: Annotated[int | None, typer.Option(help="ADC bits [default 12, the paper's]")] = None,
-    overwrite: Annotated[bool, typer.Option("--overwrite", help="replace results of another set-up in --out "
-                                                                "(otherwise refused; same set-up: finished "
-                                                                "experiments are reused)")] = False,
+    overwrite: Annotated[bool, typer.Option("--overwrite", help="recompute everything, replacing what --out holds "
+                                                                "(without it: another set-up there is refused, "
+                                                                "finished experiments of this one are reused)")
+                         ] = False,
 ) -> None:
     """Reproduce the paper's experiments in simulation; print the error table beside the paper's."""
     from .experiments import EXPERIMENTS
@@ -509,7 +510,7 @@ def demo(
     _render_demo(out_dir / "render")
     setup, params = _reproduce_config(None, quick=True)
     with lock_out_dir(out_dir / "repro"):
-        # the demo's folder is the demo's own: a run of older code or another set-up there is replaced
+        # the demo's folder is the demo's own: it is recomputed every time (a run of older code is replaced)
         results = run(list(EXPERIMENTS), setup, out_dir / "repro", show_progress=_show_progress(), params=params,
                       overwrite=True)
     _print_table(results)

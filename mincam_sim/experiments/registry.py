@@ -64,8 +64,9 @@ def reproduce(names, setup: Setup, out_dir: str | Path, show_progress: bool = Fa
     An out dir belongs to one set-up: the set-up, the library versions and the backend are recorded in
     ``reproduce_identity.json``. A rerun with the same record reuses every experiment already in
     ``results.json`` with the same parameters (so a killed ``reproduce all`` resumes with the next experiment)
-    and runs the others; a different record is refused, naming what changed, unless ``overwrite`` (then the
-    old results are dropped first), so ``results.json`` never holds numbers of two set-ups under one ``meta``.
+    and runs the others; a different record is refused, naming what changed. ``overwrite`` drops the old
+    results first and recomputes everything. So ``results.json`` never holds numbers of two set-ups under one
+    ``meta``.
 
     Returns the results as written: one entry per experiment (:meth:`ExperimentResult.as_dict` plus its
     ``params`` and their ``params_key``) and ``meta`` (``meta["reused"]``: the experiments of ``names`` that
