@@ -133,6 +133,25 @@ def test_jittered_background_agrees_with_plain_and_reports_its_spread():
     assert np.all(sigma[0] < 0.7 * equal_rays_plain_sigma), "the jittered grid should be less noisy at equal rays"
 
 
+def test_guide_sphere_holds_the_mover_and_its_shadow_in_scene_coordinates():
+    """The guide of a frame holds the moved box's corners and the shadow they cast on the table from the light's
+    corners (scene coordinates: the world shifted by minus the mincam's centre); unbounded changes have none."""
+    from mincam_sim.render.change_region import box_corners
+
+    world, frames, bg = _world({}, (0.04, 0.02, 0.02))
+    world.update({**bg, **frames([(0.05, -0.03, 0.0)])[0]})
+    centre, radius = world.change_guide(["mover"])
+    corners = box_corners(np.array([0.03, -0.04, 0.0]), np.array([0.07, -0.02, 0.02]))
+    light = np.array([0.0, 0.0, 1.2])
+    top = corners[corners[:, 2] > 0.01]
+    shadow = light + (top - light) * (light[2] / (light[2] - top[:, 2:3]))  # where the top corners' shadow lands
+    for p in np.concatenate([corners, shadow]) - world.scene_origin_m:
+        assert np.linalg.norm(p - centre) <= radius + 1e-9, p
+    assert radius < 0.2, "the guide should stay near the box"
+    assert world.change_guide(["not a shape"]) is None
+    world.update(bg)
+
+
 def test_same_seed_same_numbers():
     world, frames, bg = _world({}, (0.04, 0.02, 0.02))
     fr = frames([(0.03, 0.02, 0.0)])
