@@ -160,6 +160,7 @@ def test_same_seed_same_numbers():
     np.testing.assert_array_equal(a.irradiance_w_m2, b.irradiance_w_m2)
     np.testing.assert_array_equal(pa.stderr_w_m2, pb.stderr_w_m2)
     assert a.meta["estimator"] == "stratified" and a.meta["rays_per_mixel_per_frame"] > 0
+    assert a.meta["guide_bounces"] and a.meta["guided_frames"] == 1
 
 
 def test_region_bounds_hold_the_object_and_its_shadow():

@@ -39,6 +39,7 @@ from .change_region import ApertureRegions, change_points, mixel_regions
 from .elements import transform_update, vertex_update
 from .estimation import derive_seed, pilot_to_target, warn_target_missed, warn_unreached, worst_relative_stderr
 from .guided_path import guide_sphere
+from .guided_path import supports as guided_path_supports
 from .mask_eval import mask_model_meta
 from .mincam_scene import CAMERA_KEY, SENSOR_KEY, MincamScene, geometry_meta
 from .scene_dicts import mincam_body_shapes
@@ -235,8 +236,7 @@ class WorldRenderer:
             else:
                 strata = self._measure_stratified_into(frames, background, todo, spp, seed, correlated,
                                                        (shares, tuple(strata_expansions), bool(guide_bounces)), bg,
-                                                       values, errors,
-                                                       store, show_progress)
+                                                       values, errors, store, show_progress)
         finally:
             if store is not None:
                 store.close()
@@ -284,7 +284,7 @@ class WorldRenderer:
         moving = _moving_shapes([background, *frames])
         self.update(background)
         bg_regions = {name: self.change_regions([name]) for name in moving}
-        fractions = []
+        fractions, guided_frames = [], 0
         for i in progress(todo, desc="frames", disable=not show_progress):
             changed = _changed_shapes(frames[i], background)
             self.update({**background, **frames[i]})
@@ -292,6 +292,7 @@ class WorldRenderer:
             for name in changed:
                 regions = regions.union(bg_regions[name])
             guide = guide if guided else None
+            guided_frames += guide is not None and guided_path_supports(self.world.max_depth)
             frame_seed = derive_seed(seed, "stratified") if correlated else derive_seed(seed, "stratified", int(i))
             est = stratified_estimates(self.scene, self.sensor, self.mincam, regions, r, counts, frame_seed,
                                        expansions, guide=guide, max_depth=self.world.max_depth)
@@ -309,7 +310,8 @@ class WorldRenderer:
                 store.write([i], row_v[None], row_e[None])
         return {"strata_expansions": list(expansions), "strata_rays_per_replicate": counts,
                 "rays_per_mixel_per_frame": 2 * r * sum(counts),
-                "moving_shapes": sorted(moving),
+                "moving_shapes": sorted(moving), "guide_bounces": bool(guided),
+                "guided_frames": int(guided_frames),
                 "region_area_fraction_mean": float(np.mean(fractions)) if fractions else None}
 
     def change_guide(self, moving: Sequence[str]) -> tuple[np.ndarray, float] | None:
