@@ -84,13 +84,10 @@ GUIDES = {
     "far off": (np.array([3.0, 2.0, 0.5]), 0.2),
     "around the camera": (np.array([0.0, -1.0, 0.5]), 1.2),  # many shading points inside: not guided there
     "too small to trust": (np.array([0.05, 0.0, 0.06]), 1e-5),
-    "two spheres, mover and metal": [(np.array([0.05, 0.0, 0.06]), 0.11), (np.array([-0.35, 0.2, 0.1]), 0.18)],
-    "three overlapping, one unusable": [(np.array([0.05, 0.0, 0.06]), 0.11), (np.array([0.1, 0.0, 0.06]), 0.15),
-                                        (np.array([0.0, -1.0, 0.5]), 1.2)],
 }
 
 
-@pytest.mark.parametrize("name", list(GUIDES))
+@pytest.mark.parametrize("name", ["around the mover", "far off", "around the camera", "too small to trust"])
 def test_guided_path_equals_mitsuba_path(name):
     scene = _scene(backend.mitsuba())
     expected, e_err = _block_means(scene, 3, "path", seed=1)
@@ -108,16 +105,9 @@ def test_guided_path_equals_mitsuba_path_at_other_depths(max_depth):
     assert_close_mc(value, expected, np.hypot(e_err, v_err), what=f"guided path vs path, max_depth {max_depth}")
 
 
-CARD = guide_sphere(np.array([[-0.05, -0.05, 0.3], [0.05, 0.05, 0.3]]))
-EMPTY = (np.array([0.4, 0.3, 0.2]), 0.1)  # usable from the floor, but nothing there
-
-
-@pytest.mark.parametrize("guide", [CARD, [CARD, EMPTY], [EMPTY, CARD, (CARD[0], 0.5 * CARD[1])]],
-                         ids=["card", "card and an empty sphere", "three, two overlapping"])
-def test_guide_lowers_the_noise_of_light_thrown_by_an_object(guide):
+def test_guide_lowers_the_noise_of_light_thrown_by_an_object():
     """A bright card lit by a spot that the camera cannot see: the floor gets its light only through one
-    bounce off the card, so any error in the mixture's density shows in full. Guiding toward the card must
-    agree with path and cut the standard error (16 replicates each, same rays)."""
+    bounce off the card. Guiding toward the card must cut the standard error (16 replicates each, same rays)."""
     mi = backend.mitsuba()
     scene = mi.load_dict({
         "type": "scene",
@@ -132,19 +122,10 @@ def test_guide_lowers_the_noise_of_light_thrown_by_an_object(guide):
                  "intensity": 5.0, "cutoff_angle": 9, "beam_width": 8},  # under the floor's plane: lights the card
     })
     plain, plain_err = _block_means(scene, 3, "path", seed=5)
-    guided, guided_err = _block_means(scene, 3, guide, seed=6)
+    guided, guided_err = _block_means(scene, 3, guide_sphere(np.array([[-0.05, -0.05, 0.3], [0.05, 0.05, 0.3]])),
+                                      seed=6)
     assert_close_mc(guided, plain, np.hypot(plain_err, guided_err), what="guided vs path, light off a card")
-    assert np.median(guided_err / plain_err) < 0.7, f"guiding should cut the noise: {guided_err / plain_err}"
-
-
-def test_more_spheres_than_guides_merge_into_one_holding_them():
-    from mincam_sim.render.guided_path import MAX_GUIDES, _spheres
-
-    spheres = [(np.array([float(k), 0.0, 0.0]), 0.5) for k in range(MAX_GUIDES + 1)]
-    ((centre, radius),) = _spheres(spheres)
-    for c, r in spheres:
-        assert np.linalg.norm(c - centre) + r <= radius + 1e-12
-    assert len(_spheres(spheres[:2])) == 2 and len(_spheres(spheres[0])) == 1 and _spheres(None) == []
+    assert np.median(guided_err / plain_err) < 0.5, f"guiding should cut the noise: {guided_err / plain_err}"
 
 
 def test_guide_sphere_and_depth_support():

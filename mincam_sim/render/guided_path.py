@@ -4,11 +4,10 @@ The light a moving object throws onto the table (or takes from it) reaches a mix
 meets the table, the bounce direction meets the object. Mitsuba's ``path`` integrator draws that direction from
 the BSDF alone, so from most of the table the object is met by one bounce in ~10^4: ``dP`` outside the change
 region is then a rare-event estimate whose reported standard error scatters widely (issue 10). Here the bounce
-direction is drawn from a *mixture*: with probability ``share`` uniformly in the cone that holds one of a few
-spheres around the changing parts of the scene (the *guide*, one sphere per moving shape and its shadow; a
-usable cone picked uniformly), otherwise from the BSDF, and weighted by ``f cos / p_mix`` with
+direction is drawn from a *mixture*: with probability ``share`` uniformly in the cone that holds a sphere around
+the changing part of the scene (the *guide*), otherwise from the BSDF, and weighted by ``f cos / p_mix`` with
 
-    p_mix(w) = (1 - share) p_bsdf(w) + share * mean over usable cones k of p_cone_k(w).
+    p_mix(w) = (1 - share) p_bsdf(w) + share p_cone(w).
 
 Every direction the BSDF can draw keeps a positive density, so the estimate is unbiased whatever the guide
 (a guide around the wrong place only costs variance); emitter sampling at the next vertex and emitter hits are
@@ -34,7 +33,6 @@ from . import backend
 GUIDE_SHARE = 0.5  # share of guided bounces drawn toward the guide's sphere
 MIN_CONE_SIN2 = 1e-6  # below this (a sphere seen under < 0.06 degrees) float32 cone sampling is not trusted
 MAX_GUIDED_DEPTH = 5  # Mitsuba's path uses Russian roulette from depth 5 (rr_depth); beyond it, use path itself
-MAX_GUIDES = 4  # spheres per frame (one per moving shape); more are merged into one
 
 
 def supports(max_depth: int) -> bool:
@@ -62,7 +60,8 @@ def mis_weight(dr, pdf_a, pdf_b):
     return dr.select(dr.isfinite(w), w, 0.0)
 
 
-def guided_radiance(scene, sampler, ray, max_depth: int, guide, share: float = GUIDE_SHARE):
+def guided_radiance(scene, sampler, ray, max_depth: int, guide: tuple[np.ndarray, float] | None,
+                    share: float = GUIDE_SHARE):
     """Radiance along ``ray`` [W m^-2 sr^-1], as Mitsuba's ``path`` with ``max_depth``, bounces guided.
 
     Parameters
@@ -71,11 +70,10 @@ def guided_radiance(scene, sampler, ray, max_depth: int, guide, share: float = G
         Mitsuba scene, a seeded sampler (one lane per ray), the rays.
     max_depth : int
         Longest path in segments (1 .. :data:`MAX_GUIDED_DEPTH`), as ``path``'s ``max_depth``.
-    guide : (centre (3,) [m], radius [m]), a sequence of them, or None
-        Spheres toward which bounces are guided (one per moving shape, say); a guided bounce picks one of the
-        cones usable at its shading point uniformly. None (or no sphere) = Mitsuba's BSDF sampling only.
+    guide : (centre (3,) [m], radius [m]) or None
+        Sphere toward which bounces are guided; None = Mitsuba's BSDF sampling only.
     share : float
-        Probability (0 .. 1, exclusive of 1) that a guided bounce is drawn in a guide's cone.
+        Probability (0 .. 1, exclusive of 1) that a guided bounce is drawn in the guide's cone.
     """
     if not supports(max_depth):
         raise ValueError(f"max_depth must be 1 .. {MAX_GUIDED_DEPTH} for the guided path, got {max_depth!r}")
@@ -84,10 +82,6 @@ def guided_radiance(scene, sampler, ray, max_depth: int, guide, share: float = G
     mi = backend.mitsuba()
     import drjit as dr
 
-    spheres = _spheres(guide) if share > 0 else []
-    # opaque: a new frame's guide must not change the kernel's code (no recompilation per frame)
-    spheres = [(mi.Point3f(*(dr.opaque(mi.Float, float(c)) for c in centre)), dr.opaque(mi.Float, float(radius)))
-               for centre, radius in spheres]
     ctx = mi.BSDFContext()
     ray = mi.Ray3f(ray)
     radiance = mi.Spectrum(0.0)
@@ -96,6 +90,11 @@ def guided_radiance(scene, sampler, ray, max_depth: int, guide, share: float = G
     si_prev = dr.zeros(mi.SurfaceInteraction3f)
     pdf_prev = mi.Float(1.0)
     delta_prev = mi.Bool(True)
+    centre = radius = None
+    if guide is not None and share > 0:
+        # opaque: a new frame's guide must not change the kernel's code (no recompilation per frame)
+        centre = mi.Point3f(*(dr.opaque(mi.Float, float(c)) for c in guide[0]))
+        radius = dr.opaque(mi.Float, float(guide[1]))
     for depth in range(int(max_depth)):
         si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=depth == 0, active=active)
         bsdf = si.bsdf(ray)
@@ -106,16 +105,16 @@ def guided_radiance(scene, sampler, ray, max_depth: int, guide, share: float = G
             break
         active_next = active & si.is_valid()
 
-        guided = bool(spheres) and depth + 2 < max_depth
+        guided = centre is not None and depth + 2 < max_depth
         if guided:
-            cones = _Cones(mi, dr, si, bsdf, spheres, share, active_next)
+            alpha, cone_frame, cos_max, cone_pdf = _cone(mi, dr, si, bsdf, centre, radius, share, active_next)
 
         active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
         ds, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), True, active_em)
         active_em &= ds.pdf != 0.0
         value_em, pdf_em = bsdf.eval_pdf(ctx, si, si.to_local(ds.d), active_em)
         if guided:
-            pdf_em = (1.0 - cones.alpha) * pdf_em + cones.alpha * cones.pdf(ds.d)
+            pdf_em = (1.0 - alpha) * pdf_em + alpha * _in_cone(dr, ds.d, cone_frame, cos_max) * cone_pdf
         mis_em = dr.select(ds.delta, 1.0, mis_weight(dr, ds.pdf, pdf_em))
         radiance += dr.select(active_em, beta * mis_em * value_em * em_weight, 0.0)
 
@@ -125,14 +124,14 @@ def guided_radiance(scene, sampler, ray, max_depth: int, guide, share: float = G
         delta_prev = mi.has_flag(sample.sampled_type, mi.BSDFFlags.Delta)
         if guided:
             pick, u = sampler.next_1d(), sampler.next_2d()
-            use_cone = active_next & (pick < cones.alpha)
-            toward, chosen = cones.sample(pick / dr.maximum(cones.alpha, 1e-30), u)
+            use_cone = active_next & (pick < alpha)
+            toward = cone_frame.to_world(mi.warp.square_to_uniform_cone(u, cos_max))
             value_c, pdf_c = bsdf.eval_pdf(ctx, si, si.to_local(toward), use_cone)
             f_cos = dr.select(use_cone, value_c, weight * sample.pdf)
             pdf_b = dr.select(use_cone, pdf_c, sample.pdf)
-            p_cone = dr.select(use_cone, cones.pdf(toward, chosen), cones.pdf(direction))
-            pdf_mix = (1.0 - cones.alpha) * pdf_b + cones.alpha * p_cone
-            mixed = cones.alpha > 0.0
+            p_cone = dr.select(use_cone, cone_pdf, _in_cone(dr, direction, cone_frame, cos_max) * cone_pdf)
+            pdf_mix = (1.0 - alpha) * pdf_b + alpha * p_cone
+            mixed = alpha > 0.0
             weight = dr.select(mixed, dr.select(pdf_mix > 0.0, f_cos / pdf_mix, 0.0), weight)
             direction = dr.select(use_cone, toward, direction)
             pdf_prev = dr.select(mixed, pdf_mix, pdf_prev)
@@ -144,67 +143,21 @@ def guided_radiance(scene, sampler, ray, max_depth: int, guide, share: float = G
     return radiance
 
 
-def _spheres(guide) -> list[tuple[np.ndarray, float]]:
-    """``guide`` as a list of (centre, radius); more than :data:`MAX_GUIDES` become one sphere holding them."""
-    if guide is None:
-        return []
-    if len(guide) == 2 and (np.isscalar(guide[1]) or getattr(guide[1], "ndim", None) == 0):  # one sphere
-        guide = [guide]
-    spheres = [(np.asarray(c, dtype=float).reshape(3), float(r)) for c, r in guide]
-    if len(spheres) > MAX_GUIDES:
-        lo = np.min([c - r for c, r in spheres], axis=0)
-        hi = np.max([c + r for c, r in spheres], axis=0)
-        spheres = [(0.5 * (lo + hi), float(0.5 * np.linalg.norm(hi - lo)))]
-    return spheres
+def _cone(mi, dr, si, bsdf, centre, radius, share, active):
+    """Per lane: the mixture's share (0 where the bounce is not guided), the cone's frame, cos of its half
+    angle and its density [1/sr]."""
+    to_centre = centre - si.p
+    dist2 = dr.squared_norm(to_centre)
+    sin2 = dr.square(radius) / dr.maximum(dist2, 1e-30)
+    ok = active & (sin2 < 1.0 - 1e-4) & (sin2 >= MIN_CONE_SIN2) & ~mi.has_flag(bsdf.flags(), mi.BSDFFlags.Delta)
+    cos_max = dr.safe_sqrt(1.0 - sin2)
+    one_minus_cos = sin2 / (1.0 + cos_max)  # 1 - cos, without cancellation for small cones
+    cone_pdf = dr.select(ok, dr.rcp(dr.two_pi * dr.maximum(one_minus_cos, 1e-30)), 0.0)
+    frame = mi.Frame3f(dr.normalize(dr.select(ok, to_centre, mi.Vector3f(0, 0, 1))))
+    alpha = dr.select(ok, share, 0.0)
+    return alpha, frame, dr.select(ok, cos_max, 0.0), cone_pdf
 
 
-class _Cones:
-    """The guide's cones as seen from each lane's shading point: which are usable, the mixture's share
-    ``alpha`` (0 where the bounce is not guided: no usable cone, or a BSDF with a delta component), sampling
-    (a usable cone picked uniformly, then a uniform direction in it) and the cone mixture's density [1/sr]."""
-
-    def __init__(self, mi, dr, si, bsdf, spheres, share, active):
-        self.mi, self.dr = mi, dr
-        self.frames, self.cos, self.density, self.usable = [], [], [], []
-        for centre, radius in spheres:
-            to_centre = centre - si.p
-            sin2 = dr.square(radius) / dr.maximum(dr.squared_norm(to_centre), 1e-30)
-            ok = active & (sin2 < 1.0 - 1e-4) & (sin2 >= MIN_CONE_SIN2)
-            cos_max = dr.safe_sqrt(1.0 - sin2)
-            one_minus_cos = sin2 / (1.0 + cos_max)  # 1 - cos, without cancellation for small cones
-            self.usable.append(ok)
-            self.cos.append(dr.select(ok, cos_max, 0.0))
-            self.density.append(dr.select(ok, dr.rcp(dr.two_pi * dr.maximum(one_minus_cos, 1e-30)), 0.0))
-            self.frames.append(mi.Frame3f(dr.normalize(dr.select(ok, to_centre, mi.Vector3f(0, 0, 1)))))
-        self.count = mi.Float(0.0)
-        for ok in self.usable:
-            self.count += dr.select(ok, 1.0, 0.0)
-        guidable = (self.count > 0.0) & ~mi.has_flag(bsdf.flags(), mi.BSDFFlags.Delta)
-        self.alpha = dr.select(guidable, share, 0.0)
-
-    def sample(self, pick, u):
-        """A direction in the ``floor(pick * count)``-th usable cone (``pick`` in [0, 1)) and that cone's index."""
-        dr, mi = self.dr, self.mi
-        target = dr.minimum(mi.UInt32(pick * self.count), mi.UInt32(dr.maximum(self.count, 1.0) - 1.0))
-        seen = mi.UInt32(0)
-        chosen = mi.UInt32(0)
-        direction = mi.Vector3f(0, 0, 1)
-        for k, ok in enumerate(self.usable):
-            take = ok & (seen == target)
-            cone = self.frames[k].to_world(mi.warp.square_to_uniform_cone(u, self.cos[k]))
-            direction = dr.select(take, cone, direction)
-            chosen = dr.select(take, k, chosen)
-            seen += dr.select(ok, 1, 0)
-        return direction, chosen
-
-    def pdf(self, direction, chosen=None):
-        """Density of the cone mixture at ``direction`` [1/sr]; ``chosen``: the cone that drew it (counted as
-        holding it whatever float32 says at its rim)."""
-        dr = self.dr
-        total = self.mi.Float(0.0)
-        for k, ok in enumerate(self.usable):
-            inside = dr.dot(direction, self.frames[k].n) >= self.cos[k]
-            if chosen is not None:
-                inside |= chosen == k
-            total += dr.select(ok & inside, self.density[k], 0.0)
-        return dr.select(self.count > 0.0, total / dr.maximum(self.count, 1.0), 0.0)
+def _in_cone(dr, direction, frame, cos_max):
+    """1.0 where ``direction`` lies in the cone about ``frame.n`` with cos of its half angle ``cos_max``."""
+    return dr.select(dr.dot(direction, frame.n) >= cos_max, 1.0, 0.0)

@@ -314,9 +314,9 @@ class WorldRenderer:
                 "guided_frames": int(guided_frames),
                 "region_area_fraction_mean": float(np.mean(fractions)) if fractions else None}
 
-    def change_guide(self, moving: Sequence[str]) -> list[tuple[np.ndarray, float]] | None:
-        """Spheres (centre, radius [m], scene coordinates), one per named shape in its current place with its
-        shadow volume: where guided bounces aim (:mod:`.guided_path`); None if unbounded or no shape."""
+    def change_guide(self, moving: Sequence[str]) -> tuple[np.ndarray, float] | None:
+        """Sphere (centre, radius [m], scene coordinates) around the named shapes, in their current place, and
+        their shadow volumes: where guided bounces aim (:mod:`.guided_path`); None if unbounded."""
         return self._change(moving)[1]
 
     def change_regions(self, moving: Sequence[str]) -> ApertureRegions:
@@ -333,7 +333,7 @@ class WorldRenderer:
         regions = ApertureRegions.empty(self.mincam)
         for p in points.values():
             regions = regions.union(mixel_regions(self.scene_mincam, p))
-        return regions, ([guide_sphere(p) for p in points.values()] or None)
+        return regions, (guide_sphere(np.concatenate(list(points.values()))) if points else None)
 
     def content_fingerprint(self) -> str:
         """Content key of the scene as Mitsuba holds it: every traversable parameter's value (meshes,
