@@ -16,6 +16,11 @@ class ConfigError(MincamError, ValueError):
     """A configuration value is missing, unknown or out of range; the message names the field and the fix."""
 
 
+class InputError(MincamError, ValueError):
+    """A value handed to the Python API is unusable (a scene element, a parameter update, a budget); the message
+    names it and the fix."""
+
+
 class StoreError(MincamError):
     """An output directory or one of its files cannot be used (torn, foreign, unwritable ...)."""
 
@@ -35,6 +40,7 @@ class BackendUnavailableError(MincamError, RuntimeError):
 __all__ = [
     "BackendUnavailableError",
     "ConfigError",
+    "InputError",
     "MincamError",
     "OutDirLockedError",
     "StaleResultError",

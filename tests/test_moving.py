@@ -140,7 +140,7 @@ def test_guide_sphere_holds_the_mover_and_its_shadow_in_scene_coordinates():
 
     world, frames, bg = _world({}, (0.04, 0.02, 0.02))
     world.update({**bg, **frames([(0.05, -0.03, 0.0)])[0]})
-    centre, radius = world.change_guide(["mover"])
+    ((centre, radius),) = world.change_guide(["mover"])
     corners = box_corners(np.array([0.03, -0.04, 0.0]), np.array([0.07, -0.02, 0.02]))
     light = np.array([0.0, 0.0, 1.2])
     top = corners[corners[:, 2] > 0.01]

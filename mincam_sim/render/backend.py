@@ -20,6 +20,8 @@ from functools import cache
 from pathlib import Path
 from types import ModuleType
 
+from ..errors import BackendUnavailableError
+
 ENV_VARIANT = "MINCAM_VARIANT"
 SUPPORTED_VARIANTS = ("cuda_ad_mono", "llvm_ad_mono", "scalar_rgb")
 JIT_VARIANTS = ("cuda_ad_mono", "llvm_ad_mono")
@@ -84,12 +86,15 @@ def _loaded_variant() -> str:
 
     wanted = _wanted_variant()
     if wanted is not None:
+        if wanted.startswith("llvm"):
+            check_libllvm(dr)
         mi.set_variant(wanted)
         return wanted
     if dr.has_backend(dr.JitBackend.CUDA):
         mi.set_variant("cuda_ad_mono")
         return "cuda_ad_mono"
     if dr.has_backend(dr.JitBackend.LLVM):
+        check_libllvm(dr)
         mi.set_variant("llvm_ad_mono")
         return "llvm_ad_mono"
     warnings.warn(
@@ -100,6 +105,25 @@ def _loaded_variant() -> str:
     )
     mi.set_variant("scalar_rgb")
     return "scalar_rgb"
+
+
+MIN_LLVM = 16  # Dr.Jit's LLVM backend aborts the process on LLVM 15 ("LLVM ERROR: Cannot select")
+
+
+def check_libllvm(dr) -> None:
+    """Refuse, with the fix, a libLLVM older than :data:`MIN_LLVM` that Dr.Jit picked by itself (it does when
+    ``mitsuba`` or ``drjit`` is imported before this package): compiling a kernel would abort the process."""
+    try:
+        version = tuple(dr.detail.llvm_version())
+    except (AttributeError, RuntimeError, TypeError):  # no LLVM loaded, or a Dr.Jit without the query
+        return
+    if version and version[0] < MIN_LLVM:
+        bundled = bundled_libllvm()
+        fix = (f"import mincam_sim before mitsuba / drjit, or start Python with DRJIT_LIBLLVM_PATH={bundled}"
+               if bundled else "install karellen-llvm-core (or a system libLLVM >= 16) and import mincam_sim first")
+        raise BackendUnavailableError(
+            f"Dr.Jit loaded libLLVM {'.'.join(map(str, version))} (it was imported before mincam_sim could point it "
+            f"at a libLLVM >= {MIN_LLVM}); that version aborts the process on the first kernel: {fix}")
 
 
 def mitsuba() -> ModuleType:

@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import functools
 import warnings
 import zlib
 
@@ -136,3 +137,30 @@ def warn_target_missed(reached: float, target: float, samples: int, cap: int) ->
 
 class UnseenWarning(UserWarning):
     """A measurement that no Monte Carlo sample reached."""
+
+
+@functools.lru_cache(maxsize=64)
+def dominance_threshold(replicates: int, false_alarm: float = 1e-4) -> float:
+    """Share of the replicates' squared deviations that one replicate exceeds with probability ``false_alarm``
+    when they are Gaussian (a fixed-seed Monte Carlo quantile of 200,000 draws); above it one replicate dominates."""
+    rng = np.random.default_rng(20261202)
+    shares = []
+    for _ in range(20):  # 20 x 10,000 draws: a few MB at a time
+        x = rng.standard_normal((10_000, int(replicates)))
+        dev2 = (x - x.mean(axis=1, keepdims=True)) ** 2
+        shares.append(dev2.max(axis=1) / dev2.sum(axis=1))
+    return float(np.quantile(np.concatenate(shares), 1.0 - false_alarm))
+
+
+def heavy_tailed(replicates: np.ndarray) -> np.ndarray:
+    """Per column of ``replicates`` (R, n): True where one replicate holds more of the squared deviations than
+    Gaussian replicates would but once in 10^4 (:func:`dominance_threshold`): a rare heavy path decides the
+    estimate, and its standard error is itself uncertain. Never True for R < 3."""
+    x = np.asarray(replicates, dtype=np.float64)
+    if x.shape[0] < 3:
+        return np.zeros(x.shape[1:], dtype=bool)
+    dev2 = (x - x.mean(axis=0)) ** 2
+    total = dev2.sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        share = np.where(total > 0, dev2.max(axis=0) / total, 0.0)
+    return share > dominance_threshold(x.shape[0])

@@ -24,34 +24,58 @@ Two estimators of ``dP`` (``measure_changes(estimator=...)``):
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import difflib
+import warnings
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError
 from ..identity import fingerprint, library_versions
 from ..measurements import Measurements
 from ..optics import Mincam
 from ..progress import progress
 from ..store import ResultStore
 from . import backend
-from .change_region import ApertureRegions, change_points, mixel_regions
+from .change_region import ApertureRegions, box_corners, change_points, mixel_regions
 from .elements import transform_update, vertex_update
-from .estimation import derive_seed, pilot_to_target, warn_target_missed, warn_unreached, worst_relative_stderr
-from .guided_path import guide_sphere
+from .estimation import (
+    check_counts,
+    derive_seed,
+    heavy_tailed,
+    pilot_to_target,
+    warn_target_missed,
+    warn_unreached,
+    worst_relative_stderr,
+)
+from .guided_path import guide_sphere, guide_spheres, spheres_of
 from .guided_path import supports as guided_path_supports
 from .mask_eval import mask_model_meta
 from .mincam_scene import CAMERA_KEY, SENSOR_KEY, MincamScene, geometry_meta
 from .scene_dicts import mincam_body_shapes
 from .stratified import check_strata, stratified_estimates, whole_aperture_estimates
+from .world_input import check_frames, check_radiant_params, check_update, expand_elements
 
 MAX_SPP = 1 << 26  # cap of the target-noise budget, samples per mixel per frame
 ESTIMATORS = ("plain", "stratified")
 STRATA_EXPANSIONS = (1.0, 2.0, 4.0, 8.0)  # nested rectangles: the change region, then scaled about its centre
 STRATA_SHARES = (0.6, 0.1, 0.1, 0.1, 0.1)  # rays per stratum (region, rings, rest): near Neyman, guided, bench scene
 BACKGROUND_MIN_SPP = 1 << 16  # stratified: rays per mixel (at least) for the background's whole-aperture value
+RETRY_FACTOR = 4  # a frame whose replicates are heavy-tailed is measured again with this many times the replicates
 Updates = Mapping[str, np.ndarray]
-__all__ = ["CAMERA_KEY", "SENSOR_KEY", "WorldRenderer", "transform_update", "vertex_update"]
+__all__ = ["CAMERA_KEY", "SENSOR_KEY", "FallbackWarning", "HeavyTailWarning", "WorldParameters", "WorldRenderer",
+           "transform_update", "vertex_update"]
+
+
+class FallbackWarning(UserWarning):
+    """The stratified estimator could not bound a change (a moving emitter or light, an environment light, a
+    parameter of no shape) or guide its bounces, and fell back to a costlier, still unbiased, sampling."""
+
+
+class HeavyTailWarning(UserWarning):
+    """A measurement's replicates are dominated by one of them (a rare, heavy light path): its standard error is
+    itself uncertain. The frame was measured again with more replicates; this warns of what stayed so."""
 
 
 class WorldRenderer:
@@ -74,35 +98,57 @@ class WorldRenderer:
 
     def __init__(self, mincam: Mincam, elements: dict, replicates: int = 8, max_depth: int = 3,
                  camera: dict | None = None) -> None:
-        if isinstance(replicates, bool) or int(replicates) != replicates or replicates < 2:
-            raise ValueError(f"replicates must be an integer >= 2, got {replicates!r}")
+        if not isinstance(mincam, Mincam):
+            raise InputError(f"mincam must be a Mincam (e.g. mincam_sim.cross_layout()), got {type(mincam).__name__}")
+        if isinstance(replicates, bool) or not isinstance(replicates, (int, np.integer)) or replicates < 2:
+            raise InputError(f"replicates must be an integer >= 2, got {replicates!r}")
         backend.require_jit("The fast mixel sensor (a Python Mitsuba plugin)")
         self.mi = backend.mitsuba()
         self.mincam, self.replicates = mincam, int(replicates)
+        elements = expand_elements(elements)
         # The scene is built around the mincam: Mitsuba offsets every secondary ray by ~1e-4 x (1 + max|p|)
         # scene units, so a table 50 m (1 km) from the origin lost 1.2 % (3.7 %) of a toy's dP to shadow rays
-        # that started past it. Positions in (updates to) the user's elements are shifted on their way in.
+        # that started past it. Positions in (updates to) the user's elements are shifted on their way in and
+        # out: the API speaks world coordinates only (:attr:`params`, :meth:`update`).
         self.scene_origin_m = mincam.centre_m
         self.scene_mincam = mincam.translated(-self.scene_origin_m)
-        self.world = MincamScene.world(self.scene_mincam, elements, max_depth, camera)
-        self.scene = self.world.fast_scene
+        try:
+            self.world = MincamScene.world(self.scene_mincam, elements, max_depth, camera)
+        except ValueError as exc:
+            raise InputError(str(exc)) from None
+        try:
+            self.scene = self.world.fast_scene
+        except RuntimeError as exc:  # Mitsuba's own message names the plugin and the parameter
+            raise InputError(f"Mitsuba could not build the scene: {str(exc).strip()}") from None
         self.sensor = self.world.sensor(SENSOR_KEY)
         self.camera = self.world.sensor(CAMERA_KEY)
-        self.params = self.world.params  # Mitsuba's parameters, in scene coordinates (world - scene_origin_m)
-        ours = set(mincam_body_shapes(self.scene_mincam)) | {SENSOR_KEY}  # built in scene coordinates already
-        self._shifted = _shifted_keys(self.scene, self.params, ours)
-        self.world.update({key: _shift(key, self.params[key], -self.scene_origin_m) for key in self._shifted})
+        self._own = set(mincam_body_shapes(self.scene_mincam)) | {SENSOR_KEY}  # built in scene coordinates
+        scene_params = self.world.params
+        check_radiant_params(scene_params)
+        self._shifted = _shifted_keys(self.scene, scene_params, self._own)
+        self.world.update({key: _shift(key, scene_params[key], -self.scene_origin_m) for key in self._shifted})
+        self.params = WorldParameters(self)
+        self._mirrors = _delta_surfaces(self.scene)
         self._content_key: str | None = None
         self._content_key = self.content_fingerprint()  # before any update: the scene as built
         self._as_built: dict[str, object] = {}  # each updated parameter's value (world coordinates) before updates
 
     def update(self, updates: Updates) -> None:
-        """Set scene parameters (numpy arrays or Mitsuba values, positions in world coordinates [m]) and apply them
-        without reloading."""
+        """Set scene parameters (numpy arrays or Mitsuba values; positions in world coordinates [m], as
+        :attr:`params` reads them) and apply them without reloading."""
+        if not isinstance(updates, Mapping):
+            raise InputError(f"an update must be a dict 'name.parameter' -> value, got {type(updates).__name__}")
+        scene_params = self.world.params
+        for key, value in updates.items():
+            if key not in scene_params or key.split(".", 1)[0] in self._own:
+                raise InputError(_unknown_parameter(key, self.params.keys(), key.split(".", 1)[0] in self._own))
+            check_update(key, scene_params[key], value)
         for key in updates:
             self._remember_as_built(key)
         self.world.update({key: _shift(key, value, -self.scene_origin_m) if key in self._shifted else value
                            for key, value in updates.items()})
+        if any(key.split(".", 1)[0] in self._mirrors for key in updates):
+            self._mirrors = _delta_surfaces(self.scene)
 
     def complete_background(self, frames: Sequence[Updates], background: Updates) -> dict:
         """``background`` plus, for every parameter the frames set and it leaves out, that parameter's value in the
@@ -114,8 +160,14 @@ class WorldRenderer:
 
     def _remember_as_built(self, key: str) -> None:
         if key not in self._as_built and key in self.params:
-            value = _param_value(self.params[key])
-            self._as_built[key] = _shift(key, value, self.scene_origin_m) if key in self._shifted else value
+            self._as_built[key] = self.params[key]
+
+    def world_value(self, key: str):
+        """Parameter ``key`` as :meth:`update` takes it back, in world coordinates: positions (``to_world``
+        as a 4 x 4 matrix, ``vertex_positions`` flat (3 n,), a point light's ``position``) as float64 numpy,
+        anything else as a copy of the Mitsuba value."""
+        value = _param_value(self.world.params[key])
+        return _shift(key, value, self.scene_origin_m) if key in self._shifted else value
 
     def estimates(self, spp: int, seed: int) -> np.ndarray:
         """(replicates, n_mixels) independent irradiance estimates [W/m^2], ``spp / replicates`` rays each."""
@@ -179,13 +231,22 @@ class WorldRenderer:
             Changes and absolute frame measurements, each (n_frames, n_mixels) with standard errors.
         """
         n = len(self.mincam)
-        if not (np.isfinite(target_rel_stderr) and target_rel_stderr >= 0):
-            raise ValueError(f"target_rel_stderr must be >= 0 (0 = use spp as given), got {target_rel_stderr!r}")
+        check_frames(frames, background)
+        try:
+            check_counts(spp, self.replicates)
+        except ValueError as exc:
+            raise InputError(str(exc)) from None
+        if int(spp) < self.replicates:
+            raise InputError(f"spp = {spp} rays per mixel per frame is fewer than the {self.replicates} replicates "
+                             "(each replicate needs rays of its own); raise spp or lower replicates")
+        if not (isinstance(target_rel_stderr, (int, float)) and np.isfinite(target_rel_stderr)
+                and target_rel_stderr >= 0):
+            raise InputError(f"target_rel_stderr must be >= 0 (0 = use spp as given), got {target_rel_stderr!r}")
         if estimator not in ESTIMATORS:
-            raise ValueError(f"estimator must be one of {ESTIMATORS}, got {estimator!r}")
+            raise InputError(f"estimator must be one of {ESTIMATORS}, got {estimator!r}")
         shares = np.asarray(strata_shares, dtype=float)
         if shares.ndim != 1 or not np.all(np.isfinite(shares) & (shares > 0)):
-            raise ValueError(f"strata_shares (share of rays per stratum) must be positive numbers, "
+            raise InputError(f"strata_shares (share of rays per stratum) must be positive numbers, "
                              f"got {strata_shares!r}")
         background = self.complete_background(frames, background)
         budget: dict = {}
@@ -193,9 +254,12 @@ class WorldRenderer:
             pilot_idx = np.unique(np.linspace(0, len(frames) - 1, min(4, len(frames))).astype(int))
 
             def pilot(samples: int):
-                dp, _ = self.measure_changes([frames[i] for i in pilot_idx], background, samples, seed, correlated,
-                                             estimator=estimator, strata_shares=strata_shares,
-                                             strata_expansions=strata_expansions, guide_bounces=guide_bounces)
+                with warnings.catch_warnings():  # a pilot's fallbacks are said by the run itself
+                    warnings.simplefilter("ignore", FallbackWarning)
+                    warnings.simplefilter("ignore", HeavyTailWarning)
+                    dp, _ = self.measure_changes([frames[i] for i in pilot_idx], background, samples, seed,
+                                                 correlated, estimator=estimator, strata_shares=strata_shares,
+                                                 strata_expansions=strata_expansions, guide_bounces=guide_bounces)
                 return dp.irradiance_w_m2, dp.stderr_w_m2
 
             first = int(spp)
@@ -220,7 +284,7 @@ class WorldRenderer:
                         "n_frames": len(frames), "frames": _fingerprint(frames),
                         "background": _fingerprint([background]), "mincam": fingerprint(self.mincam),
                         "scene": self.content_fingerprint(), "variant": backend.variant(),
-                        "versions": library_versions()}
+                        "versions": library_versions(), "retry_factor": RETRY_FACTOR}
             if estimator != "plain":
                 identity.update(estimator=estimator, strata_shares=shares.tolist(),
                                 strata_expansions=[float(e) for e in strata_expansions],
@@ -228,21 +292,22 @@ class WorldRenderer:
             store = ResultStore(out_dir, len(frames), columns, identity, overwrite=overwrite)
             values[:], errors[:] = store.values, store.stderr
             todo = store.pending()
-        strata: dict = {}
+        if estimator == "plain":
+            run = _PlainRun(self, background, int(spp), seed, correlated, bg)
+        else:
+            run = _StratifiedRun(self, frames, background, int(spp), seed, correlated, shares,
+                                 tuple(strata_expansions), bool(guide_bounces), bg)
         try:
-            if estimator == "plain":
-                self._measure_into(frames, background, todo, spp, seed, correlated, bg, values, errors, store,
-                                   show_progress)
-            else:
-                strata = self._measure_stratified_into(frames, background, todo, spp, seed, correlated,
-                                                       (shares, tuple(strata_expansions), bool(guide_bounces)), bg,
-                                                       values, errors, store, show_progress)
+            for i, row_v, row_e in run.rows(frames, todo, show_progress):
+                values[i], errors[i] = row_v, row_e
+                if store is not None:
+                    store.write([i], row_v[None], row_e[None])
         finally:
             if store is not None:
                 store.close()
         self.update(background)
 
-        meta = {"form": "fast_world", "estimator": estimator, **strata,
+        meta = {"form": "fast_world", "estimator": estimator, **run.meta(),
                 "spp_per_mixel_per_frame": int(spp), "background_spp_per_mixel": int(bg_spp), "seed": seed,
                 "correlated_seeds": correlated,
                 "replicates": self.replicates, "background_w_m2": bg.mean(0).tolist(),
@@ -253,87 +318,45 @@ class WorldRenderer:
         reached = worst_relative_stderr(values[:, :n], errors[:, :n], significance=3.0)
         meta["reached_rel_stderr"] = reached if np.isfinite(reached) else None
         warn_target_missed(reached, target_rel_stderr, int(spp), MAX_SPP)
+        run.warn()
         names = self.mincam.names
         warn_unreached(Measurements(values[:, n:], errors[:, n:], names))
         dp = Measurements(values[:, :n], errors[:, :n], names, {**meta, "quantity": "dP = P(frame) - P(background)"})
         p = Measurements(values[:, n:], errors[:, n:], names, {**meta, "quantity": "P(frame)"})
         return dp, p
 
-    def _measure_into(self, frames, background, todo, spp, seed, correlated, bg, values, errors, store,
-                      show_progress) -> None:
-        for i in progress(todo, desc="frames", disable=not show_progress):
-            self.update(background)
-            self.update(frames[i])
-            frame_seed = seed if correlated else derive_seed(seed, "frame", int(i))
-            est = self.estimates(spp, frame_seed)
-            diff = est - bg
-            r = self.replicates
-            row_v = np.concatenate([diff.mean(0), est.mean(0)])
-            row_e = np.concatenate([diff.std(0, ddof=1), est.std(0, ddof=1)]) / np.sqrt(r)
-            values[i], errors[i] = row_v, row_e
-            if store is not None:
-                store.write([i], row_v[None], row_e[None])
-
-    def _measure_stratified_into(self, frames, background, todo, spp, seed, correlated, strata, bg, values,
-                                 errors, store, show_progress) -> dict:
-        r = self.replicates
-        shares, expansions, guided = strata
-        check_strata([1] * len(shares), expansions)
-        per_rep = -(-int(spp) // r)
-        counts = [max(1, int(round(per_rep * s / shares.sum()))) for s in shares]
-        moving = _moving_shapes([background, *frames])
-        self.update(background)
-        bg_regions = {name: self.change_regions([name]) for name in moving}
-        fractions, guided_frames = [], 0
-        for i in progress(todo, desc="frames", disable=not show_progress):
-            changed = _changed_shapes(frames[i], background)
-            self.update({**background, **frames[i]})
-            regions, guide = self._change(changed)
-            for name in changed:
-                regions = regions.union(bg_regions[name])
-            guide = guide if guided else None
-            guided_frames += guide is not None and guided_path_supports(self.world.max_depth)
-            frame_seed = derive_seed(seed, "stratified") if correlated else derive_seed(seed, "stratified", int(i))
-            est = stratified_estimates(self.scene, self.sensor, self.mincam, regions, r, counts, frame_seed,
-                                       expansions, guide=guide, max_depth=self.world.max_depth)
-            self.update(background)
-            bg_seed = frame_seed if correlated else derive_seed(seed, "stratified-background", int(i))
-            bg_est = stratified_estimates(self.scene, self.sensor, self.mincam, regions, r, counts, bg_seed,
-                                          expansions, guide=guide, max_depth=self.world.max_depth)
-            diff = est - bg_est
-            frame = bg + diff  # P(frame): the background traced once over the whole aperture, plus the change
-            row_v = np.concatenate([diff.mean(0), frame.mean(0)])
-            row_e = np.concatenate([diff.std(0, ddof=1), frame.std(0, ddof=1)]) / np.sqrt(r)
-            values[i], errors[i] = row_v, row_e
-            fractions.append(regions.area_fraction())
-            if store is not None:
-                store.write([i], row_v[None], row_e[None])
-        return {"strata_expansions": list(expansions), "strata_rays_per_replicate": counts,
-                "rays_per_mixel_per_frame": 2 * r * sum(counts),
-                "moving_shapes": sorted(moving), "guide_bounces": bool(guided),
-                "guided_frames": int(guided_frames),
-                "region_area_fraction_mean": float(np.mean(fractions)) if fractions else None}
-
-    def change_guide(self, moving: Sequence[str]) -> tuple[np.ndarray, float] | None:
-        """Sphere (centre, radius [m], scene coordinates) around the named shapes, in their current place, and
-        their shadow volumes: where guided bounces aim (:mod:`.guided_path`); None if unbounded."""
+    def change_guide(self, moving: Sequence[str]) -> list[tuple[np.ndarray, float]] | None:
+        """Spheres (centre, radius [m], scene coordinates) toward which guided bounces aim
+        (:mod:`.guided_path`): one per group of the named shapes, in their current place, with their shadow
+        volumes (shapes close together share one); None if a change is unbounded."""
         return self._change(moving)[1]
 
     def change_regions(self, moving: Sequence[str]) -> ApertureRegions:
-        """Aperture regions (per mixel) that the named shapes, in their current place, and their shadows reach:
-        the bounding rectangle of each shape's own region (so that far-apart shapes, one of them out of view,
-        do not make one hull spanning both); the whole aperture if one of them is unbounded."""
+        """Aperture regions (per mixel) that the named shapes, in their current place, their shadows and their
+        images in the scene's planar mirrors reach (and every other delta surface: glass, curved mirrors): the
+        bounding rectangle of each shape's own region (so that far-apart shapes, one of them out of view, do
+        not make one hull spanning both); the whole aperture if one of them is unbounded."""
         return self._change(moving)[0]
 
-    def _change(self, moving: Sequence[str]) -> tuple[ApertureRegions, tuple[np.ndarray, float] | None]:
-        """:meth:`change_regions` and :meth:`change_guide` from one look at the scene."""
-        points = {name: _change_points(self.scene, [name]) for name in sorted(moving)}
-        if any(p is None for p in points.values()):
-            return ApertureRegions.full(self.mincam), None
+    def _change(self, moving: Sequence[str]) -> tuple[ApertureRegions, list | None, list[str]]:
+        """:meth:`change_regions`, :meth:`change_guide` and why a change is unbounded, from one look at the
+        scene."""
+        points, reasons = {}, []
+        for name in sorted(moving):
+            points[name], why = _change_points(self.scene, [name], self._mirrors)
+            if why:
+                reasons.append(why)
+        if reasons:
+            return ApertureRegions.full(self.mincam), None, reasons
         regions = ApertureRegions.empty(self.mincam)
-        for p in points.values():
+        for name, p in points.items():
             regions = regions.union(mixel_regions(self.scene_mincam, p))
-        return regions, (guide_sphere(np.concatenate(list(points.values()))) if points else None)
+            for seen in self._mirrors.images(p, exclude=name):
+                regions = regions.union(mixel_regions(self.scene_mincam, seen))
+        spheres = guide_spheres(list(points.values()))
+        if spheres:  # light reaching the change through a mirror: bounces aimed at the lights' images find it
+            spheres = spheres_of(spheres + self._mirrors.light_image_spheres(self.scene))
+        return regions, (spheres or None), []
 
     def content_fingerprint(self) -> str:
         """Content key of the scene as Mitsuba holds it: every traversable parameter's value (meshes,
@@ -350,6 +373,263 @@ class WorldRenderer:
     def camera_image(self, spp: int = 64, seed: int = 0) -> np.ndarray:
         """Image (rows, cols) of the ground-truth pinhole camera [W m^-2 sr^-1], row 0 at the top."""
         return self.world.camera_image(spp, seed)
+
+
+class WorldParameters(Mapping):
+    """The scene's parameters as the user's elements define them, in world coordinates (read-only).
+
+    Keys are ``"name.parameter"`` (``mi.traverse`` names) of the user's elements; the mincam's own bodies and
+    sensor are not among them. Values are what :meth:`WorldRenderer.update` takes back: positions
+    (``to_world`` 4 x 4, ``vertex_positions`` flat (3 n,), a point light's ``position``) as float64 numpy in
+    world coordinates [m], anything else a copy of the Mitsuba value. Reading a value and writing it back
+    changes nothing.
+    """
+
+    def __init__(self, renderer: WorldRenderer) -> None:
+        self._renderer = renderer
+
+    def _visible(self, key: str) -> bool:
+        return key.split(".", 1)[0] not in self._renderer._own and "." in key
+
+    def __getitem__(self, key: str):
+        if key not in self._renderer.world.params or not self._visible(key):
+            raise KeyError(key)
+        return self._renderer.world_value(key)
+
+    def __contains__(self, key) -> bool:
+        return isinstance(key, str) and key in self._renderer.world.params and self._visible(key)
+
+    def __iter__(self) -> Iterator[str]:
+        return (k for k in self._renderer.world.params.keys() if self._visible(k))
+
+    def __len__(self) -> int:
+        return sum(1 for _ in self)
+
+
+def _unknown_parameter(key: str, known, own: bool) -> str:
+    if own:
+        return (f"{key!r} belongs to the mincam's own body or sensor; move the mixels through the Mincam, not the "
+                "scene")
+    close = difflib.get_close_matches(str(key), list(known), n=3)
+    hint = f"; did you mean {', '.join(map(repr, close))}?" if close else "; see the renderer's params.keys()"
+    return f"unknown scene parameter {key!r}{hint}"
+
+
+class _Run:
+    """The frames of one ``measure_changes`` run: per-frame replicate estimates, the heavy-tail check and its
+    retry, and what the run says about itself (meta, warnings)."""
+
+    def __init__(self, renderer: WorldRenderer, background: Updates, spp: int, seed: int, correlated: bool,
+                 bg: np.ndarray) -> None:
+        self.r, self.background, self.spp, self.seed, self.correlated = renderer, background, spp, seed, correlated
+        self.bg = bg
+        self.retried: list[int] = []
+        self.heavy: list[list[int]] = []
+        self.unseen: list[list[int]] = []
+        self.fallbacks: dict[str, str] = {}
+
+    def rows(self, frames, todo, show_progress: bool):
+        """(frame index, values, stderr) per frame of ``todo``: dP then P per mixel."""
+        for i in progress(todo, desc="frames", disable=not show_progress):
+            i = int(i)
+            diff, frame_v, frame_e, changes = self.frame(frames, i, self.r.replicates, "")
+            flagged = heavy_tailed(diff) | (changes & np.all(diff == diff[:1], axis=0))
+            if flagged.any():
+                self.retried.append(i)
+                diff, frame_v, frame_e, changes = self.frame(frames, i, RETRY_FACTOR * self.r.replicates, "retry")
+                for k in np.flatnonzero(heavy_tailed(diff)):
+                    self.heavy.append([i, int(k)])
+                for k in np.flatnonzero(changes & np.all(diff == diff[:1], axis=0)):
+                    self.unseen.append([i, int(k)])
+            reps = diff.shape[0]
+            row_v = np.concatenate([diff.mean(0), frame_v])
+            row_e = np.concatenate([diff.std(0, ddof=1) / np.sqrt(reps), frame_e])
+            yield i, row_v, row_e
+
+    def meta(self) -> dict:
+        return {"retried_frames": self.retried, "retry_factor": RETRY_FACTOR, "heavy_tailed": self.heavy,
+                "no_ray_met_the_change": self.unseen, "fallbacks": sorted(self.fallbacks.values())}
+
+    def warn(self) -> None:
+        for message in sorted(self.fallbacks.values()):
+            warnings.warn(message, FallbackWarning, stacklevel=4)
+        if self.heavy or self.unseen:
+            where = self.heavy[:3] + self.unseen[:3]
+            warnings.warn(
+                f"{len(self.heavy)} value(s) stayed dominated by one replicate and {len(self.unseen)} saw no ray meet "
+                f"a change after {RETRY_FACTOR}x the replicates (first [frame, mixel]: {where}): a rare, heavy light "
+                "path (a mirror, glass, a small bright object far from the change region); their standard errors "
+                "are uncertain. Raise spp or replicates; see meta['heavy_tailed'], meta['no_ray_met_the_change']",
+                HeavyTailWarning, stacklevel=4)
+
+
+class _PlainRun(_Run):
+    """Whole-aperture rays for every frame, with the background's seed (the reference estimator)."""
+
+    def frame(self, frames, i: int, replicates: int, purpose: str):
+        r = self.r
+        frame_seed = self.seed if self.correlated else derive_seed(self.seed, "frame", i)
+        if purpose:
+            frame_seed = derive_seed(frame_seed, purpose, i)
+        spp = self.spp * replicates // r.replicates
+        if replicates == r.replicates and not purpose:
+            bg = self.bg
+        else:
+            r.update(self.background)
+            bg = r.world.fast_estimates(spp, replicates, frame_seed)
+        r.update(self.background)
+        r.update(frames[i])
+        est = r.world.fast_estimates(spp, replicates, frame_seed)
+        changes = np.full(len(r.mincam), bool(_changed_shapes(frames[i], self.background)))
+        return est - bg, est.mean(0), est.std(0, ddof=1) / np.sqrt(replicates), changes
+
+    def meta(self) -> dict:
+        return {**super().meta(), "rays_per_mixel_per_frame": int(self.spp)}
+
+
+class _StratifiedRun(_Run):
+    """Most rays in the aperture region the frame's change reaches; frame and background paired lane by lane."""
+
+    def __init__(self, renderer, frames, background, spp, seed, correlated, shares, expansions, guided, bg):
+        super().__init__(renderer, background, spp, seed, correlated, bg)
+        check_strata([1] * len(shares), expansions)
+        self.expansions, self.guided = expansions, guided
+        per_rep = -(-int(spp) // renderer.replicates)
+        self.counts = [max(1, int(round(per_rep * s / shares.sum()))) for s in shares]
+        self.moving = _moving_shapes([background, *frames])
+        renderer.update(background)
+        self.bg_regions = {}
+        for name in self.moving:
+            self.bg_regions[name], _, why = renderer._change([name])
+            for reason in why:
+                self.note_fallback(name, reason)
+        self.fractions: list[float] = []
+        self.guided_frames = 0
+        self.spheres: list[int] = []
+        self.can_guide = guided and guided_path_supports(renderer.world.max_depth)
+        if guided and not self.can_guide:
+            self.fallbacks["depth"] = (f"bounces are not guided at max_depth {renderer.world.max_depth} (the guided "
+                                       "path covers 1 .. 5): rays follow Mitsuba's path")
+
+    def note_fallback(self, name: str, reason: str) -> None:
+        self.fallbacks.setdefault(name, f"{reason}; the stratified estimator samples the whole aperture and does not "
+                                        "guide bounces in frames that move it (unbiased, but about as noisy as the "
+                                        "plain estimator at the same rays)")
+
+    def frame(self, frames, i: int, replicates: int, purpose: str):
+        r = self.r
+        changed = _changed_shapes(frames[i], self.background)
+        r.update({**self.background, **frames[i]})
+        regions, guide, why = r._change(changed)
+        for reason in why:
+            self.note_fallback(next(iter(sorted(changed))), reason)
+        for name in changed:
+            regions = regions.union(self.bg_regions[name])
+        guide = guide if self.can_guide else None
+        frame_seed = (derive_seed(self.seed, "stratified") if self.correlated
+                      else derive_seed(self.seed, "stratified", i))
+        if purpose:
+            frame_seed = derive_seed(frame_seed, purpose, i)
+        kw = {"expansions": self.expansions, "guide": guide, "max_depth": r.world.max_depth}
+        est = stratified_estimates(r.scene, r.sensor, r.mincam, regions, replicates, self.counts, frame_seed, **kw)
+        r.update(self.background)
+        bg_seed = frame_seed if self.correlated else derive_seed(self.seed, "stratified-background", i, purpose)
+        bg_est = stratified_estimates(r.scene, r.sensor, r.mincam, regions, replicates, self.counts, bg_seed, **kw)
+        diff = est - bg_est
+        if not purpose:
+            self.fractions.append(regions.area_fraction())
+            self.guided_frames += guide is not None
+            self.spheres.append(0 if guide is None else len(guide))
+        if replicates == self.bg.shape[0]:
+            frame = self.bg + diff  # P(frame): the background traced once over the whole aperture, plus the change
+            frame_v, frame_e = frame.mean(0), frame.std(0, ddof=1) / np.sqrt(replicates)
+        else:  # the background and the change are independent estimates
+            frame_v = self.bg.mean(0) + diff.mean(0)
+            frame_e = np.hypot(self.bg.std(0, ddof=1) / np.sqrt(self.bg.shape[0]),
+                               diff.std(0, ddof=1) / np.sqrt(replicates))
+        changes = np.full(len(r.mincam), bool(changed))
+        return diff, frame_v, frame_e, changes
+
+    def meta(self) -> dict:
+        counts = self.counts
+        return {**super().meta(), "strata_expansions": list(self.expansions), "strata_rays_per_replicate": counts,
+                "rays_per_mixel_per_frame": 2 * self.r.replicates * sum(counts),
+                "moving_shapes": sorted(self.moving), "guide_bounces": bool(self.guided),
+                "guided_frames": int(self.guided_frames),
+                "guide_spheres_per_frame": self.spheres,
+                "region_area_fraction_mean": float(np.mean(self.fractions)) if self.fractions else None}
+
+
+class _DeltaSurfaces:
+    """The scene's delta surfaces (mirrors, glass, null BSDFs): planar ones by their plane, which mirrors a
+    change into an image the mixels can see; curved ones by their bounding box (rays that reach them may go
+    anywhere after)."""
+
+    def __init__(self, planes: dict[str, tuple[np.ndarray, float]], boxes: dict[str, np.ndarray]) -> None:
+        self.planes, self.boxes = planes, boxes
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.planes or name in self.boxes
+
+    def images(self, points: np.ndarray, exclude: str = "") -> list[np.ndarray]:
+        """Point sets to add to a change's region: its mirror images in each planar delta surface, and the
+        boxes of the curved ones."""
+        out = []
+        for name, (normal, offset) in self.planes.items():
+            if name != exclude:
+                out.append(points - 2.0 * (points @ normal - offset)[:, None] * normal)
+        out += [box for name, box in self.boxes.items() if name != exclude]
+        return out
+
+    def reflect(self, points: np.ndarray) -> list[np.ndarray]:
+        """``points`` (m, 3) mirrored in each planar delta surface's plane."""
+        return [points - 2.0 * (points @ n - c)[:, None] * n for n, c in self.planes.values()]
+
+    def with_images(self, boxes: list, directions: list) -> tuple[list, list]:
+        """Light boxes and directions plus their images in each planar delta surface (first-order reflections):
+        the shadow a mover casts in light that a mirror throws."""
+        images = [(im.min(axis=0), im.max(axis=0)) for lo, hi in boxes for im in self.reflect(box_corners(lo, hi))]
+        turned = [d - 2.0 * (np.asarray(d) @ n) * n for d in directions for n, _ in self.planes.values()]
+        return boxes + images, list(directions) + turned
+
+    def light_image_spheres(self, scene) -> list[tuple[np.ndarray, float]]:
+        """Spheres around the images of the scene's emitting shapes and point lights in each planar delta
+        surface: the direction in which a bounce meets a light through a mirror."""
+        if not self.planes:
+            return []
+        lights, _ = _light_bounds(scene)
+        boxes = [] if lights is None else list(lights[0])
+        boxes += [(np.array(s.bbox().min, dtype=float), np.array(s.bbox().max, dtype=float))
+                  for s in scene.shapes() if s.is_emitter()]
+        return [guide_sphere(im) for lo, hi in boxes for im in self.reflect(box_corners(lo, hi))]
+
+
+def _delta_surfaces(scene) -> _DeltaSurfaces:
+    mi = backend.mitsuba()
+    import drjit as dr
+
+    planes, boxes = {}, {}
+    for shape in scene.shapes():
+        bsdf = shape.bsdf()
+        if shape.is_emitter() or shape.is_sensor() or bsdf is None:
+            continue
+        if not int(bsdf.flags()) & int(mi.BSDFFlags.Delta):
+            continue
+        bb = shape.bbox()
+        lo, hi = np.array(bb.min, dtype=float), np.array(bb.max, dtype=float)
+        g = np.linspace(0.05, 0.95, 8)
+        uu, vv = np.meshgrid(g, g)
+        ps = shape.sample_position(0.0, mi.Point2f(uu.ravel(), vv.ravel()))
+        p = np.array(ps.p, dtype=float).reshape(3, -1).T
+        n = np.array(ps.n, dtype=float).reshape(3, -1).T
+        normal = n[0] / np.linalg.norm(n[0])
+        size = max(float(np.linalg.norm(hi - lo)), 1e-9)
+        if np.all(np.abs(n @ normal) > 1 - 1e-6) and np.all(np.abs((p - p[0]) @ normal) < 1e-6 * size):
+            planes[shape.id()] = (normal, float(p[0] @ normal))
+        else:
+            boxes[shape.id()] = box_corners(lo, hi)
+        dr.eval()
+    return _DeltaSurfaces(planes, boxes)
 
 
 def _param_array(value) -> np.ndarray:
@@ -428,16 +708,20 @@ def _changed_shapes(update: Updates, background: Updates) -> set[str]:
     return names - {SENSOR_KEY, CAMERA_KEY}
 
 
-def _change_points(scene, moving) -> np.ndarray | None:
-    """Corner points whose hull holds the moving shapes and their shadow volumes [m]; None if unbounded
-    (an environment light, a moving emitter, an emitter of a kind not bounded here, or a moved parameter that
-    belongs to no shape)."""
+def _change_points(scene, moving, mirrors: _DeltaSurfaces | None = None) -> tuple[np.ndarray | None, str]:
+    """Corner points whose hull holds the moving shapes and their shadow volumes [m] (from the lights and their
+    images in planar mirrors), or None and why the change is unbounded (an environment light, a moving emitter,
+    an emitter of a kind not bounded here, or a moved parameter that belongs to no shape)."""
     shapes = {s.id(): s for s in scene.shapes()}
-    if any(name not in shapes or shapes[name].is_emitter() for name in moving):
-        return None
-    lights = _light_bounds(scene)
+    for name in moving:
+        if name not in shapes:
+            return None, (f"'{name}' is not a shape (a moving light or another parameter): its change reaches "
+                          "anywhere")
+        if shapes[name].is_emitter():
+            return None, f"'{name}' is an emitting shape: the light it moves reaches anywhere"
+    lights, why = _light_bounds(scene)
     if lights is None:
-        return None
+        return None, why
 
     def box(shape):
         bb = shape.bbox()
@@ -446,12 +730,15 @@ def _change_points(scene, moving) -> np.ndarray | None:
     objects = [box(shapes[name]) for name in sorted(moving)]
     boxes, directions = lights
     boxes = boxes + [box(s) for s in scene.shapes() if s.is_emitter()]
-    return change_points(objects, boxes, box(scene), directions)
+    if mirrors is not None:
+        boxes, directions = mirrors.with_images(boxes, directions)
+    return change_points(objects, boxes, box(scene), directions), ""
 
 
-def _light_bounds(scene) -> tuple[list, list] | None:
+def _light_bounds(scene) -> tuple[tuple[list, list] | None, str]:
     """Where the scene's non-shape emitters shine from: point-like ones (point, spot) as zero-size boxes [m],
-    directional ones by the direction their rays travel; None for an environment light or any other kind."""
+    directional ones by the direction their rays travel; None (and why) for an environment light or any other
+    kind."""
     mi = backend.mitsuba()
     boxes, directions = [], []
     for emitter in scene.emitters():
@@ -459,7 +746,7 @@ def _light_bounds(scene) -> tuple[list, list] | None:
         if flags & int(mi.EmitterFlags.Surface):
             continue  # an emitting shape: bounded by its shape's box
         if emitter.is_environment():
-            return None
+            return None, f"the environment light '{emitter.id()}' casts shadows anywhere"
         params = mi.traverse(emitter)
         if flags & int(mi.EmitterFlags.DeltaDirection) and "to_world" in params:
             directions.append(np.array(params["to_world"].matrix, dtype=float).reshape(4, 4)[:3, 2])
@@ -468,8 +755,8 @@ def _light_bounds(scene) -> tuple[list, list] | None:
                      else np.array(params["to_world"].matrix, dtype=float).reshape(4, 4)[:3, 3])
             boxes.append((where, where))
         else:
-            return None
-    return boxes, directions
+            return None, f"the light '{emitter.id()}' is of a kind not bounded here (an area light without a shape?)"
+    return (boxes, directions), ""
 
 
 def _fingerprint(updates: Sequence[Updates]) -> list:

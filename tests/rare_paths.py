@@ -1,0 +1,105 @@
+"""Scenes with rare light paths for the per-run honesty of the stratified estimator's standard error: two movers
+far apart and out of view (all of their change is light they throw onto the table), and a mover seen only in a
+mirror. Shared by tests/test_world_trust.py and the per-run tail measurement (``python tests/rare_paths.py``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+
+from mincam_sim import Pose
+from mincam_sim.optics import cross_layout
+from mincam_sim.render import scene_dicts as sd
+from mincam_sim.render.world import WorldRenderer, vertex_update
+
+HEIGHT_M = 0.4  # mixels above the table; their view reaches ~0.2 m from the centre on the table
+PARK_M = np.array([5.0, 5.0, 0.0])  # where movers wait out of the scene
+
+
+def _box(size_m, at_m):
+    box = trimesh.creation.box(size_m)
+    box.apply_translation((0.0, 0.0, size_m[2] / 2))
+    return box.vertices + np.asarray(at_m, float), box.faces
+
+
+def rare_scene(case: str, replicates: int = 8):
+    """(world, frames, background) for ``case`` in {"far_movers", "mirror"}."""
+    cam = cross_layout(center=Pose((0.0, 0.0, HEIGHT_M), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)))
+    elements = {
+        "table": {"type": "rectangle", "to_world": sd._transform(np.diag([0.8, 0.8, 1.0, 1.0])),
+                  "bsdf": {"type": "diffuse", "reflectance": {"type": "spectrum", "value": 0.4}}},
+        "light": sd.area_light(0.3, 0.3, Pose((0.0, 0.0, 1.2), (0.0, 0.0, -1.0)).matrix(), 10.0),
+    }
+    if case == "far_movers":
+        # small bright boxes 0.55 m either side: out of view, their shadows too; one sphere around both holds
+        # everything the mixels see
+        places = {"left": (-0.55, 0.0, 0.0), "right": (0.55, 0.05, 0.0)}
+        sizes = {"left": (0.04, 0.04, 0.05), "right": (0.04, 0.04, 0.05)}
+    elif case == "mirror":
+        # a vertical perfect mirror at x = 0.22 (facing -x) throws the light onto the table at x = 0.13 .. 0.22,
+        # in view; a small mover there blocks part of that light (a shadow of the light's image, found only by
+        # bounces that meet the mirror and then the light) and is seen in the mirror
+        elements["light"] = sd.area_light(0.1, 0.1, Pose((0.0, 0.0, 1.0), (0.0, 0.0, -1.0)).matrix(), 90.0)
+        elements["mirror"] = {"type": "rectangle",
+                              "to_world": sd._transform(Pose((0.22, 0.0, 0.15), (-1.0, 0.0, 0.0)).matrix()
+                                                        @ np.diag([0.2, 0.15, 1.0, 1.0])),
+                              "bsdf": {"type": "conductor", "material": "none"}}
+        places = {"mover": (0.18, 0.03, 0.0)}
+        sizes = {"mover": (0.02, 0.02, 0.03)}
+    else:
+        raise KeyError(case)
+    parked, placed = {}, {}
+    for k, (name, at) in enumerate(places.items()):
+        v, f = _box(sizes[name], PARK_M + np.array([0.0, 0.3 * k, 0.0]))
+        elements[name] = sd.mesh_object(name, v, f, 0.9)
+        parked.update(vertex_update(name, v))
+        foot = v.min(axis=0) * [1, 1, 0] + np.array(sizes[name]) * [0.5, 0.5, 0]  # the box's foot centre
+        placed.update(vertex_update(name, v - foot + np.asarray(at)))
+    world = WorldRenderer(cam, elements, replicates=replicates, max_depth=3)
+    return world, [placed], parked
+
+
+def tail_counts(case: str, seeds, spp: int, replicates: int = 8):
+    """Over independent seeds: each run's dP against the mean of all other runs (z with both standard errors:
+    the run's reported sigma and the spread of the others' mean), how many values lie beyond 4.5 sigma, how
+    many are 0 +/- 0, the z values and the runs' values and sigmas (runs, frames, mixels)."""
+    import warnings
+
+    world, frames, background = rare_scene(case, replicates)
+    values, sigmas = [], []
+    for seed in seeds:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            dp, _ = world.measure_changes(frames, background, spp=spp, seed=int(seed), estimator="stratified")
+        values.append(dp.irradiance_w_m2)
+        sigmas.append(dp.stderr_w_m2)
+    v, s = np.array(values), np.array(sigmas)
+    n = len(v)
+    others = (v.sum(0) - v) / (n - 1)
+    spread = np.array([np.delete(v, i, axis=0).std(0, ddof=1) / np.sqrt(n - 1) for i in range(n)])
+    z = (v - others) / np.hypot(s, spread)
+    zero = int(np.sum((v == 0) & (s == 0)))
+    return int(np.sum(np.abs(z) > 4.5)), zero, z, v, s
+
+
+def plain_reference(case: str, spp: int, seed: int = 12345, replicates: int = 16):
+    world, frames, background = rare_scene(case, replicates)
+    dp, _ = world.measure_changes(frames, background, spp=spp, seed=seed)
+    return dp.irradiance_w_m2, dp.stderr_w_m2
+
+
+if __name__ == "__main__":
+    import sys
+    import time
+
+    case = sys.argv[1]
+    n_seeds = int(sys.argv[2]) if len(sys.argv) > 2 else 64
+    spp = int(sys.argv[3]) if len(sys.argv) > 3 else 1 << 14
+    t0 = time.time()
+    beyond, zero, z, v, s = tail_counts(case, range(n_seeds), spp)
+    print(f"{case}: {beyond} of {z.size} beyond 4.5 sigma, {zero} values 0 +/- 0, max |z| {np.abs(z).max():.1f}, "
+          f"mean dP {v.mean(0).ravel()} +/- {(v.std(0, ddof=1) / np.sqrt(len(v))).ravel()}, "
+          f"sigma spread/reported {(v.std(0, ddof=1) / np.sqrt((s ** 2).mean(0))).ravel()} ({time.time() - t0:.0f} s)")
+    if "--plain" in sys.argv:
+        ref = plain_reference(case, 1 << 22)
+        print(case, "plain reference dP", ref[0].ravel(), "+/-", ref[1].ravel(), f"({time.time() - t0:.0f} s)")

@@ -1,0 +1,295 @@
+"""World scenes you can trust anywhere: mixel bodies where their mixels are (against a view-factor oracle that
+shares no code with the renderer), users' shapes never merged away, one (world) coordinate system in the API,
+per-run honest standard errors on rare light paths, every fallback said, and bad input refused in one line."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import warnings
+
+import numpy as np
+import pytest
+from conftest import Z, assert_close_mc
+from rare_paths import rare_scene, tail_counts
+
+from mincam_sim import Pose, masks
+from mincam_sim.errors import InputError
+from mincam_sim.optics import Mincam, Mixel, cross_layout
+from mincam_sim.quadrature import open_aperture_view_factor_irradiance
+from mincam_sim.render import backend
+from mincam_sim.render import scene_dicts as sd
+from mincam_sim.render.estimation import dominance_threshold, heavy_tailed
+from mincam_sim.render.world import FallbackWarning, WorldRenderer, vertex_update
+from mincam_sim.scene.display import Screen
+
+
+def _rotation(axis, deg: float) -> np.ndarray:
+    a = np.asarray(axis, float) / np.linalg.norm(axis)
+    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    t = np.radians(deg)
+    return np.eye(3) + np.sin(t) * k + (1 - np.cos(t)) * k @ k
+
+
+def _moved(pose: Pose, rot: np.ndarray, shift_m: np.ndarray) -> Pose:
+    return Pose(tuple(rot @ np.asarray(pose.position_m) + shift_m), tuple(rot @ np.asarray(pose.forward)),
+                tuple(rot @ np.asarray(pose.up)))
+
+
+PLACEMENTS = {
+    "as built": (np.eye(3), np.zeros(3)),
+    "moved 2 cm": (np.eye(3), np.array([0.02, 0.0, 0.0])),
+    "turned and moved": (_rotation((1, 2, 3), 40.0), np.array([3.0, -2.0, 1.5])),
+    "1.2 km away, tilted": (_rotation((0.3, -1, 0.2), 75.0), np.array([1200.0, -350.0, 40.0])),
+}
+
+
+@pytest.mark.parametrize("placement", list(PLACEMENTS))
+def test_bodies_in_world_scenes_match_the_view_factor_oracle(placement):
+    """A mixel 10 mm in front of another hides 27 % of its view of an emitting rectangle (a world element, not
+    a display): the fast world form agrees with the exact polygon view factor minus the body's shadow wherever
+    the rig is. Merged bodies, shifted twice, read +36 % (their shadow gone) to -62 % (a phantom body)."""
+    rot, shift = PLACEMENTS[placement]
+    back = Mixel(masks.constant(1.0), pose=_moved(Pose((0.0, 0.0, 0.0), (0, 0, -1)), rot, shift), name="back")
+    front = Mixel(masks.constant(1.0, width_m=6e-3), d_f_m=3e-3,
+                  pose=_moved(Pose((0.004, 0.0, -0.010), (0, 0, -1)), rot, shift), name="front")
+    base = Screen()
+    screen = Screen(base.width_m, base.height_m, base.resolution, _moved(base.pose, rot, shift))
+    radiance = 2.0
+    expected = open_aperture_view_factor_irradiance(back, screen, radiance, [front.body_corners_m()])
+    alone = open_aperture_view_factor_irradiance(back, screen, radiance)
+    assert expected < 0.8 * alone
+    world = WorldRenderer(Mincam((back, front)),
+                          {"panel": sd.area_light(screen.width_m, screen.height_m, screen.pose.matrix(), radiance)},
+                          replicates=16, max_depth=2)
+    est = world.estimates(1 << 20, seed=3)
+    value, sigma = est.mean(0), est.std(0, ddof=1) / 4
+    assert sigma[0] / expected < 1e-3
+    assert_close_mc(value[0], expected, sigma[0], what=f"shadowed mixel in a world scene, {placement}")
+    front_alone = open_aperture_view_factor_irradiance(front, screen, radiance)
+    assert_close_mc(value[1], front_alone, sigma[1], what=f"front mixel, {placement}")
+
+
+def _card_world(centre_m=(0.0, 0.0, 0.0)):
+    """4 mixels 0.4 m over a grey floor under a sky; a card and a tile whose BSDF dicts equal the floor's, and a
+    toy mesh, all placed relative to ``centre_m``."""
+    c = np.asarray(centre_m, float)
+    cam = cross_layout(center=Pose(tuple(c + [0, 0, 0.4]), (0, 0, -1), (0, 1, 0)))
+    grey = {"type": "diffuse", "reflectance": {"type": "spectrum", "value": 0.5}}
+
+    def placed(x, y, z, half):
+        return sd._transform(np.array([[half, 0, 0, c[0] + x], [0, half, 0, c[1] + y], [0, 0, 1, c[2] + z],
+                                       [0, 0, 0, 1.0]]))
+
+    toy_v = np.array([[-0.03, -0.03, 0.05], [0.03, -0.03, 0.05], [0.0, 0.04, 0.05]]) + c
+    elements = {"floor": {"type": "rectangle", "to_world": placed(0, 0, 0, 1.0), "bsdf": dict(grey)},
+                "card": {"type": "rectangle", "to_world": placed(-0.06, 0.0, 0.1, 0.04), "bsdf": dict(grey)},
+                "tile": {"type": "rectangle", "to_world": placed(0.1, 0.0, 0.02, 0.05), "bsdf": dict(grey)},
+                "toy": sd.mesh_object("toy", toy_v, np.array([[0, 1, 2]]), 0.9), "sky": sd.sky(1.0)}
+    return WorldRenderer(cam, elements, replicates=8), toy_v
+
+
+@pytest.mark.parametrize("centre", [(0.0, 0.0, 0.0), (40.0, -25.0, 3.0)], ids=["at the origin", "far away"])
+def test_a_shape_whose_material_equals_anothers_keeps_its_name_and_reads_back_in_world_coordinates(centre):
+    """The card and the tile share the floor's BSDF dict: all keep their own parameters (Mitsuba's merging used
+    to fold them into one anonymous mesh: 'unknown scene parameter card.vertex_positions'). What params reads
+    is in world coordinates, and writing it back changes nothing (it moved the card by the rig's centre)."""
+    world, toy_v = _card_world(centre)
+    assert {"card.to_world", "tile.to_world", "floor.to_world", "toy.vertex_positions"} <= set(world.params)
+    assert not any(k.startswith("object_") or k.startswith("mixel") for k in world.params)
+    read = world.params["toy.vertex_positions"].reshape(-1, 3)
+    np.testing.assert_allclose(read, toy_v, atol=2e-6 * (1 + np.abs(toy_v).max()))
+    card = world.params["card.to_world"]
+    assert card.shape == (4, 4) and abs(card[0, 3] - (centre[0] - 0.06)) < 1e-5
+    before = world.estimates(1 << 15, seed=4)
+    world.update({key: world.params[key] for key in ("toy.vertex_positions", "card.to_world", "tile.to_world")})
+    after = world.estimates(1 << 15, seed=4)  # same rays: equal but for float32 rounding of the rewritten shapes
+    np.testing.assert_allclose(after.mean(0), before.mean(0), rtol=1e-4)
+    moved = card.copy()
+    moved[:3, 3] += [0.12, 0.02, 0.0]
+    dp, _ = world.measure_changes([{"card.to_world": moved}], {}, spp=1 << 15, seed=1)
+    assert np.any(np.abs(dp.irradiance_w_m2) > 5 * dp.stderr_w_m2), "moving the card by name changes the view"
+
+
+def test_a_loaded_scene_as_an_element_gives_its_shapes_and_lights():
+    """A scene loaded by the user (optimize=False) passed as one element renders as its shapes and emitters
+    given one by one (it rendered 0 with only an UnseenWarning)."""
+    mi = backend.mitsuba()
+    cam = cross_layout(center=Pose((0.0, 0.0, 0.4), (0, 0, -1), (0, 1, 0)))
+    parts = {"floor": {"type": "rectangle", "bsdf": {"type": "diffuse"}},
+             "lamp": sd.area_light(0.3, 0.3, Pose((0.0, 0.0, 1.0), (0, 0, -1)).matrix(), 5.0)}
+    loaded = mi.load_dict({"type": "scene", **parts}, optimize=False)
+    a = WorldRenderer(cam, {"room": loaded}).estimates(1 << 16, seed=2)
+    b = WorldRenderer(cam, parts).estimates(1 << 16, seed=2)
+    sigma = np.hypot(a.std(0, ddof=1), b.std(0, ddof=1)) / np.sqrt(8)
+    assert a.mean(0).min() > 10 * sigma.max()
+    assert_close_mc(a.mean(0), b.mean(0), sigma, what="loaded scene vs its elements")
+    assert "lamp.emitter.radiance.value" in WorldRenderer(cam, {"room": loaded}).params
+
+
+def _simple_world(**extra):
+    cam = cross_layout(center=Pose((0.0, 0.0, 0.4), (0, 0, -1), (0, 1, 0)))
+    tri = np.array([[0.0, 0.0, 0.05], [0.03, 0.0, 0.05], [0.0, 0.03, 0.05]])
+    elements = {"floor": {"type": "rectangle", "bsdf": {"type": "diffuse"}},
+                "lamp": sd.area_light(0.3, 0.3, Pose((0.0, 0.0, 1.0), (0, 0, -1)).matrix(), 5.0),
+                "toy": sd.mesh_object("toy", tri, np.array([[0, 1, 2]]), 0.8), **extra}
+    return WorldRenderer(cam, elements), tri
+
+
+BAD_UPDATES = {
+    "NaN vertices": ({"toy.vertex_positions": np.full(9, np.nan)}, "NaN or infinite"),
+    "wrong vertex count": ({"toy.vertex_positions": np.zeros(12)}, "mesh has 3 vertices"),
+    "negative radiance": ({"lamp.emitter.radiance.value": np.array([-1.0])}, "negative power"),
+    "singular transform": ({"floor.to_world": np.zeros((4, 4))}, "singular"),
+    "unknown key": ({"toy.vertex_position": np.zeros(9)}, "did you mean 'toy.vertex_positions'"),
+    "the mincam's own body": ({"mixel0_body_back.to_world": np.eye(4)}, "mincam's own body"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_UPDATES))
+def test_bad_updates_are_one_clear_error(case):
+    world, _ = _simple_world()
+    update, message = BAD_UPDATES[case]
+    with pytest.raises(InputError, match=message):
+        world.update(update)
+
+
+def test_bad_world_inputs_are_one_clear_error():
+    world, tri = _simple_world()
+    frame = vertex_update("toy", tri + [0.01, 0, 0])
+    with pytest.raises(InputError, match="fewer than the 8 replicates"):
+        world.measure_changes([frame], {}, spp=3)
+    with pytest.raises(InputError, match="frames must be a list"):
+        world.measure_changes(frame, {}, spp=64)
+    with pytest.raises(InputError, match=r"frames\[0\] must be a dict"):
+        world.measure_changes([np.zeros(3)], {}, spp=64)
+    with pytest.raises(InputError, match="estimator must be one of"):
+        world.measure_changes([frame], {}, spp=64, estimator="fast")
+    cam = cross_layout()
+    with pytest.raises(InputError, match="must be a Mincam"):
+        WorldRenderer([cam[0]], {})
+    with pytest.raises(InputError, match="without '.'"):
+        WorldRenderer(cam, {"my.toy": {"type": "sphere"}})
+    with pytest.raises(InputError, match="no plugin 'type'"):
+        WorldRenderer(cam, {"toy": {"radius": 0.1}})
+    with pytest.raises(InputError, match="negative power"):
+        WorldRenderer(cam, {"lamp": sd.area_light(0.3, 0.3, np.eye(4), -2.0)})
+    with pytest.raises(InputError, match="not a Mitsuba dict"):
+        WorldRenderer(cam, {"toy": np.zeros(3)})
+
+
+@pytest.mark.parametrize("what", ["emitting shape", "point light"])
+def test_a_change_that_cannot_be_bounded_is_said(what):
+    """A moving emitter or light: one FallbackWarning naming it and what it costs, and the same in meta."""
+    cam = cross_layout(center=Pose((0.0, 0.0, 0.4), (0, 0, -1), (0, 1, 0)))
+    elements = {"floor": {"type": "rectangle", "bsdf": {"type": "diffuse"}}}
+    if what == "emitting shape":
+        elements["lamp"] = sd.area_light(0.1, 0.1, Pose((0.0, 0.0, 1.0), (0, 0, -1)).matrix(), 50.0)
+        frame = {"lamp.to_world": Pose((0.05, 0.0, 1.0), (0, 0, -1)).matrix() @ np.diag([0.05, 0.05, 1, 1])}
+        name = "lamp"
+    else:
+        elements["bulb"] = {"type": "point", "position": [0.0, 0.0, 1.0], "intensity": {"type": "spectrum",
+                                                                                       "value": 2.0}}
+        frame = {"bulb.position": np.array([0.1, 0.0, 1.0])}
+        name = "bulb"
+    world = WorldRenderer(cam, elements)
+    with pytest.warns(FallbackWarning, match=f"'{name}'.*whole aperture") as caught:
+        dp, _ = world.measure_changes([frame], {}, spp=1 << 12, estimator="stratified")
+    assert sum(issubclass(w.category, FallbackWarning) for w in caught) == 1
+    assert any(name in f for f in dp.meta["fallbacks"])
+    assert dp.meta["guided_frames"] == 0
+
+
+def test_plain_runs_report_their_rays_like_stratified_ones():
+    """Experiments read the rays per frame of either estimator (the plain one ended every tabletop run with
+    KeyError: 'rays_per_mixel_per_frame')."""
+    world, tri = _simple_world()
+    dp, _ = world.measure_changes([vertex_update("toy", tri + [0.01, 0, 0])], {}, spp=1 << 10)
+    assert dp.meta["rays_per_mixel_per_frame"] == 1 << 10 and dp.meta["retried_frames"] == []
+
+
+def test_heavy_tail_flag_has_its_false_alarm_rate_and_catches_one_dominant_replicate():
+    rng = np.random.default_rng(0)
+    for r in (8, 16, 64):
+        flags = heavy_tailed(rng.standard_normal((r, 40_000)))
+        assert flags.mean() < 5e-4, f"{r} replicates: Gaussian data flagged {flags.mean():.1e} of the time"
+        one_hit = np.zeros((r, 3))
+        one_hit[2] = [1.0, 5.0, 0.3]
+        assert heavy_tailed(one_hit + 1e-3 * rng.standard_normal((r, 3))).all()
+    assert not heavy_tailed(np.array([[0.0, 1.0], [5.0, 1.0]])).any()  # 2 replicates: never decidable
+    assert 0.8 < dominance_threshold(8) < 0.875
+
+
+def _tail_case(case: str, n_seeds: int, spp: int):
+    beyond, zero, z, values, sigmas = tail_counts(case, range(n_seeds), spp)
+    return beyond, zero, z, values, sigmas
+
+
+# Per value, |z| > 4.5 happens with probability ~0.003 when the reported sigma is honest (t distribution with 7
+# degrees of freedom from 8 replicates, and a little more from the leave-one-out mean); with 4 mixels x n seeds
+# values the bound below is the Poisson 99.9 % quantile of that expectation.
+def _allowed_beyond(n_values: int) -> int:
+    from scipy.stats import poisson
+
+    return int(poisson.ppf(0.999, 0.0035 * n_values))
+
+
+@pytest.mark.parametrize("case, n_seeds", [pytest.param("far_movers", 16, id="far movers"),
+                                           pytest.param("mirror", 16, id="mirror")])
+def test_per_run_sigma_is_honest_on_rare_light_paths(case, n_seeds):
+    """Every run's dP against the mean of the other runs, in units of both standard errors: tails no heavier
+    than honest Gaussian replicates allow, and never 0 +/- 0 for a change the others resolve. Far-apart movers
+    out of view: one guide sphere around both held the whole view and guiding switched itself off (2 of 64
+    values beyond 4.5 sigma, one 0 +/- 0, max |z| 28.8 at 16 seeds before); per-mover spheres fix it."""
+    beyond, zero, z, values, sigmas = _tail_case(case, n_seeds, 1 << 14)
+    mean = values.mean(0)
+    resolved = np.abs(mean) > Z * values.std(0, ddof=1) / np.sqrt(n_seeds)
+    assert resolved.mean() > 0.5, "the scene's change must be resolved for the test to mean anything"
+    assert zero == 0, f"{zero} values are 0 +/- 0"
+    assert beyond <= _allowed_beyond(z.size), f"{beyond} of {z.size} beyond 4.5 sigma (max |z| {np.abs(z).max():.1f})"
+    spread = values.std(0, ddof=1)
+    reported = np.sqrt((sigmas ** 2).mean(0))
+    ratio = spread[resolved] / reported[resolved]
+    assert np.all((ratio > 0.5) & (ratio < 2.0)), f"spread / reported sigma {ratio}"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", ["far_movers", "mirror"])
+def test_per_run_sigma_is_honest_on_rare_light_paths_many_seeds(case):
+    beyond, zero, z, _, _ = _tail_case(case, 96, 1 << 14)
+    assert zero == 0
+    assert beyond <= _allowed_beyond(z.size), f"{beyond} of {z.size} beyond 4.5 sigma (max |z| {np.abs(z).max():.1f})"
+
+
+def test_guides_of_far_apart_movers_stay_apart():
+    """Two movers 1.1 m apart get a sphere each (one around both held everything the mixels see); a mover and
+    its neighbour 4 cm away share one."""
+    world, frames, background = rare_scene("far_movers")
+    world.update({**background, **frames[0]})
+    spheres = world.change_guide(["left", "right"])
+    assert len(spheres) == 2 and max(r for _, r in spheres) < 0.45
+    for centre, radius in spheres:  # no sphere holds the mincam's view of the table below it
+        assert np.linalg.norm(centre - np.array([0.0, 0.0, -0.4])) > radius
+    world.update(background)
+
+
+def test_importing_mitsuba_first_is_a_clear_error_or_works():
+    """drjit imported before mincam_sim picks a system libLLVM; on Debian 12 that is 15, which aborted the
+    process ('LLVM ERROR: Cannot select'). Now: it works (a usable libLLVM) or one clear line, never an abort."""
+    code = ("import mitsuba\nimport mincam_sim\nfrom mincam_sim.render import check\n"
+            "raise SystemExit(check.main([]))")
+    env = {k: v for k, v in os.environ.items() if k != "DRJIT_LIBLLVM_PATH"}
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
+    assert done.returncode >= 0, f"aborted by a signal: {done.stderr[-400:]}"
+    if done.returncode != 0:
+        assert "import mincam_sim before mitsuba" in done.stderr, done.stderr[-400:]
+
+
+def test_warnings_quiet_when_nothing_falls_back():
+    world, tri = _simple_world()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FallbackWarning)
+        dp, _ = world.measure_changes([vertex_update("toy", tri + [0.01, 0, 0])], {}, spp=1 << 12,
+                                      estimator="stratified")
+    assert dp.meta["fallbacks"] == [] and dp.meta["guided_frames"] == 1
