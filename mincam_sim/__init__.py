@@ -2,15 +2,55 @@
 
 Units are SI throughout: metres, radians, W/m^2 (irradiance), W m^-2 sr^-1 (radiance), seconds.
 Only ``mincam_sim.render`` imports mitsuba / drjit; everything else is pure numpy.
+
+The front door: ``Simulation(mincam, screen=... | world=...)`` with a solver (``ResponseMap``, ``Aperture``,
+``Reference``, ``StratifiedChange``, ``PlainChange``) and a ``Budget``; ``Run(out_dir)`` keeps results.
+These names load the renderer on first use (``import mincam_sim`` itself stays pure numpy).
 """
 
+from .budget import Budget
+from .changes import Changes, RunInfo
+from .errors import ConfigError, InputError, MincamError
 from .geometry import Pose, look_at
 from .masks import Mask
+from .measurements import Measurements
 from .optics import Mincam, Mixel, cross_layout, layout, pair_layout, single
 from .scene.display import Screen, grid_sweep, line_sweep, white_square
 
+_LAZY = {
+    "Simulation": "mincam_sim.render.simulation",
+    "Reference": "mincam_sim.render.solvers",
+    "Aperture": "mincam_sim.render.solvers",
+    "ResponseMap": "mincam_sim.render.solvers",
+    "PlainChange": "mincam_sim.render.solvers",
+    "StratifiedChange": "mincam_sim.render.solvers",
+    "Run": "mincam_sim.run",
+}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'mincam_sim' has no attribute {name!r}")
+
 __all__ = [
+    "Aperture",
+    "Budget",
+    "Changes",
+    "ConfigError",
+    "InputError",
     "Mask",
+    "Measurements",
+    "MincamError",
+    "PlainChange",
+    "Reference",
+    "ResponseMap",
+    "Run",
+    "RunInfo",
+    "Simulation",
+    "StratifiedChange",
     "Mincam",
     "Mixel",
     "Pose",

@@ -1,9 +1,12 @@
 """Architecture: the import graph of the package, read from the code (every import, module-level or local).
 
 Floors, bottom to top: the pure core (numpy physics, sensor, estimators, calibration, masks, scene
-descriptions, config, stores) -> ``render`` (the only Mitsuba / Dr.Jit user) -> ``render_job`` (the config
-service) -> ``experiments`` and ``design`` -> ``studies`` -> ``cli``. ``plots`` draws results and sits beside
-the core. Lower floors never import upper ones, and no modules import each other in a loop.
+descriptions, config, stores, budgets and typed results) -> ``render`` (the only Mitsuba / Dr.Jit user: the
+simulation and its solvers) -> ``run`` (output directories: lock, identity, resume; the solvers never import
+it) -> ``render_job`` (the config service) -> ``experiments`` and ``design`` -> ``studies`` -> ``cli``.
+``plots`` draws results and sits beside the core. The package root is the public facade: it exposes upper
+floors lazily and nothing inside the package imports it. Lower floors never import upper ones, and no modules
+import each other in a loop.
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "mincam_sim"
-UPPER = ("render", "render_job", "experiments", "design", "studies", "cli", "plots", "figures")
+UPPER = ("render", "run", "render_job", "experiments", "design", "studies", "cli", "plots", "figures")
 
 
 def _module_name(path: Path) -> str:
@@ -58,6 +61,8 @@ GRAPH = {name: _imports(name, path) for name, path in MODULES.items()}
 
 def _floor(module: str) -> str:
     parts = module.split(".")
+    if module == "mincam_sim":
+        return "facade"
     return parts[1] if len(parts) > 1 and parts[1] in UPPER else "core"
 
 
@@ -74,7 +79,8 @@ def test_only_the_render_layer_imports_mitsuba_or_drjit():
 
 @pytest.mark.parametrize("source, forbidden", [
     ({"core"}, set(UPPER)),
-    ({"render"}, {"render_job", "experiments", "design", "studies", "cli", "plots", "figures"}),
+    ({"render"}, {"run", "render_job", "experiments", "design", "studies", "cli", "plots", "figures"}),
+    ({"run"}, {"render_job", "experiments", "design", "studies", "cli", "plots", "figures"}),
     ({"render_job"}, {"experiments", "design", "studies", "cli", "plots", "figures"}),
     ({"plots"}, {"experiments", "design", "studies", "cli", "render"}),
     ({"experiments", "design"}, {"studies", "cli"}),
@@ -82,6 +88,18 @@ def test_only_the_render_layer_imports_mitsuba_or_drjit():
 ])
 def test_lower_floors_never_import_upper_ones(source, forbidden):
     assert _offenders(source, forbidden) == []
+
+
+def test_nothing_inside_the_package_imports_its_facade():
+    offenders = sorted(a for a, targets in GRAPH.items() if a != "mincam_sim" and "mincam_sim" in targets)
+    assert offenders == []
+
+
+def test_the_facade_imports_upper_floors_only_lazily():
+    tree = ast.parse((PACKAGE / "__init__.py").read_text())
+    eager = [node for node in tree.body if isinstance(node, (ast.Import, ast.ImportFrom))]
+    names = {_resolve(n.module or "", n.level, "mincam_sim", True) for n in eager if isinstance(n, ast.ImportFrom)}
+    assert all(_floor(n) == "core" for n in names), names
 
 
 def test_no_import_cycles():

@@ -63,6 +63,7 @@ STRATA_EXPANSIONS = (1.0, 2.0, 4.0, 8.0)  # nested rectangles: the change region
 STRATA_SHARES = (0.6, 0.1, 0.1, 0.1, 0.1)  # rays per stratum (region, rings, rest): near Neyman, guided, bench scene
 BACKGROUND_MIN_SPP = 1 << 16  # stratified: rays per mixel (at least) for the background's whole-aperture value
 RETRY_FACTOR = 4  # a frame whose replicates are heavy-tailed is measured again with this many times the replicates
+INFO_COLUMNS = ("retried", "guided", "guide_spheres", "region_area_fraction")  # per frame, kept with the results
 Updates = Mapping[str, np.ndarray]
 __all__ = ["CAMERA_KEY", "SENSOR_KEY", "FallbackWarning", "HeavyTailWarning", "WorldParameters", "WorldRenderer",
            "transform_update", "vertex_update"]
@@ -274,8 +275,10 @@ class WorldRenderer:
             bg_spp = max(int(spp), BACKGROUND_MIN_SPP)
             bg = whole_aperture_estimates(self.scene, self.sensor, self.mincam, self.replicates, bg_spp,
                                           derive_seed(seed, "background"))
-        columns = [f"dP_{m}" for m in self.mincam.names] + [f"P_{m}" for m in self.mincam.names]
-        values = np.full((len(frames), 2 * n), np.nan)
+        names = self.mincam.names
+        columns = ([f"dP_{m}" for m in names] + [f"P_{m}" for m in names]
+                   + [f"heavy_tailed_{m}" for m in names] + [f"unseen_{m}" for m in names] + list(INFO_COLUMNS))
+        values = np.full((len(frames), len(columns)), np.nan)
         errors = np.full_like(values, np.nan)
         store = None
         todo = np.arange(len(frames))
@@ -298,16 +301,17 @@ class WorldRenderer:
             run = _StratifiedRun(self, frames, background, int(spp), seed, correlated, shares,
                                  tuple(strata_expansions), bool(guide_bounces), bg)
         try:
-            for i, row_v, row_e in run.rows(frames, todo, show_progress):
-                values[i], errors[i] = row_v, row_e
+            for i, row_v, row_e, info in run.rows(frames, todo, show_progress):
+                values[i] = np.concatenate([row_v, info])
+                errors[i] = np.concatenate([row_e, np.zeros_like(info)])
                 if store is not None:
-                    store.write([i], row_v[None], row_e[None])
+                    store.write([i], values[i][None], errors[i][None])
         finally:
             if store is not None:
                 store.close()
         self.update(background)
 
-        meta = {"form": "fast_world", "estimator": estimator, **run.meta(),
+        meta = {"form": "fast_world", "estimator": estimator, **run.meta(values[:, 2 * n:]),
                 "spp_per_mixel_per_frame": int(spp), "background_spp_per_mixel": int(bg_spp), "seed": seed,
                 "correlated_seeds": correlated,
                 "replicates": self.replicates, "background_w_m2": bg.mean(0).tolist(),
@@ -318,11 +322,10 @@ class WorldRenderer:
         reached = worst_relative_stderr(values[:, :n], errors[:, :n], significance=3.0)
         meta["reached_rel_stderr"] = reached if np.isfinite(reached) else None
         warn_target_missed(reached, target_rel_stderr, int(spp), MAX_SPP)
-        run.warn()
-        names = self.mincam.names
-        warn_unreached(Measurements(values[:, n:], errors[:, n:], names))
+        run.warn(meta)
+        warn_unreached(Measurements(values[:, n:2 * n], errors[:, n:2 * n], names))
         dp = Measurements(values[:, :n], errors[:, :n], names, {**meta, "quantity": "dP = P(frame) - P(background)"})
-        p = Measurements(values[:, n:], errors[:, n:], names, {**meta, "quantity": "P(frame)"})
+        p = Measurements(values[:, n:2 * n], errors[:, n:2 * n], names, {**meta, "quantity": "P(frame)"})
         return dp, p
 
     def change_guide(self, moving: Sequence[str]) -> list[tuple[np.ndarray, float]] | None:
@@ -417,49 +420,54 @@ def _unknown_parameter(key: str, known, own: bool) -> str:
 
 class _Run:
     """The frames of one ``measure_changes`` run: per-frame replicate estimates, the heavy-tail check and its
-    retry, and what the run says about itself (meta, warnings)."""
+    retry, and what the run says about itself (per-frame info kept with the results, so that a resumed run
+    reports every frame; meta and warnings)."""
 
     def __init__(self, renderer: WorldRenderer, background: Updates, spp: int, seed: int, correlated: bool,
                  bg: np.ndarray) -> None:
         self.r, self.background, self.spp, self.seed, self.correlated = renderer, background, spp, seed, correlated
         self.bg = bg
-        self.retried: list[int] = []
-        self.heavy: list[list[int]] = []
-        self.unseen: list[list[int]] = []
         self.fallbacks: dict[str, str] = {}
 
     def rows(self, frames, todo, show_progress: bool):
-        """(frame index, values, stderr) per frame of ``todo``: dP then P per mixel."""
+        """(frame index, values, stderr, info) per frame of ``todo``: dP then P per mixel; then heavy-tailed and
+        unseen flags per mixel and :data:`INFO_COLUMNS`."""
+        n = len(self.r.mincam)
         for i in progress(todo, desc="frames", disable=not show_progress):
             i = int(i)
-            diff, frame_v, frame_e, changes = self.frame(frames, i, self.r.replicates, "")
+            diff, frame_v, frame_e, changes, info = self.frame(frames, i, self.r.replicates, "")
             flagged = heavy_tailed(diff) | (changes & np.all(diff == diff[:1], axis=0))
-            if flagged.any():
-                self.retried.append(i)
-                diff, frame_v, frame_e, changes = self.frame(frames, i, RETRY_FACTOR * self.r.replicates, "retry")
-                for k in np.flatnonzero(heavy_tailed(diff)):
-                    self.heavy.append([i, int(k)])
-                for k in np.flatnonzero(changes & np.all(diff == diff[:1], axis=0)):
-                    self.unseen.append([i, int(k)])
+            retried = bool(flagged.any())
+            if retried:
+                diff, frame_v, frame_e, changes, _ = self.frame(frames, i, RETRY_FACTOR * self.r.replicates, "retry")
+            heavy = heavy_tailed(diff) if retried else np.zeros(n, dtype=bool)
+            unseen = (changes & np.all(diff == diff[:1], axis=0)) if retried else np.zeros(n, dtype=bool)
             reps = diff.shape[0]
             row_v = np.concatenate([diff.mean(0), frame_v])
             row_e = np.concatenate([diff.std(0, ddof=1) / np.sqrt(reps), frame_e])
-            yield i, row_v, row_e
+            yield i, row_v, row_e, np.concatenate([heavy, unseen, [retried, *info]]).astype(float)
 
-    def meta(self) -> dict:
-        return {"retried_frames": self.retried, "retry_factor": RETRY_FACTOR, "heavy_tailed": self.heavy,
-                "no_ray_met_the_change": self.unseen, "fallbacks": sorted(self.fallbacks.values())}
+    def meta(self, info: np.ndarray) -> dict:
+        """What the run did, from the per-frame info of every frame (this process's and a resumed store's)."""
+        n = len(self.r.mincam)
+        done = np.all(np.isfinite(info), axis=1)
+        heavy, unseen, rest = info[:, :n] > 0, info[:, n:2 * n] > 0, info[:, 2 * n:]
+        return {"retried_frames": np.flatnonzero(done & (rest[:, 0] > 0)).tolist(), "retry_factor": RETRY_FACTOR,
+                "heavy_tailed": np.argwhere(done[:, None] & heavy).tolist(),
+                "no_ray_met_the_change": np.argwhere(done[:, None] & unseen).tolist(),
+                "fallbacks": sorted(self.fallbacks.values())}
 
-    def warn(self) -> None:
+    def warn(self, meta: dict) -> None:
         for message in sorted(self.fallbacks.values()):
             warnings.warn(message, FallbackWarning, stacklevel=4)
-        if self.heavy or self.unseen:
-            where = self.heavy[:3] + self.unseen[:3]
+        heavy, unseen = meta["heavy_tailed"], meta["no_ray_met_the_change"]
+        if heavy or unseen:
+            where = heavy[:3] + unseen[:3]
             warnings.warn(
-                f"{len(self.heavy)} value(s) stayed dominated by one replicate and {len(self.unseen)} saw no ray meet "
-                f"a change after {RETRY_FACTOR}x the replicates (first [frame, mixel]: {where}): a rare, heavy light "
-                "path (a mirror, glass, a small bright object far from the change region); their standard errors "
-                "are uncertain. Raise spp or replicates; see meta['heavy_tailed'], meta['no_ray_met_the_change']",
+                f"{len(heavy)} value(s) stayed dominated by one replicate and {len(unseen)} saw no ray meet a change "
+                f"after {RETRY_FACTOR}x the replicates (first [frame, mixel]: {where}): a rare, heavy light path (a "
+                "mirror, glass, a small bright object far from the change region); their standard errors are "
+                "uncertain. Raise spp or replicates; see meta['heavy_tailed'], meta['no_ray_met_the_change']",
                 HeavyTailWarning, stacklevel=4)
 
 
@@ -481,10 +489,11 @@ class _PlainRun(_Run):
         r.update(frames[i])
         est = r.world.fast_estimates(spp, replicates, frame_seed)
         changes = np.full(len(r.mincam), bool(_changed_shapes(frames[i], self.background)))
-        return est - bg, est.mean(0), est.std(0, ddof=1) / np.sqrt(replicates), changes
+        info = (0.0, 0.0, 1.0)  # not guided, no guide sphere, the whole aperture
+        return est - bg, est.mean(0), est.std(0, ddof=1) / np.sqrt(replicates), changes, info
 
-    def meta(self) -> dict:
-        return {**super().meta(), "rays_per_mixel_per_frame": int(self.spp)}
+    def meta(self, info: np.ndarray) -> dict:
+        return {**super().meta(info), "rays_per_mixel_per_frame": int(self.spp)}
 
 
 class _StratifiedRun(_Run):
@@ -503,9 +512,6 @@ class _StratifiedRun(_Run):
             self.bg_regions[name], _, why = renderer._change([name])
             for reason in why:
                 self.note_fallback(name, reason)
-        self.fractions: list[float] = []
-        self.guided_frames = 0
-        self.spheres: list[int] = []
         self.can_guide = guided and guided_path_supports(renderer.world.max_depth)
         if guided and not self.can_guide:
             self.fallbacks["depth"] = (f"bounces are not guided at max_depth {renderer.world.max_depth} (the guided "
@@ -536,10 +542,8 @@ class _StratifiedRun(_Run):
         bg_seed = frame_seed if self.correlated else derive_seed(self.seed, "stratified-background", i, purpose)
         bg_est = stratified_estimates(r.scene, r.sensor, r.mincam, regions, replicates, self.counts, bg_seed, **kw)
         diff = est - bg_est
-        if not purpose:
-            self.fractions.append(regions.area_fraction())
-            self.guided_frames += guide is not None
-            self.spheres.append(0 if guide is None else len(guide))
+        info = (float(guide is not None), 0.0 if guide is None else float(len(guide)),
+                float(np.mean(regions.area_fraction())))
         if replicates == self.bg.shape[0]:
             frame = self.bg + diff  # P(frame): the background traced once over the whole aperture, plus the change
             frame_v, frame_e = frame.mean(0), frame.std(0, ddof=1) / np.sqrt(replicates)
@@ -548,16 +552,17 @@ class _StratifiedRun(_Run):
             frame_e = np.hypot(self.bg.std(0, ddof=1) / np.sqrt(self.bg.shape[0]),
                                diff.std(0, ddof=1) / np.sqrt(replicates))
         changes = np.full(len(r.mincam), bool(changed))
-        return diff, frame_v, frame_e, changes
+        return diff, frame_v, frame_e, changes, info
 
-    def meta(self) -> dict:
-        counts = self.counts
-        return {**super().meta(), "strata_expansions": list(self.expansions), "strata_rays_per_replicate": counts,
+    def meta(self, info: np.ndarray) -> dict:
+        counts, n = self.counts, len(self.r.mincam)
+        rest = info[np.all(np.isfinite(info), axis=1), 2 * n:]
+        return {**super().meta(info), "strata_expansions": list(self.expansions), "strata_rays_per_replicate": counts,
                 "rays_per_mixel_per_frame": 2 * self.r.replicates * sum(counts),
                 "moving_shapes": sorted(self.moving), "guide_bounces": bool(self.guided),
-                "guided_frames": int(self.guided_frames),
-                "guide_spheres_per_frame": self.spheres,
-                "region_area_fraction_mean": float(np.mean(self.fractions)) if self.fractions else None}
+                "guided_frames": int(rest[:, 1].sum()),
+                "guide_spheres_per_frame": rest[:, 2].astype(int).tolist(),
+                "region_area_fraction_mean": float(rest[:, 3].mean()) if len(rest) else None}
 
 
 class _DeltaSurfaces:

@@ -1,0 +1,107 @@
+"""The front door: Simulation + solvers + Budget + typed results, and Run outside the numerics."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import trimesh
+
+import mincam_sim as ms
+from mincam_sim.errors import InputError, StaleResultError
+from mincam_sim.render import scene_dicts as sd
+from mincam_sim.render.screen_engine import render_frames
+from mincam_sim.render.world import WorldRenderer, vertex_update
+
+
+def _frames(screen, n=3):
+    return ms.line_sweep((-0.15, 0.0), (0.15, 0.0), n=n, size_m=0.04).frame_stack(screen)
+
+
+@pytest.mark.parametrize("solver, budget, form, kw", [
+    (ms.ResponseMap(), ms.Budget(samples_per_texel=16, seed=3), "response_map", {"samples_per_texel": 16}),
+    (ms.Aperture(), ms.Budget(spp=1 << 14, seed=3), "fast", {"spp": 1 << 14}),
+])
+def test_display_measure_is_the_engine_bit_for_bit(solver, budget, form, kw):
+    cam, screen = ms.pair_layout(), ms.Screen()
+    m = ms.Simulation(cam, screen=screen).measure(_frames(screen), solver=solver, budget=budget)
+    ref, _ = render_frames(cam, screen, _frames(screen), form, seed=3, **kw)
+    np.testing.assert_array_equal(m.irradiance_w_m2, ref.irradiance_w_m2)
+    np.testing.assert_array_equal(m.stderr_w_m2, ref.stderr_w_m2)
+    assert m.meta["solver"] == solver.name
+
+
+def _world_parts():
+    box = trimesh.creation.box((0.04, 0.04, 0.04))
+    v = box.vertices + [5.0, 5.0, 0.02]
+    elements = {"floor": {"type": "rectangle", "bsdf": {"type": "diffuse"}},
+                "lamp": sd.area_light(0.3, 0.3, ms.Pose((0, 0, 1.0), (0, 0, -1)).matrix(), 10.0),
+                "toy": sd.mesh_object("toy", v, box.faces, 0.9)}
+    frames = [vertex_update("toy", v - [5.0, 5.0, 0.0] + [x, 0.02, 0.0]) for x in (-0.08, 0.05)]
+    cam = ms.cross_layout(center=ms.Pose((0.0, 0.0, 0.4), (0, 0, -1), (0, 1, 0)))
+    return cam, elements, frames
+
+
+@pytest.mark.parametrize("solver", [ms.StratifiedChange(), ms.PlainChange()], ids=["stratified", "plain"])
+def test_world_changes_are_typed_and_equal_the_renderer(solver):
+    cam, elements, frames = _world_parts()
+    ch = ms.Simulation(cam, world=elements).measure_changes(frames, solver=solver, budget=ms.Budget(spp=1 << 12))
+    dp, p = WorldRenderer(cam, elements).measure_changes(frames, {}, spp=1 << 12, estimator=solver.form)
+    np.testing.assert_array_equal(ch.dp.irradiance_w_m2, dp.irradiance_w_m2)
+    np.testing.assert_array_equal(ch.p.stderr_w_m2, p.stderr_w_m2)
+    assert ch.info.estimator == solver.form and ch.info.rays_per_mixel_per_frame > 0
+    assert ch.info.reached_rel_stderr is not None and ch.info.replicates == 8
+    assert np.all(np.abs(ch.dp.irradiance_w_m2) > 3 * ch.dp.stderr_w_m2)
+
+
+def test_world_measure_gives_absolute_p_per_update():
+    cam, elements, frames = _world_parts()
+    sim = ms.Simulation(cam, world=elements)
+    m = sim.measure(frames, budget=ms.Budget(spp=1 << 14))
+    ch = sim.measure_changes(frames, solver=ms.PlainChange(), budget=ms.Budget(spp=1 << 14))
+    sigma = np.hypot(m.stderr_w_m2, ch.p.stderr_w_m2)
+    assert np.all(np.abs(m.irradiance_w_m2 - ch.p.irradiance_w_m2) < 4.5 * sigma)
+
+
+def test_run_keeps_resumes_and_refuses(tmp_path):
+    cam, elements, frames = _world_parts()
+    sim = ms.Simulation(cam, world=elements)
+    with ms.Run(tmp_path / "out") as run:
+        first = run.measure_changes(sim, frames, budget=ms.Budget(spp=1 << 12))
+    with ms.Run(tmp_path / "out") as run:  # a rerun of the same run: reused, same numbers
+        again = run.measure_changes(sim, frames, budget=ms.Budget(spp=1 << 12))
+    np.testing.assert_array_equal(first.dp.irradiance_w_m2, again.dp.irradiance_w_m2)
+    loaded = ms.Changes.load_npz(tmp_path / "out" / "measurements.npz")
+    assert loaded.info == first.info
+    np.testing.assert_array_equal(loaded.dp.stderr_w_m2, first.dp.stderr_w_m2)
+    header = (tmp_path / "out" / "measurements.csv").read_text().splitlines()[1]
+    assert header.startswith("frame,") and "_dP_w_m2" in header and "_P_stderr_w_m2" in header
+    with ms.Run(tmp_path / "out") as run, pytest.raises(StaleResultError):
+        run.measure_changes(sim, frames, budget=ms.Budget(spp=1 << 12, seed=1))
+    with pytest.raises(InputError, match="with-block"):
+        ms.Run(tmp_path / "x").measure(sim, frames)
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda: ms.Budget(spp=0), "Budget.spp must be an integer >= 1"),
+    (lambda: ms.Budget(spp=4, replicates=8), "fewer than its 8 replicates"),
+    (lambda: ms.Budget(target_rel_stderr=-1e-3), "target_rel_stderr"),
+    (lambda: ms.Budget(replicates=1), "replicates must be an integer >= 2"),
+    (lambda: ms.Budget(seed=1.5), "seed"),
+    (lambda: ms.Simulation(ms.pair_layout()), "exactly one"),
+    (lambda: ms.Simulation(ms.pair_layout(), screen=ms.Screen()).measure_changes([]), "does not solve display"),
+    (lambda: ms.Simulation(ms.pair_layout(), screen=ms.Screen()).measure([], solver="fast"), "solver must be"),
+    (lambda: ms.Simulation(ms.pair_layout(), world="no/such/room.xml"), "does not exist"),
+])
+def test_front_door_errors_name_the_fix(make, message):
+    with pytest.raises(InputError, match=message):
+        make()
+
+
+def test_import_stays_pure_numpy_until_the_renderer_is_used():
+    code = ("import sys, mincam_sim as ms\nb = ms.Budget(spp=64)\n"
+            "assert 'mitsuba' not in sys.modules and 'drjit' not in sys.modules\n"
+            "ms.Simulation\nassert 'mincam_sim.render.simulation' in sys.modules\n")
+    subprocess.run([sys.executable, "-c", code], check=True)
