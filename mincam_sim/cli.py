@@ -260,6 +260,32 @@ def check_out_file(path: Path, what: str = "output file") -> Path:
 
 
 # ------------------------------------------------------------------------------------------------- render
+def _render_world(config: Path, out_dir: Path | None, check: bool, overwrite: bool) -> None:
+    from .world_config import load_world_config
+    from .world_job import run_world_config, world_summary
+
+    cfg = load_world_config(config)
+    if out_dir is not None:
+        cfg.run.out_dir = out_dir
+    variant = check_variant(cfg.run.variant)
+    if check:
+        check_out_dir(cfg.run.out_dir, create=False)
+        for line in world_summary(cfg, variant):
+            typer.echo(line)
+        return
+    check_out_dir(cfg.run.out_dir)
+    _announce_variant()
+    ch = run_world_config(cfg, show_progress=_show_progress(), overwrite=overwrite, say=_say)
+    reached = ch.info.reached_rel_stderr
+    typer.echo(f"# {ch.n_frames} frames x {len(ch.mixel_names)} mixels, dP [W/m^2] +/- stderr ({ch.info.estimator}, "
+               f"{ch.info.rays_per_mixel_per_frame} rays per mixel per frame, worst relative stderr "
+               f"{'n/a' if reached is None else f'{reached:.2e}'}); outputs in {cfg.run.out_dir}")
+    typer.echo("frame  " + "  ".join(f"{n:>24}" for n in ch.mixel_names))
+    for i in range(ch.n_frames):
+        cells = "  ".join(f"{v:12.5e} +/- {e:8.1e}" for v, e in zip(ch.dp.irradiance_w_m2[i], ch.dp.stderr_w_m2[i],
+                                                                     strict=True))
+        typer.echo(f"{i:5d}  {cells}")
+
 
 
 @app.command()
@@ -271,9 +297,16 @@ def render(
     overwrite: Annotated[bool, typer.Option("--overwrite", help="replace the results of a different run in the "
                                                                 "output directory")] = False,
 ) -> None:
-    """Render the measurements a config describes; write measurements.npz/.csv (+ response maps as EXR)."""
-    from .render_job import config_summary, run_render_config
+    """Render the measurements a config describes; write measurements.npz/.csv (+ response maps as EXR).
 
+    A config with a [world] section renders your own scene (a Mitsuba XML file, meshes, lights, movers): dP and P
+    per frame, a plot and the CSV (see `mincam-sim config-example --world`)."""
+    from .render_job import config_summary, run_render_config
+    from .world_config import is_world_config
+
+    if is_world_config(config):
+        _render_world(config, out_dir, check, overwrite)
+        return
     cfg = load_config(config)
     if out_dir is not None:
         cfg.run.out_dir = out_dir
@@ -302,9 +335,15 @@ def render(
 
 
 @app.command("config-example")
-def config_example() -> None:
+def config_example(
+    world: Annotated[bool, typer.Option("--world", help="the world-scene config (your own scene from a file)")] = False,
+) -> None:
     """Print the documented TOML schema with every default."""
+    if world:
+        from .world_config import world_example_toml
 
+        typer.echo(world_example_toml(), nl=False)
+        return
     typer.echo(EXAMPLE_TOML)
 
 
