@@ -35,7 +35,7 @@ import numpy as np
 from ..optics import Mincam
 from . import backend, guided_path
 from .change_region import ApertureRegions
-from .tracing import MAX_LANES
+from .tracing import MAX_LANES, seeded_sampler
 
 DETECTOR_SHRINK = 1 - 2e-6  # as mixel_sensor.mixel_position_sample: keeps x strictly inside the mixel's film cell
 
@@ -106,8 +106,7 @@ def stratified_estimates(scene, sensor, mincam: Mincam, regions: ApertureRegions
     groups_per_launch = max(1, MAX_LANES // per)
     for launch, g0 in enumerate(range(0, n_groups, groups_per_launch)):
         ng = min(groups_per_launch, n_groups - g0)
-        sampler = mi.load_dict({"type": "independent"})
-        sampler.seed((int(seed) * 1_000_003 + launch) & 0x7FFFFFFF, ng * per)
+        sampler = seeded_sampler(seed, launch, ng * per)
         # counts enter as opaque values, not literals: other budgets reuse the compiled kernel
         lane = dr.arange(mi.UInt32, ng * per)
         per_o = dr.opaque(mi.UInt32, per)

@@ -17,6 +17,19 @@ from . import backend
 MAX_LANES = 1 << 22  # rays traced per kernel launch
 
 
+def launch_seed(seed: int, launch: int) -> int:
+    """The sampler seed of kernel launch ``launch`` of a run seeded ``seed`` (the one rule every launch loop of
+    the fast forms uses: same seed and launch, same random numbers)."""
+    return (int(seed) * 1_000_003 + int(launch)) & 0x7FFFFFFF
+
+
+def seeded_sampler(seed: int, launch: int, lanes: int):
+    """An independent sampler seeded for ``launch`` with ``lanes`` lanes."""
+    sampler = backend.mitsuba().load_dict({"type": "independent"})
+    sampler.seed(launch_seed(seed, launch), int(lanes))
+    return sampler
+
+
 def trace_groups(
     scene,
     sensor,
@@ -53,8 +66,7 @@ def trace_groups(
         ng = min(groups_per_launch, n_groups - g0)
         for s0 in range(0, samples_per_group, per_launch):
             ns = min(per_launch, samples_per_group - s0)
-            sampler = mi.load_dict({"type": "independent"})
-            sampler.seed((seed * 1_000_003 + launch) & 0x7FFFFFFF, ng * ns)
+            sampler = seeded_sampler(seed, launch, ng * ns)
             launch += 1
             group = dr.arange(mi.UInt32, ng * ns) // ns + g0
             u = sampler.next_2d()
@@ -77,6 +89,6 @@ def _render_groups_scalar(mi, scene, sensor, n_groups, samples_per_group, seed, 
         backend.require_jit("Tracing groups with a position-sample map (the fast mixel sensor)")
     out = np.empty(n_groups)
     for g in range(n_groups):
-        image = mi.render(scene, sensor=sensor, spp=int(samples_per_group), seed=(seed * 1_000_003 + g) & 0x7FFFFFFF)
+        image = mi.render(scene, sensor=sensor, spp=int(samples_per_group), seed=launch_seed(seed, g))
         out[g] = float(np.asarray(image, dtype=np.float64).mean())
     return out
