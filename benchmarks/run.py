@@ -43,7 +43,7 @@ def _sweep_setup():
 
 
 def bench_baseline() -> dict:
-    """Issue 2 baseline: samples/s and relative noise of one measurement of a small white square through a
+    """Baseline: samples/s and relative noise of one measurement of a small white square through a
     ramp mask, for the reference form (literal scene) and the fast form (mixel sensor), same spp."""
     from mincam_sim import Screen, masks, single
     from mincam_sim.render.screen_engine import ScreenRenderer
@@ -76,7 +76,7 @@ def bench_baseline() -> dict:
 
 
 def bench_sweep() -> dict:
-    """Issue 3: 1,000-position sweep x 4 mixels, each measurement <= 0.1 % relative standard error, wall time
+    """1,000-position sweep x 4 mixels, each measurement <= 0.1 % relative standard error, wall time
     including building the response maps (target-noise mode: pilot + extrapolation)."""
     from mincam_sim.render.screen_engine import render_frames
 
@@ -155,10 +155,10 @@ def _tabletop(n_frames: int, replicates: int = 8):
 
 
 def bench_moving_object() -> dict:
-    """Issues 3 and 10: dP of a small moving object (4 x 2 cm box on a 1 m table, 4 mixels at 0.5 m).
+    """dP of a small moving object (4 x 2 cm box on a 1 m table, 4 mixels at 0.5 m).
 
     Plain estimator (the reference): variance with correlated vs independent seeds at equal samples, and
-    frames/s at <= 1 % on dP. Stratified estimator (issue 10): frames/s at <= 1 % on dP on the same frames, and
+    frames/s at <= 1 % on dP. Stratified estimator: frames/s at <= 1 % on dP on the same frames, and
     its agreement with the plain run (z = difference / combined standard error, every frame and mixel)."""
     # 64 replicates: the goal is on the worst reported sigma of 108 values, the maximum of noisy estimates, which
     # sits above the largest true sigma by ~2.5 times their relative noise (same rays and time either way). At
@@ -252,8 +252,134 @@ def _moving_object_stratified(world, frames, background, plain) -> dict:
     }
 
 
+def _grid_mincam(n: int, height_m: float):
+    """``n`` mixels (a square grid, 6 mm apart, ramps x / 1-x / y / 1-y in turn) at ``height_m`` looking down."""
+    from mincam_sim import masks
+    from mincam_sim.geometry import Pose
+    from mincam_sim.optics import layout
+
+    side = int(round(np.sqrt(n)))
+    offsets = [((i - (side - 1) / 2) * 0.006, (j - (side - 1) / 2) * 0.006) for j in range(side) for i in range(side)]
+    kinds = ["x", "1-x", "y", "1-y"]
+    return layout([masks.ramp(kinds[k % 4], 64) for k in range(len(offsets))], offsets,
+                  names=[f"m{k}" for k in range(len(offsets))],
+                  center=Pose((0.0, 0.0, height_m), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)))
+
+
+def _cost_point(n_mixels: int = 4, table_triangles: int = 2, n_movers: int = 1, n_frames: int = 4,
+                spp: int = 1 << 14) -> dict:
+    """One point of the cost curves: the stratified and the plain estimator on the same frames at the same rays
+    per pass; frames/s and the rays per mixel per frame each needs for <= 1 % worst relative sigma of dP
+    (extrapolated with sigma ~ rays^-1/2 and time ~ rays from the measured run)."""
+    import trimesh
+
+    from mincam_sim.geometry import Pose
+    from mincam_sim.render import scene_dicts as sd
+    from mincam_sim.render.world import WorldRenderer, vertex_update
+
+    height = 0.5
+    cam = _grid_mincam(n_mixels, height) if n_mixels != 4 else None
+    if cam is None:
+        from mincam_sim import cross_layout
+
+        cam = cross_layout(center=Pose((0.0, 0.0, height), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)))
+    cells = max(1, int(round(np.sqrt(table_triangles / 2))))
+    grid = np.linspace(-0.5, 0.5, cells + 1)
+    gx, gy = np.meshgrid(grid, grid)
+    verts = np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)])
+    idx = np.arange((cells + 1) ** 2).reshape(cells + 1, cells + 1)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
+    faces = np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+    elements = {"table": sd.mesh_object("table", verts, faces, 0.4),
+                "light": sd.area_light(0.4, 0.4, Pose((0, 0, 1.2), (0, 0, -1)).matrix(), 10.0)}
+    toy = trimesh.creation.box((0.04, 0.02, 0.02))
+    toy.apply_translation((0, 0, 0.01))
+    angles = np.linspace(0, 2 * np.pi, n_movers, endpoint=False)
+    centres = [(0.0, 0.0)] if n_movers == 1 else [(0.1 * np.cos(t), 0.1 * np.sin(t)) for t in angles]
+    background = {}
+    for k in range(n_movers):
+        name = f"toy{k}"
+        elements[name] = sd.mesh_object(name, toy.vertices + [5.0 + k, 5.0, 0.0], toy.faces, 0.9)
+        background.update(vertex_update(name, toy.vertices + [5.0 + k, 5.0, 0.0]))
+    xs = np.linspace(-0.05, 0.05, n_frames)
+    frames = [{k: v for j, (cx, cy) in enumerate(centres)
+               for k, v in vertex_update(f"toy{j}", toy.vertices + [cx + x, cy, 0.0]).items()} for x in xs]
+    world = WorldRenderer(cam, elements, replicates=16)
+    out = {"n_mixels": len(cam), "table_triangles": int(len(faces)), "n_movers": n_movers, "spp": spp}
+    for estimator in ("stratified", "plain"):
+        world.measure_changes(frames[:1], background, spp=1 << 10, seed=1, estimator=estimator)  # warm-up
+        t = time.perf_counter()
+        dp, _ = world.measure_changes(frames, background, spp=spp, seed=2, estimator=estimator)
+        seconds = time.perf_counter() - t
+        significant = np.abs(dp.irradiance_w_m2) > 4 * dp.stderr_w_m2
+        rel = np.abs(dp.stderr_w_m2 / dp.irradiance_w_m2)[significant]
+        worst = float(rel.max()) if rel.size else float("nan")
+        rays = int(dp.meta["rays_per_mixel_per_frame"])
+        scale = (worst / 0.01) ** 2
+        out[estimator] = {"seconds_per_frame": seconds / n_frames, "rays_per_mixel_per_frame": rays,
+                          "worst_rel_stderr_dP": worst, "significant_values": int(significant.sum()),
+                          "rays_per_mixel_per_frame_at_1pct": rays * scale,
+                          "frames_per_second_at_1pct": n_frames / seconds / scale}
+    out["stratified_over_plain_frames_per_second_at_1pct"] = (out["stratified"]["frames_per_second_at_1pct"]
+                                                              / out["plain"]["frames_per_second_at_1pct"])
+    return out
+
+
+def bench_cost_curves() -> dict:
+    """How the cost of dP grows with the mixels (4, 16, 64), the table's triangles (~1 k, 100 k, 1 M) and the
+    movers (1, 2, 8), stratified and plain side by side at each point; and the response-map build time against
+    screen resolution (256 x 144 .. 1920 x 1080, 4 mixels, 16 samples per texel). Extrapolated to <= 1 %
+    from one run per point (sigma ~ rays^-1/2, time ~ rays): a curve of how things scale, not the frame rate."""
+    from mincam_sim import Screen, cross_layout
+    from mincam_sim.render.response_map import response_maps
+
+    curves = {
+        "mixels": [_cost_point(n_mixels=n) for n in (4, 16, 64)],
+        "triangles": [_cost_point(table_triangles=t) for t in (1_000, 100_000, 1_000_000)],
+        "movers": [_cost_point(n_movers=m) for m in (1, 2, 8)],
+    }
+    maps = []
+    cam = cross_layout()
+    response_maps(cam, Screen(resolution=(64, 36)), 16, seed=0)  # warm-up
+    for res in ((256, 144), (640, 360), (1280, 720), (1920, 1080)):
+        t = time.perf_counter()
+        response_maps(cam, Screen(resolution=res), 16, seed=0)
+        maps.append({"resolution": list(res), "texels": res[0] * res[1], "seconds": time.perf_counter() - t})
+    curves["response_map_build"] = maps
+    _plot_cost_curves(curves, HERE / "cost_curves.png")
+    return curves
+
+
+def _plot_cost_curves(curves: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 4, figsize=(15, 3.4), constrained_layout=True)
+    for ax, (axis, key, label) in zip(axes[:3], [("mixels", "n_mixels", "mixels"),
+                                                 ("triangles", "table_triangles", "table triangles"),
+                                                 ("movers", "n_movers", "moving shapes")], strict=True):
+        x = [p[key] for p in curves[axis]]
+        for est, style in (("stratified", "o-"), ("plain", "s--")):
+            ax.plot(x, [p[est]["frames_per_second_at_1pct"] for p in curves[axis]], style, label=est)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel(label)
+        ax.set_ylabel("frames/s at ≤ 1 % on ΔP")
+        ax.legend(fontsize=8)
+    m = curves["response_map_build"]
+    axes[3].plot([p["texels"] for p in m], [p["seconds"] for p in m], "o-")
+    axes[3].set_xscale("log")
+    axes[3].set_yscale("log")
+    axes[3].set_xlabel("screen texels")
+    axes[3].set_ylabel("response-map build [s] (4 mixels, 16 spt)")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def bench_memory_sweep_1080p() -> dict:
-    """Issue 8: a 1,000-position sweep on the paper's 1920 x 1080 display, streamed (frames made on demand,
+    """A 1,000-position sweep on the paper's 1920 x 1080 display, streamed (frames made on demand,
     measured in chunks, results in a resumable store): peak memory of the whole process."""
     import tempfile
 
@@ -273,7 +399,7 @@ def bench_memory_sweep_1080p() -> dict:
 
 
 def bench_memory_10k_frames() -> dict:
-    """Issue 8: 10,000 frames at 256 x 144, streamed into a resumable store: peak memory of the process."""
+    """10,000 frames at 256 x 144, streamed into a resumable store: peak memory of the process."""
     import tempfile
 
     from mincam_sim import Screen, pair_layout
@@ -291,7 +417,7 @@ def bench_memory_10k_frames() -> dict:
 
 
 def bench_study_scaling() -> dict:
-    """Issue 12: the spacing study (full points, a 4 x 2 grid) on an embedded dask cluster with 1 and with 2
+    """The spacing study (full points, a 4 x 2 grid) on an embedded dask cluster with 1 and with 2
     process workers, side by side: scaling efficiency = T1 / (2 T2); both warm (Dr.Jit caches per worker)."""
     import tempfile
 
@@ -313,7 +439,7 @@ def bench_study_scaling() -> dict:
 
 
 def bench_reproduce_all() -> dict:
-    """Issue 10: wall time of ``reproduce all`` in full mode (intrusion and tracking videos of >= 300 frames).
+    """Wall time of ``reproduce all`` in full mode (intrusion and tracking videos of >= 300 frames).
     Its results.json and plots stay in ``out/bench_reproduce_all`` (the README's experiment table and figures)."""
     import shutil
 
@@ -342,6 +468,7 @@ BENCHMARKS = {
     "memory_10k_frames": bench_memory_10k_frames,
     "study_scaling": bench_study_scaling,
     "reproduce_all": bench_reproduce_all,
+    "cost_curves": bench_cost_curves,
 }
 
 

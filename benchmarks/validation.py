@@ -1,5 +1,5 @@
 """Measured agreement of the renderer with closed forms and invariants (value +/- sigma), for the README and
-the issue notes: ``python benchmarks/validation.py`` writes ``benchmarks/validation.json``.
+the changelog: ``python benchmarks/validation.py`` writes ``benchmarks/validation.json``.
 The pass/fail versions of these checks are ``tests/test_physics.py``; this script reports the numbers at
 higher sample counts."""
 

@@ -80,8 +80,10 @@ class ResponseMaps:
         var = np.empty_like(values)
         for i in range(0, len(frames), chunk):
             f = frames[i : i + chunk].reshape(len(frames[i : i + chunk]), -1)
-            values[i : i + chunk] = f @ w
-            var[i : i + chunk] = (f * f) @ v
+            # einsum's own loops, not BLAS: each value is summed in one order whatever the chunk (BLAS blocks by
+            # the number of rows, so a frame streamed in another chunk differed in the last bits)
+            values[i : i + chunk] = np.einsum("ft,tm->fm", f, w, optimize=False)
+            var[i : i + chunk] = np.einsum("ft,tm->fm", f * f, v, optimize=False)
         meta = {**self.meta, "form": "response_map"}
         return Measurements(values, np.sqrt(var), list(self.mixel_names), meta)
 

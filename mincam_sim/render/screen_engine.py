@@ -31,6 +31,7 @@ from .estimation import (
     UnseenWarning,
     check_counts,
     derive_seed,
+    pilot_to_target,
     replicate_mean_stderr,
     samples_for_target,
     warn_target_missed,
@@ -312,13 +313,17 @@ def render_frames(
             return measure_stream(maps, frames, idx)
     else:
         renderer = ScreenRenderer(mincam, screen, form, replicates)
-        if target_rel_stderr > 0:
+        if target_rel_stderr > 0:  # the budget rule of every ray solver (estimation.pilot_to_target)
             pilot_spp = replicates * 2048
             pilot_idx = np.unique(np.linspace(0, len(frames) - 1, min(4, len(frames))).astype(int))
-            pilot = renderer.render(frames[pilot_idx], spp=pilot_spp, seed=derive_seed(seed, "pilot"))
-            rel = worst_relative_stderr(pilot)
-            spp = samples_for_target(pilot_spp, rel, target_rel_stderr, MAX_SPP)
-            provenance.update(pilot_spp=pilot_spp, pilot_rel_stderr=rel)
+            pilot_frames = frames[pilot_idx]
+
+            def pilot(samples: int):
+                m = renderer.render(pilot_frames, spp=samples, seed=derive_seed(seed, "pilot"))
+                return m.irradiance_w_m2, m.stderr_w_m2
+
+            spp, trail = pilot_to_target(pilot, pilot_spp, target_rel_stderr, MAX_SPP, significance=0.0)
+            provenance.update(pilot_spp=pilot_spp, pilot_trail=trail)
         budget["spp"] = int(spp)
         budget["replicates"] = int(replicates)
 
