@@ -231,7 +231,39 @@ class WorldRenderer:
         (dP, P) : Measurements
             Changes and absolute frame measurements, each (n_frames, n_mixels) with standard errors.
         """
-        n = len(self.mincam)
+        shares = self._check_change_args(frames, background, spp, target_rel_stderr, estimator, strata_shares)
+        background = self.complete_background(frames, background)
+        options = {"estimator": estimator, "strata_shares": strata_shares, "strata_expansions": strata_expansions,
+                   "guide_bounces": guide_bounces}
+        spp, budget = self._resolve_spp(frames, background, int(spp), seed, correlated, target_rel_stderr, options)
+        self.update(background)
+        if estimator == "plain":
+            bg_spp = spp
+            bg = self.estimates(bg_spp, seed)
+        else:  # traced once per run, P = background + dP: a jittered aperture, at least BACKGROUND_MIN_SPP rays
+            bg_spp = max(spp, BACKGROUND_MIN_SPP)
+            bg = whole_aperture_estimates(self.scene, self.sensor, self.mincam, self.replicates, bg_spp,
+                                          derive_seed(seed, "background"))
+        if estimator == "plain":
+            run = _PlainRun(self, background, spp, seed, correlated, bg)
+        else:
+            run = _StratifiedRun(self, frames, background, spp, seed, correlated, shares,
+                                 tuple(strata_expansions), bool(guide_bounces), bg)
+        identity = None
+        if out_dir is not None:
+            identity = self._store_identity(frames, background, spp, seed, correlated, shares, options)
+        values, errors = self._run_frames(run, frames, out_dir, identity, overwrite, show_progress)
+        self.update(background)
+        meta = {"form": "fast_world", "estimator": estimator, **run.meta(values[:, 2 * len(self.mincam):]),
+                "spp_per_mixel_per_frame": spp, "background_spp_per_mixel": int(bg_spp), "seed": seed,
+                "correlated_seeds": correlated, "replicates": self.replicates, "background_w_m2": bg.mean(0).tolist(),
+                "masks": {m.name: mask_model_meta(m.mask) for m in self.mincam},
+                "background_stderr_w_m2": (bg.std(0, ddof=1) / np.sqrt(self.replicates)).tolist(),
+                **backend.describe(), **geometry_meta(self.mincam), **budget}
+        return self._changes(values, errors, meta, run, target_rel_stderr)
+
+    def _check_change_args(self, frames, background, spp, target_rel_stderr, estimator, strata_shares) -> np.ndarray:
+        """Refuse, in one line each, what measure_changes cannot honestly measure; the strata shares as an array."""
         check_frames(frames, background)
         try:
             check_counts(spp, self.replicates)
@@ -249,57 +281,54 @@ class WorldRenderer:
         if shares.ndim != 1 or not np.all(np.isfinite(shares) & (shares > 0)):
             raise InputError(f"strata_shares (share of rays per stratum) must be positive numbers, "
                              f"got {strata_shares!r}")
-        background = self.complete_background(frames, background)
-        budget: dict = {}
-        if target_rel_stderr > 0 and len(frames):
-            pilot_idx = np.unique(np.linspace(0, len(frames) - 1, min(4, len(frames))).astype(int))
+        return shares
 
-            def pilot(samples: int):
-                with warnings.catch_warnings():  # a pilot's fallbacks are said by the run itself
-                    warnings.simplefilter("ignore", FallbackWarning)
-                    warnings.simplefilter("ignore", HeavyTailWarning)
-                    dp, _ = self.measure_changes([frames[i] for i in pilot_idx], background, samples, seed,
-                                                 correlated, estimator=estimator, strata_shares=strata_shares,
-                                                 strata_expansions=strata_expansions, guide_bounces=guide_bounces)
-                return dp.irradiance_w_m2, dp.stderr_w_m2
+    def _resolve_spp(self, frames, background, spp: int, seed: int, correlated: bool, target: float,
+                     options: dict) -> tuple[int, dict]:
+        """``spp`` as given, or (target > 0) the count the pilots extrapolate (:func:`.estimation.pilot_to_target`
+        on up to 4 frames spread over the run), with the pilots' trail."""
+        if not target > 0 or not len(frames):
+            return spp, {}
+        pilot_idx = np.unique(np.linspace(0, len(frames) - 1, min(4, len(frames))).astype(int))
 
-            first = int(spp)
-            spp, trail = pilot_to_target(pilot, first, target_rel_stderr, MAX_SPP)
-            budget = {"pilot_spp": first, "pilot_worst_rel_stderr": trail[0]["worst_rel_stderr"],
-                      "pilot_trail": trail, "target_rel_stderr": target_rel_stderr}
-        self.update(background)
-        if estimator == "plain":
-            bg_spp = spp
-            bg = self.estimates(bg_spp, seed)
-        else:  # traced once per run, P = background + dP: a jittered aperture, at least BACKGROUND_MIN_SPP rays
-            bg_spp = max(int(spp), BACKGROUND_MIN_SPP)
-            bg = whole_aperture_estimates(self.scene, self.sensor, self.mincam, self.replicates, bg_spp,
-                                          derive_seed(seed, "background"))
+        def pilot(samples: int):
+            with warnings.catch_warnings():  # a pilot's fallbacks are said by the run itself
+                warnings.simplefilter("ignore", FallbackWarning)
+                warnings.simplefilter("ignore", HeavyTailWarning)
+                dp, _ = self.measure_changes([frames[i] for i in pilot_idx], background, samples, seed, correlated,
+                                             **options)
+            return dp.irradiance_w_m2, dp.stderr_w_m2
+
+        resolved, trail = pilot_to_target(pilot, spp, target, MAX_SPP)
+        return int(resolved), {"pilot_spp": spp, "pilot_worst_rel_stderr": trail[0]["worst_rel_stderr"],
+                               "pilot_trail": trail, "target_rel_stderr": target}
+
+    def _store_identity(self, frames, background, spp, seed, correlated, shares, options) -> dict:
+        """Everything that determines a run's numbers, for its store."""
+        identity = {"spp": int(spp), "seed": int(seed), "correlated": correlated, "replicates": self.replicates,
+                    "n_frames": len(frames), "frames": _fingerprint(frames),
+                    "background": _fingerprint([background]), "mincam": fingerprint(self.mincam),
+                    "scene": self.content_fingerprint(), "variant": backend.variant(),
+                    "versions": library_versions(), "retry_factor": RETRY_FACTOR}
+        if options["estimator"] != "plain":
+            identity.update(estimator=options["estimator"], strata_shares=shares.tolist(),
+                            strata_expansions=[float(e) for e in options["strata_expansions"]],
+                            guide_bounces=bool(options["guide_bounces"]))
+        return identity
+
+    def _run_frames(self, run: _Run, frames, out_dir, identity, overwrite: bool, show_progress: bool):
+        """Values and errors (n_frames, columns: dP, P, heavy-tailed and unseen flags per mixel, run info) of
+        every frame, from the store where a run with this identity has already measured them."""
         names = self.mincam.names
         columns = ([f"dP_{m}" for m in names] + [f"P_{m}" for m in names]
                    + [f"heavy_tailed_{m}" for m in names] + [f"unseen_{m}" for m in names] + list(INFO_COLUMNS))
         values = np.full((len(frames), len(columns)), np.nan)
         errors = np.full_like(values, np.nan)
-        store = None
-        todo = np.arange(len(frames))
+        store, todo = None, np.arange(len(frames))
         if out_dir is not None:
-            identity = {"spp": int(spp), "seed": int(seed), "correlated": correlated, "replicates": self.replicates,
-                        "n_frames": len(frames), "frames": _fingerprint(frames),
-                        "background": _fingerprint([background]), "mincam": fingerprint(self.mincam),
-                        "scene": self.content_fingerprint(), "variant": backend.variant(),
-                        "versions": library_versions(), "retry_factor": RETRY_FACTOR}
-            if estimator != "plain":
-                identity.update(estimator=estimator, strata_shares=shares.tolist(),
-                                strata_expansions=[float(e) for e in strata_expansions],
-                                guide_bounces=bool(guide_bounces))
             store = ResultStore(out_dir, len(frames), columns, identity, overwrite=overwrite)
             values[:], errors[:] = store.values, store.stderr
             todo = store.pending()
-        if estimator == "plain":
-            run = _PlainRun(self, background, int(spp), seed, correlated, bg)
-        else:
-            run = _StratifiedRun(self, frames, background, int(spp), seed, correlated, shares,
-                                 tuple(strata_expansions), bool(guide_bounces), bg)
         try:
             for i, row_v, row_e, info in run.rows(frames, todo, show_progress):
                 values[i] = np.concatenate([row_v, info])
@@ -309,19 +338,14 @@ class WorldRenderer:
         finally:
             if store is not None:
                 store.close()
-        self.update(background)
+        return values, errors
 
-        meta = {"form": "fast_world", "estimator": estimator, **run.meta(values[:, 2 * n:]),
-                "spp_per_mixel_per_frame": int(spp), "background_spp_per_mixel": int(bg_spp), "seed": seed,
-                "correlated_seeds": correlated,
-                "replicates": self.replicates, "background_w_m2": bg.mean(0).tolist(),
-                "masks": {m.name: mask_model_meta(m.mask) for m in self.mincam},
-                "background_stderr_w_m2": (bg.std(0, ddof=1) / np.sqrt(self.replicates)).tolist(),
-                **backend.describe(), **geometry_meta(self.mincam)}
-        meta.update(budget)
+    def _changes(self, values, errors, meta: dict, run: _Run, target: float) -> tuple[Measurements, Measurements]:
+        """(dP, P) with the reached noise in their meta, and the run's warnings said."""
+        n, names = len(self.mincam), self.mincam.names
         reached = worst_relative_stderr(values[:, :n], errors[:, :n], significance=3.0)
         meta["reached_rel_stderr"] = reached if np.isfinite(reached) else None
-        warn_target_missed(reached, target_rel_stderr, int(spp), MAX_SPP)
+        warn_target_missed(reached, target, meta["spp_per_mixel_per_frame"], MAX_SPP)
         run.warn(meta)
         warn_unreached(Measurements(values[:, n:2 * n], errors[:, n:2 * n], names))
         dp = Measurements(values[:, :n], errors[:, :n], names, {**meta, "quantity": "dP = P(frame) - P(background)"})
