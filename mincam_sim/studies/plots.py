@@ -57,7 +57,7 @@ def plot_study(ds, metrics: list[str] | None = None, path: str | Path = "study.p
     x_factor, x_shown = display_scale(ds[x].values, x_unit)
     ncols = min(3, len(metrics))
     nrows = -(-len(metrics) // ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(4.6 * ncols, 3.6 * nrows), squeeze=False)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(4.6 * ncols, 3.6 * nrows), squeeze=False, layout="constrained")
     for ax in axes.flat[len(metrics):]:
         ax.set_visible(False)
     for ax, metric in zip(axes.flat, metrics, strict=False):
@@ -90,7 +90,6 @@ def plot_study(ds, metrics: list[str] | None = None, path: str | Path = "study.p
     crn = " common random numbers," if ds.attrs.get("common_random_numbers") else ""
     fig.suptitle(f"study {ds.attrs.get('study', '')} ({ds.attrs.get('experiment', '')}):{crn} error bars = 1 "
                  f"standard error ({reps} replicates)", fontsize=10)
-    fig.tight_layout()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:

@@ -17,6 +17,7 @@ Targets (:func:`study_target`):
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import tempfile
 from collections.abc import Callable
@@ -158,6 +159,24 @@ def _numeric_details(result: dict) -> dict:
     return out
 
 
+@contextlib.contextmanager
+def _figures_not_saved():
+    """A study keeps an experiment's numbers, not its per-run figures (drawing them is most of a quick point's
+    time): while a point runs, :mod:`mincam_sim.plots` closes its figures instead of saving them."""
+    from .. import plots
+
+    def close(fig, path):
+        plots.plt.close(fig)
+        return Path(path)
+
+    saved = plots._save
+    plots._save = close
+    try:
+        yield
+    finally:
+        plots._save = saved
+
+
 def _experiment_point(name: str) -> PointFunction:
     def point(params: dict, seed: int, quick: bool) -> dict:
         from ..experiments import REGISTRY, Setup
@@ -168,7 +187,7 @@ def _experiment_point(name: str) -> PointFunction:
                                     **{k: v for k, v in params.items() if k in setup_keys})
         exp_params = dataclasses.replace(exp.params(quick), **{k: v for k, v in params.items()
                                                                 if k not in setup_keys})
-        with tempfile.TemporaryDirectory(prefix=f"study_{name}_") as tmp:
+        with tempfile.TemporaryDirectory(prefix=f"study_{name}_") as tmp, _figures_not_saved():
             result = exp.run(setup, exp_params, Path(tmp)).as_dict()
         return _numeric_details(result)
     return point
@@ -202,8 +221,8 @@ def _flat_numeric(raw: dict) -> dict:
         given = raw.get(section, {})
         for key, default in defaults.items():
             value = given.get(key, default)
-            if isinstance(value, int | float) and not isinstance(value, bool):
-                out[f"{section}.{key}"] = value
+            if isinstance(value, int | float) and not isinstance(value, bool) and f"{section}.{key}" != "run.seed":
+                out[f"{section}.{key}"] = value  # run.seed is the study's: [study] seed and replicates
     return out
 
 
