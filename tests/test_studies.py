@@ -15,8 +15,8 @@ import pytest
 from mincam_sim.errors import ConfigError, OutDirLockedError, StaleResultError, StoreError
 from mincam_sim.studies import load_study, plot_study, run_study
 from mincam_sim.studies import runner as runner_mod
-from mincam_sim.studies.points import SPACING
 from mincam_sim.studies.plots import display_scale
+from mincam_sim.studies.points import SPACING
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = {
@@ -283,3 +283,24 @@ def test_shipped_studies_run_with_quick_from_the_command_line(tmp_path, name):
     spec = load_study(ROOT / "scenes" / "studies" / f"{name}.toml", quick=True)
     for metric in spec.metrics:
         assert np.any(np.isfinite(ds[metric].values)) and np.any(np.isfinite(ds[f"{metric}_stderr"].values))
+
+
+def test_a_design_point_reads_the_design_result(monkeypatch):
+    """The design target's plumbing (a real design point takes minutes: not run here): the point calls
+    ``run_design`` with its dpi and seed and returns the baseline's and the design's error rates."""
+    import mincam_sim.design as design_mod
+    from mincam_sim.studies import study_target
+
+    seen = {}
+
+    def fake(task, out_dir, quick=False, seed=0, dpi=600.0, show_progress=False):
+        seen.update(task=task, quick=quick, seed=seed, dpi=dpi)
+        return {"baseline": {"avg_error_pct": 3.0, "max_error_pct": 7.0},
+                "designed": {"avg_error_pct": 1.5, "max_error_pct": None}}
+
+    monkeypatch.setattr(design_mod, "run_design", fake)
+    target = study_target({"name": "design"})
+    out = target.point({"dpi": 1200.0}, 5, True)
+    assert seen == {"task": "tracking", "quick": True, "seed": 5, "dpi": 1200.0}
+    assert out["baseline_avg_error_pct"] == 3.0 and out["designed_avg_error_pct"] == 1.5
+    assert np.isnan(out["designed_max_error_pct"]) and set(out) == set(target.metrics)

@@ -82,7 +82,11 @@ def plot_study(ds, metrics: list[str] | None = None, path: str | Path = "study.p
                         ms=4, capsize=3)
         ax.set_xlabel(axis_label(x, x_shown))
         ax.set_ylabel(axis_label(metric, unit))
-        ax.xaxis.set_major_locator(MaxNLocator(nbins=6))
+        xs = np.asarray(ds[x].values, dtype=float)
+        if np.all(xs > 0) and xs.max() / xs.min() >= 100:  # values over decades (read noise 1 ... 1000 e-)
+            ax.set_xscale("log")
+        else:
+            ax.xaxis.set_major_locator(MaxNLocator(nbins=6))
         ax.grid(alpha=0.3)
         if np.all(np.isnan(da.values)):
             ax.text(0.5, 0.5, "no finished points", transform=ax.transAxes, ha="center")

@@ -26,6 +26,7 @@ import os
 import shutil
 import sys
 import time
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 
@@ -73,8 +74,12 @@ def compute_point(ref: dict, params: dict, seeds: list[int], quick: bool, metric
     threads = os.environ.get(ENV_THREADS)
     if threads:
         backend.cap_threads(int(threads))
+    from ..calibration import ExtrapolationWarning
+
     target = study_target(ref)
-    runs = [target.point(dict(params), int(seed), bool(quick)) for seed in seeds]
+    with warnings.catch_warnings():  # studies use calibrations away from their range on purpose: the error shows it
+        warnings.simplefilter("ignore", ExtrapolationWarning)
+        runs = [target.point(dict(params), int(seed), bool(quick)) for seed in seeds]
     out = {}
     for m in metrics:
         values = np.array([float(r.get(m, np.nan)) for r in runs])
