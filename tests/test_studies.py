@@ -289,3 +289,18 @@ def test_a_design_point_reads_the_design_result(monkeypatch):
     assert seen == {"task": "tracking", "quick": True, "seed": 5, "dpi": 1200.0}
     assert out["baseline_avg_error_pct"] == 3.0 and out["designed_avg_error_pct"] == 1.5
     assert np.isnan(out["designed_max_error_pct"]) and set(out) == set(target.metrics)
+
+
+def test_a_point_the_experiment_refuses_is_named_and_the_others_kept(tmp_path, monkeypatch):
+    spec = load_study(TINY, quick=True)
+    original = runner_mod.compute_point
+
+    def refusing(ref, params, *args):
+        if params["spacing_m"] == 0.05 and params["depth_m"] == 0.8:
+            raise ValueError("only 6 of 8 calibration squares lie inside every mixel's field of view")
+        return original(ref, params, *args)
+
+    monkeypatch.setattr(runner_mod, "compute_point", refusing)
+    with pytest.raises(ConfigError, match=r"point \(spacing_m=0.05, depth_m=0.8\): only 6 of 8"):
+        _run(spec, tmp_path, workers=1)
+    assert len(list((tmp_path / "points").iterdir())) == 3

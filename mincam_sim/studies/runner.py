@@ -243,6 +243,17 @@ def _write_point(spec: StudySpec, store: Path, records: Path, index: tuple[int, 
         raise _wrap_os_error(err, "the completion record", path) from None
 
 
+def _refused_point(spec: StudySpec, index: tuple[int, ...], compute: Callable[[], dict]) -> dict:
+    """``compute()``; an experiment's refusal of the point's parameters (a ValueError) names the point."""
+    try:
+        return compute()
+    except ConfigError:
+        raise
+    except ValueError as err:
+        raise ConfigError(f"study {spec.name}, point ({_label(spec, index)}): {err}; change the grid (the points "
+                          "computed so far are kept)") from None
+
+
 def _stderr_say(message: str) -> None:
     print(message, file=sys.stderr)
 
@@ -320,7 +331,8 @@ def _run_locked(spec, workers, scheduler, quick, out, overwrite, show_progress, 
     t0 = time.perf_counter()
     if pending and scheduler is None and n_workers == 1:
         for idx, params in progress(pending, desc=f"study {spec.name}", disable=not show_progress):
-            result = compute_point(spec.experiment.ref, params, point_seeds(spec, params), quick, list(spec.metrics))
+            result = _refused_point(spec, idx, lambda p=params: compute_point(
+                spec.experiment.ref, p, point_seeds(spec, p), quick, list(spec.metrics)))
             _write_point(spec, store, records, idx, params, result)
     elif pending:
         _run_distributed(spec, store, records, pending, n_workers, scheduler, quick, show_progress, out)
@@ -362,7 +374,7 @@ def _run_distributed(spec, store, records, pending, n_workers, scheduler, quick,
         for future in progress(as_completed(futures), desc=f"study {spec.name}", total=len(futures),
                                disable=not show_progress):
             idx, params = futures[future]
-            _write_point(spec, store, records, idx, params, future.result())
+            _write_point(spec, store, records, idx, params, _refused_point(spec, idx, future.result))
     finally:
         client.close()
         if cluster is not None:
