@@ -30,13 +30,15 @@ def _run(spec, out, **kw):
 
 
 def test_two_workers_equal_one(tmp_path):
+    import xarray as xr
+
     spec = load_study(TINY, quick=True)
     serial, s1 = _run(spec, tmp_path / "one", workers=1)
     parallel, s2 = _run(spec, tmp_path / "two", workers=2)
     assert s1["points_computed"] == s2["points_computed"] == 4 and s2["workers"] == 2
     for var in runner_mod.variables(spec):
         assert np.all(np.isfinite(serial[var].values)), var
-        np.testing.assert_array_equal(serial[var].values, parallel[var].values)
+    xr.testing.assert_identical(serial, parallel)  # values, coordinates, units and the study's identity
     assert serial["avg_after_pct"].dims == ("spacing_m", "depth_m")
     assert (tmp_path / "two" / "summary.json").is_file()
 

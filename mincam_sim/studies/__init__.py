@@ -3,9 +3,9 @@ keys or of the mask design, run on ``dask.distributed``, stored as an xarray Dat
 error beside every metric; resumable, verified on reuse, the same numbers on 1 or N workers."""
 
 from .plots import plot_study
-from .points import STUDY_EXPERIMENTS, StudyExperiment, study_target, target_names, unit_of
+from .points import StudyExperiment, study_target, target_names, unit_of
 from .runner import compute_point, point_seed, point_seeds, run_study
 from .spec import StudySpec, load_study
 
-__all__ = ["STUDY_EXPERIMENTS", "StudyExperiment", "StudySpec", "compute_point", "load_study", "plot_study",
+__all__ = ["StudyExperiment", "StudySpec", "compute_point", "load_study", "plot_study",
            "point_seed", "point_seeds", "run_study", "study_target", "target_names", "unit_of"]

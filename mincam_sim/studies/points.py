@@ -319,7 +319,3 @@ def study_target(ref: dict) -> StudyExperiment:
     if name in REGISTRY and name in _EXPERIMENT_METRICS:
         return _registry_target(name)
     raise ConfigError(f"[study] experiment = {name!r} is not one of {', '.join(map(repr, target_names()))}")
-
-
-#: Kept for callers of the old API: the screen boundary sweep (now named ``spacing``).
-STUDY_EXPERIMENTS: dict[str, StudyExperiment] = {SPACING.name: SPACING}
