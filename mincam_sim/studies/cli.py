@@ -11,7 +11,7 @@ import typer
 def run_study_command(study_file: Path, workers: int | None, scheduler: str | None, out_dir: Path | None,
                       quick: bool, overwrite: bool, quiet: bool = False, max_points: int | None = None) -> None:
     """Run a parameter study on dask.distributed; results.zarr (xarray), summary.json and a plot in --out."""
-    from ..errors import ConfigError
+    from ..errors import ConfigError, StoreError
     from .plots import plot_study
     from .runner import run_study
     from .spec import DEFAULT_MAX_POINTS, load_study
@@ -22,7 +22,11 @@ def run_study_command(study_file: Path, workers: int | None, scheduler: str | No
     out = out_dir or spec.out_dir
     ds, summary = run_study(spec, workers=workers, scheduler=scheduler, quick=quick, out_dir=out,
                             overwrite=overwrite, show_progress=not quiet, say=lambda m: typer.echo(m, err=True))
-    plot = plot_study(ds, list(spec.metrics), Path(out) / "study.png")
+    try:
+        plot = plot_study(ds, list(spec.metrics), Path(out) / "study.png")
+    except OSError as err:
+        raise StoreError(f"cannot write {err.filename or Path(out) / 'study.png'}: {err.strerror or err}; the "
+                         f"results are complete in {out}/results.zarr") from None
     typer.echo(f"study {spec.name}: {summary['points_total']} points x {spec.replicates} replicates "
                f"({summary['points_computed']} computed, {summary['points_reused']} reused) on {summary['workers']} "
                f"workers in {summary['wall_seconds']:.1f} s")
