@@ -423,7 +423,7 @@ def bench_study_scaling() -> dict:
 
     from mincam_sim.studies import load_study, run_study
 
-    raw = {"study": {"name": "bench", "experiment": "intrusion", "seed": 0},
+    raw = {"study": {"name": "bench", "experiment": "spacing", "seed": 0, "replicates": 1},
            "grid": {"spacing_m": [0.0, 0.02, 0.033, 0.06], "depth_m": [0.5, 1.0]}}
     spec = load_study(raw)
     seconds = {}

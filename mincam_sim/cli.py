@@ -132,7 +132,7 @@ masks_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None,
                         help="Generate the mask library or export print-ready masks.")
 app.add_typer(masks_app, name="masks")
 study_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None,
-                        help="Parameter studies: `run STUDY.toml` on dask (xarray/Zarr results), `spacing`.")
+                        help="Parameter studies: `run STUDY.toml` on dask (xarray/Zarr results).")
 app.add_typer(study_app, name="study")
 
 
@@ -496,41 +496,22 @@ def reproduce(
 @study_app.command("run")
 def study_run(
     study_file: Annotated[Path, typer.Argument(help="study TOML (see scenes/studies/*.toml)")],
-    workers: Annotated[int | None, typer.Option(help="process workers of the embedded dask cluster "
-                                                     "(default min(2, cores); 0 = serial in this process)")] = None,
+    workers: Annotated[int | None, typer.Option(help="workers: 1 = in this process, >= 2 = process workers of "
+                                                     "an embedded dask cluster (default min(2, cores))")] = None,
     scheduler: Annotated[str | None, typer.Option(help="address of an existing dask scheduler, e.g. "
                                                        "tcp://host:8786 (a dask-jobqueue cluster)")] = None,
     out_dir: Annotated[Path | None, typer.Option("--out", help="output folder (default: [study] out_dir)")] = None,
     quick: Annotated[bool, typer.Option("--quick", help="the study's [quick] lists, fast points (~1 min)")] = False,
     overwrite: Annotated[bool, typer.Option("--overwrite", help="replace a different study's results")] = False,
+    max_points: Annotated[int | None, typer.Option("--max-points", help="refuse studies with more points than "
+                                                                         "this (default 10000)")] = None,
 ) -> None:
     """Run a parameter study on dask.distributed: results.zarr (xarray), summary.json and study.png in --out."""
     from .studies.cli import run_study_command
 
     check_variant()
-    run_study_command(study_file, workers, scheduler, out_dir, quick, overwrite, quiet=not _show_progress())
-
-
-@study_app.command("spacing")
-def study(
-    out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out/study"),
-    quick: Annotated[bool, typer.Option("--quick", help="fewer spacings and depths")] = False,
-    config: Annotated[Path | None, typer.Option("--config", help="reproduce TOML ([setup], [spacing])")] = None,
-) -> None:
-    """Intrusion error against mixel spacing (0-10 cm) and depth, before/after calibration (serial)."""
-    from .experiments import reproduce as run
-
-    setup, params = _reproduce_config(config, quick)
-    check_variant()
-    check_out_dir(out_dir)
-    _announce_variant()
-    with lock_out_dir(out_dir):
-        result = run(["spacing"], setup, out_dir, show_progress=_show_progress(), params=params)["spacing"]
-    typer.echo("spacing [cm]  " + "  ".join(f"{100 * s:6.1f}" for s in result["spacing_m"]))
-    for depth, rows in result["by_depth"].items():
-        typer.echo(f"d={depth} m avg error before [%] " + " ".join(f"{v:6.2f}" for v in rows["avg_before_pct"]))
-        typer.echo(f"d={depth} m avg error after  [%] " + " ".join(f"{v:6.2f}" for v in rows["avg_after_pct"]))
-    typer.echo(f"# spacing_study.json and spacing_study.png in {out_dir}")
+    run_study_command(study_file, workers, scheduler, out_dir, quick, overwrite, quiet=not _show_progress(),
+                      max_points=max_points)
 
 
 @app.command()

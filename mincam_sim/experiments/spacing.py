@@ -112,7 +112,8 @@ class Spacing(Experiment):
         irradiance, true = boundary_sweep_irradiance(setup, depth_m, params.positions, params.samples_per_texel,
                                                      params.screen_texels, params.boundary_x_m, params.band_m,
                                                      params.square_m)
-        dn = setup.sensor().auto_exposed(float(irradiance.max()), setup.exposure_fill).expected(irradiance)
+        sensor = setup.sensor().auto_exposed(float(irradiance.max()), setup.exposure_fill)
+        dn = sensor.expected(irradiance) - sensor.expected(np.zeros(irradiance.shape[1]))  # minus the dark level
         return intrusion_position(dn[:, 0], dn[:, 1]), true
 
     def run(self, setup: Setup, params: SpacingParams, out_dir: Path,

@@ -4,25 +4,36 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import typer
 
 
 def run_study_command(study_file: Path, workers: int | None, scheduler: str | None, out_dir: Path | None,
-                      quick: bool, overwrite: bool, quiet: bool = False) -> None:
+                      quick: bool, overwrite: bool, quiet: bool = False, max_points: int | None = None) -> None:
     """Run a parameter study on dask.distributed; results.zarr (xarray), summary.json and a plot in --out."""
+    from ..errors import ConfigError, StoreError
     from .plots import plot_study
     from .runner import run_study
-    from .spec import load_study
+    from .spec import DEFAULT_MAX_POINTS, load_study
 
-    spec = load_study(study_file, quick=quick)
+    if workers is not None and workers < 1:  # before anything is read or started
+        raise ConfigError(f"--workers must be an integer >= 1 (1 = in this process), got {workers}")
+    spec = load_study(study_file, quick=quick, max_points=DEFAULT_MAX_POINTS if max_points is None else max_points)
     out = out_dir or spec.out_dir
     ds, summary = run_study(spec, workers=workers, scheduler=scheduler, quick=quick, out_dir=out,
-                            overwrite=overwrite, show_progress=not quiet)
-    plot = plot_study(ds, list(spec.metrics), Path(out) / "study.png")
-    typer.echo(f"study {spec.name}: {summary['points_total']} points ({summary['points_computed']} computed, "
-               f"{summary['points_reused']} reused) on {summary['workers']} workers in "
-               f"{summary['wall_seconds']:.1f} s")
+                            overwrite=overwrite, show_progress=not quiet, say=lambda m: typer.echo(m, err=True))
+    try:
+        plot = plot_study(ds, list(spec.metrics), Path(out) / "study.png")
+    except OSError as err:
+        raise StoreError(f"cannot write {err.filename or Path(out) / 'study.png'}: {err.strerror or err}; the "
+                         f"results are complete in {out}/results.zarr") from None
+    typer.echo(f"study {spec.name}: {summary['points_total']} points x {spec.replicates} replicates "
+               f"({summary['points_computed']} computed, {summary['points_reused']} reused) on {summary['workers']} "
+               f"workers in {summary['wall_seconds']:.1f} s")
     for metric in spec.metrics:
-        values = ds[metric].values
-        typer.echo(f"  {metric}: min {values.min():.3g}, max {values.max():.3g}")
+        values, se = ds[metric].values, ds[f"{metric}_stderr"].values
+        unit = ds[metric].attrs.get("units", "")
+        worst = np.nanmax(se) if np.any(np.isfinite(se)) else float("nan")
+        typer.echo(f"  {metric} [{unit}]: min {np.nanmin(values):.3g}, max {np.nanmax(values):.3g} "
+                   f"(standard error up to {worst:.2g})")
     typer.echo(f"# {out}/results.zarr, summary.json, {plot.name}")
