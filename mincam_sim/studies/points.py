@@ -27,6 +27,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConfigError
+from ..optics import DEFAULT_D_F_M, DEFAULT_DETECTOR_SIZE_M, PAPER_SPACING_M
+from ..sensor import SensorModel
 
 PointFunction = Callable[[dict, int, bool], dict]
 
@@ -116,8 +118,9 @@ SPACING = StudyExperiment(
     name="spacing",
     description="1D intrusion error on a screen vs mincam geometry and sensor noise (calibrated at one depth, "
                 "used at another): the spacing experiment, one point per set-up",
-    parameters={"spacing_m": 0.033, "depth_m": 0.5, "calibration_depth_m": 0.5, "d_f_m": 2e-3,
-                "detector_size_m": 1e-4, "bit_depth": 12, "read_noise_e": 2.5},
+    parameters={"spacing_m": PAPER_SPACING_M, "depth_m": 0.5, "calibration_depth_m": 0.5, "d_f_m": DEFAULT_D_F_M,
+                "detector_size_m": DEFAULT_DETECTOR_SIZE_M, "bit_depth": SensorModel.paper_prototype().bit_depth,
+                "read_noise_e": SensorModel.paper_prototype().read_noise_e},
     metrics=tuple(f"{p}{k}" for p in ("", "noisy_") for k in ("avg_before_pct", "max_before_pct", "avg_after_pct",
                                                               "max_after_pct", "missing_pct")),
     point=_spacing_point,
