@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import imageio
+from ..atomic import atomic_path
 from .mask import Mask
 
 _LUMA_709 = np.array([0.2126, 0.7152, 0.0722])
@@ -135,6 +136,8 @@ def save_exr(mask: Mask, path: str | Path) -> Path:
     The header records ``width_m``, ``height_m``, ``units`` ("m"), ``name``, the array convention and the
     mask's ``meta``; :func:`load` reads them back (values exact to float32, ~6e-8).
 
+    The file is written atomically (a temporary file beside it, moved into place when complete).
+
     Returns
     -------
     Path
@@ -149,4 +152,7 @@ def save_exr(mask: Mask, path: str | Path) -> Path:
         "convention": "row 0 = top, column 0 = left, as seen from the detector looking out",
         "meta": mask.meta,
     }
-    return imageio.write_exr(path, mask.transmission, ("Y",), metadata)
+    path = Path(path)
+    with atomic_path(path) as tmp:  # a full disk or a kill leaves the old file or none, never a torn one
+        imageio.write_exr(tmp, mask.transmission, ("Y",), metadata)
+    return path
