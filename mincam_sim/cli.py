@@ -335,6 +335,8 @@ def render(
     figures = [plot_render(m, out / "measurements.png", cfg.frame_positions_m, cfg.frames_kind)]
     if maps is not None:
         figures.append(plot_response_maps(maps, cfg.screen, out / "response_maps.png"))
+    elif cfg.run.form == "response_map" and (out / "response_maps.png").is_file():
+        figures.append(out / "response_maps.png")  # a finished run shown again: its maps' figure is still there
     np.set_printoptions(precision=6, suppress=False, linewidth=120)
     typer.echo(f"# {m.n_frames} frames x {len(m.mixel_names)} mixels, irradiance [W/m^2] +/- stderr, "
                f"variant {m.meta.get('variant')}, worst relative stderr {m.meta['reached_rel_stderr']:.2e}")
