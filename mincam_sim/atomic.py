@@ -75,10 +75,26 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     except OSError as err:
         _remove_quietly(tmp)
         raise _naming(err, path) from err
+    except RuntimeError as err:
+        _remove_quietly(tmp)
+        if tmp.name not in str(err):
+            raise
+        raise _writer_failure(err, tmp, path) from err
     except BaseException:
         _remove_quietly(tmp)
         raise
     fsync_dir(path.parent)
+
+
+def _writer_failure(err: RuntimeError, tmp: Path, path: Path) -> OSError:
+    """A C++ writer's RuntimeError about the temporary file (OpenEXR: "Failed to write ... File too large") as
+    an ``OSError`` naming the destination, with the errno its text implies (ENOSPC, EFBIG, else EIO)."""
+    import errno
+
+    text = " ".join(str(err).replace(str(tmp), str(path)).replace(tmp.name, path.name).split())
+    code = errno.ENOSPC if "space" in text.lower() else errno.EFBIG if "too large" in text.lower() else errno.EIO
+    strerror = os.strerror(code) if code != errno.EIO else f"cannot write the file ({text})"
+    return OSError(code, strerror, str(path))
 
 
 def _naming(err: OSError, path: Path) -> OSError:

@@ -71,7 +71,7 @@ def user_error_message(err: BaseException) -> str:
         target = f": {err.filename}" if err.filename else ""
         other = f" -> {err.filename2}" if getattr(err, "filename2", None) else ""
         fix = ""
-        if err.errno in (errno.ENOSPC, errno.EDQUOT):
+        if err.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
             fix = " (nothing half-written is left there); free some space or choose another output location"
         elif err.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
             fix = "; choose an output location you can write to"
@@ -472,6 +472,9 @@ def _print_reused(results: dict, out_dir: Path) -> None:
                    f"{', '.join(reused)}; --overwrite recomputes")
 
 
+MIN_BIT_DEPTH = 2  # reproduce --quick runs at 2 bits (large errors); at 1 bit the calibration fit is singular
+
+
 def _reproduce_config(config: Path | None, quick: bool, **flags: Any) -> tuple[Any, dict]:
     """Set-up and parameters from an optional reproduce config, then the command-line flags given."""
     from .experiments import load_reproduce_config
@@ -483,13 +486,18 @@ def _reproduce_config(config: Path | None, quick: bool, **flags: Any) -> tuple[A
     if given.get("seed", 0) < 0:
         raise ConfigError(f"--seed must be an integer >= 0, got {given['seed']}")
     try:
-        return load_reproduce_config(config, quick=quick, **given)
+        setup, params = load_reproduce_config(config, quick=quick, **given)
     except ConfigError as err:
         text = str(err)
         if not text.startswith("[command line]"):
             raise
         flag = re.sub(r"Setup\.(\w+)", lambda m: "--" + m.group(1).replace("_", "-"), text)
         raise ConfigError(flag.replace("[command line]: ", "")) from None
+    if getattr(setup, "bit_depth", MIN_BIT_DEPTH) < MIN_BIT_DEPTH:
+        where = "--bit-depth" if "bit_depth" in given else "[setup] bit_depth"
+        raise ConfigError(f"{where} = {setup.bit_depth}: give 2 to 32 bits (the paper: 12); a 1-bit ADC reads every "
+                          "change as 0 or 1 DN and the calibration has nothing to fit")
+    return setup, params
 
 
 @app.command()
