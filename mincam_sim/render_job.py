@@ -94,6 +94,9 @@ def run_render_config(
     identity = config_identity(cfg, backend.variant())  # the variant in use: CUDA and LLVM differ in the last bits
     key = run_key(identity)
     with lock_out_dir(out):
+        finished = not overwrite and reuse and _finished_results(out, key, len(cfg.frames)) is not None
+        if time_limit_s is not None and not finished:  # before anything is written: a refusal claims nothing
+            check_budget(cfg, backend.variant(), time_limit_s)
         if overwrite:
             clear_store(run_dir, extra=("response_maps.npz",))
         same = check_identity(out, identity, overwrite=overwrite)
@@ -104,8 +107,6 @@ def run_render_config(
                     say(f"mincam-sim: {out} holds the finished results of this same run; shown again (--overwrite "
                         "renders anew)")
                 return done, None
-        if time_limit_s is not None:
-            check_budget(cfg, backend.variant(), time_limit_s)
         _, rounding = traced_samples(cfg.run)
         if rounding is not None and say is not None:
             say(f"mincam-sim: {rounding}")

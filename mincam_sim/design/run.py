@@ -27,6 +27,12 @@ def _summary(res: dict) -> dict:
 IDENTITY_FILE = "design_identity.json"
 
 
+def design_identity(task_name: str, task: tr.TrackingTask, quick: bool, seed: int) -> dict:
+    """Everything a design's outputs depend on: task, its sizes (dpi included), seed and library versions."""
+    return {"task": task_name, "quick": bool(quick), "seed": int(seed), "setup": task.as_dict(),
+            "versions": library_versions()}
+
+
 def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: int = 0, dpi: float = 600.0,
                show_progress: bool = False, overwrite: bool = False) -> dict:
     """Design masks for ``task_name`` and write the outputs in ``out_dir``; return the ``design.json`` dict.
@@ -64,8 +70,7 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
     task = tr.TrackingTask.quick(seed) if quick else tr.TrackingTask(seed=seed)
     task = replace(task, dpi=float(dpi))
     film = task.film()
-    identity = {"task": task_name, "quick": bool(quick), "seed": int(seed), "setup": task.as_dict(),
-                "versions": library_versions()}
+    identity = design_identity(task_name, task, quick, seed)
     if (out / "design.json").exists() and not overwrite:
         if not (out / IDENTITY_FILE).exists():
             raise StaleResultError(f"{out} holds a finished design without a record of what it was computed from "
