@@ -35,7 +35,8 @@ def _save(fig, path: str | Path) -> Path:
 def plot_render(m: Measurements, path: str | Path, positions_m: np.ndarray | None = None,
                 kind: str = "line_sweep") -> Path:
     """What a render measured: each mixel's irradiance with 2-sigma error bars against the frame's position
-    (a line sweep: the square's x or y on the screen, whichever changes more) or against the frame number.
+    (a line sweep: the square's x or y on the screen, whichever changes more) or against the frame number; a
+    grid sweep adds each mixel's irradiance as an image over the square's positions.
 
     Parameters
     ----------
@@ -57,7 +58,24 @@ def plot_render(m: Measurements, path: str | Path, positions_m: np.ndarray | Non
     else:
         x = np.arange(n)
         xlabel = "frame" + (" (grid sweep, row by row)" if kind == "grid_sweep" else "")
-    fig, ax = plt.subplots(figsize=(6.4, 3.8))
+    grid = _grid_of(positions_m, n) if kind == "grid_sweep" else None
+    if grid is None:
+        fig, ax = plt.subplots(figsize=(6.4, 3.8))
+    else:
+        k_mixels = len(m.mixel_names)
+        fig = plt.figure(figsize=(max(6.4, 3.2 * k_mixels), 7.0))
+        top = fig.subfigures(2, 1, height_ratios=[1.1, 1])
+        maps = top[0].subplots(1, k_mixels, squeeze=False)[0]
+        ax = top[1].subplots()
+        xs, ys, index = grid
+        for k, (name, mx) in enumerate(zip(m.mixel_names, maps, strict=True)):
+            img = np.full((len(ys), len(xs)), np.nan)
+            img[index[:, 1], index[:, 0]] = m.irradiance_w_m2[:, k]
+            im = mx.imshow(img, origin="lower", cmap="magma", aspect="auto", extent=_cell_extent_cm(xs, ys))
+            mx.set_title(f"mixel {name}", fontsize=9)
+            mx.set_xlabel("square x [cm]")
+            mx.set_ylabel("square y [cm]")
+            top[0].colorbar(im, ax=mx, label="irradiance [W/m$^2$]")
     for k, name in enumerate(m.mixel_names):
         ax.errorbar(x, m.irradiance_w_m2[:, k], yerr=2 * m.stderr_w_m2[:, k], marker="o", ms=3, capsize=2,
                     lw=1, label=f"mixel {name}")
@@ -83,6 +101,27 @@ def plot_sweep(positions_m: np.ndarray, m: Measurements, path: str | Path, xlabe
     ax.legend()
     ax.grid(alpha=0.3)
     return _save(fig, path)
+
+
+def _grid_of(positions_m, n: int):
+    """(x values, y values, (n, 2) column/row index of each frame) of a grid sweep's positions, or None."""
+    if positions_m is None:
+        return None
+    pos = np.asarray(positions_m, dtype=np.float64).reshape(n, -1)[:, :2]
+    xs, ix = np.unique(np.round(pos[:, 0], 12), return_inverse=True)
+    ys, iy = np.unique(np.round(pos[:, 1], 12), return_inverse=True)
+    if len(xs) * len(ys) != n:
+        return None
+    return xs, ys, np.column_stack([ix, iy])
+
+
+def _cell_extent_cm(xs: np.ndarray, ys: np.ndarray) -> list[float]:
+    """imshow extent [cm] putting each cell's centre on its grid position (half a step beyond the ends)."""
+    def edges(v: np.ndarray) -> tuple[float, float]:
+        half = (v[-1] - v[0]) / (2 * (len(v) - 1)) if len(v) > 1 else 0.005
+        return 100 * (v[0] - half), 100 * (v[-1] + half)
+
+    return [*edges(xs), *edges(ys)]
 
 
 def plot_response_maps(maps, screen: Screen, path: str | Path):

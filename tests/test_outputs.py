@@ -409,3 +409,15 @@ def test_a_render_refused_by_the_budget_claims_nothing(tmp_path):
     with pytest.raises(ConfigError, match="--time-limit-s"):
         run_render_config(cfg, time_limit_s=60.0)
     assert not (tmp_path / "out" / "identity.json").exists()  # another config may use the folder next
+
+
+def test_grid_sweep_figure_has_a_map_per_mixel(monkeypatch):
+    plots, figs = _capture(monkeypatch)
+    xs, ys = np.meshgrid([-0.1, 0.0, 0.1], [-0.05, 0.05])
+    pos = np.column_stack([xs.ravel(), ys.ravel()])
+    m = Measurements(np.column_stack([pos[:, 0] + 1, pos[:, 1] + 1]), np.full((6, 2), 0.01), ["a", "b"],
+                     {"frame_positions_m": pos.tolist()})
+    plots.plot_render(m, "g.png", pos, "grid_sweep")
+    images = [ax.images[0].get_array() for ax in figs[0].axes if ax.images]
+    assert len(images) == 2
+    assert images[0][1, 2] == pytest.approx(1.1) and images[1][0, 0] == pytest.approx(0.95)  # (x, y) in place
