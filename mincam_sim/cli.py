@@ -407,6 +407,8 @@ def masks_export(
     sheet = out.with_name(f"{out.stem}_sheet.png") if sheet is None else sheet
     if sheet.suffix.lower() not in (".png", ".pdf"):
         raise ConfigError(f"--sheet {sheet}: give a name ending in .png (at --dpi) or .pdf")
+    if sheet.resolve() == out.resolve():
+        raise ConfigError(f"--sheet {sheet} is the --out file; give the sheet another name")
     check_out_file(out, "--out file")
     check_out_file(sheet, "--sheet file")
     if preview is not None:
