@@ -108,8 +108,8 @@ def run_render_config(
                         "renders anew)")
                 return done, None
         _, rounding = traced_samples(cfg.run)
-        if rounding is not None and say is not None:
-            say(f"mincam-sim: {rounding}")
+        if rounding is not None and say is not None and not (run_dir / "run.json").exists():
+            say(f"mincam-sim: {rounding}")  # on a fresh start only: a resumed run said it when it started
         m, maps = render_frames(
             cfg.mincam, cfg.screen, cfg.frames, cfg.run.form, cfg.run.spp, cfg.run.samples_per_texel,
             cfg.run.target_rel_stderr, cfg.run.seed, cfg.run.replicates, out_dir=run_dir,
