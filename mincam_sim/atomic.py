@@ -3,8 +3,9 @@
 Every helper writes into a temporary file in the destination's directory (same file system), flushes and
 ``fsync``s it, then ``os.replace``s it over the destination and ``fsync``s the directory. If anything fails
 (an exception, a full disk, a failing ``os.replace``) the temporary file is removed and the destination is left
-as it was. A process killed mid-write leaves at most a hidden ``.<name>.tmp-*`` file beside the destination,
-never a partial destination.
+as it was; an ``OSError`` (e.g. ``No space left on device``) is re-raised naming the destination file. A
+process killed mid-write leaves at most a hidden ``.<name>.tmp-*`` file beside the destination, never a partial
+destination.
 
 Use :func:`atomic_path` for writers that need a file name (OpenEXR, PNG): it yields a temporary path with the
 destination's suffix and moves it into place when the block succeeds.
@@ -71,10 +72,42 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
             with open(tmp, "rb+") as fh:
                 os.fsync(fh.fileno())
         os.replace(tmp, path)
+    except OSError as err:
+        _remove_quietly(tmp)
+        raise _naming(err, path) from err
+    except RuntimeError as err:
+        _remove_quietly(tmp)
+        if tmp.name not in str(err):
+            raise
+        raise _writer_failure(err, tmp, path) from err
     except BaseException:
         _remove_quietly(tmp)
         raise
     fsync_dir(path.parent)
+
+
+def _writer_failure(err: RuntimeError, tmp: Path, path: Path) -> OSError:
+    """A C++ writer's RuntimeError about the temporary file (OpenEXR: "Failed to write ... File too large") as
+    an ``OSError`` naming the destination, with the errno its text implies (ENOSPC, EFBIG, else EIO)."""
+    import errno
+
+    text = " ".join(str(err).replace(str(tmp), str(path)).replace(tmp.name, path.name).split())
+    code = errno.ENOSPC if "space" in text.lower() else errno.EFBIG if "too large" in text.lower() else errno.EIO
+    strerror = os.strerror(code) if code != errno.EIO else f"cannot write the file ({text})"
+    return OSError(code, strerror, str(path))
+
+
+def _naming(err: OSError, path: Path) -> OSError:
+    """``err`` naming the destination ``path`` (not the hidden temporary) as the file that failed.
+
+    A full disk (``ENOSPC``) raised by ``write`` carries no file name, and one raised by ``open`` names the
+    temporary file; either way the user is told which output could not be written.
+    """
+    named = err.filename
+    if named is not None and TMP_MARK not in Path(str(named)).name:
+        return err
+    strerror = err.strerror or str(err) or type(err).__name__
+    return OSError(err.errno, strerror, str(path))
 
 
 @contextlib.contextmanager

@@ -2,7 +2,8 @@
 
 Every user error (config, option, file, output location, a backend this machine lacks) is one line
 ``error: ...`` on stderr with exit code 2, caught in one place (:class:`_MincamGroup`); ``--debug`` (or
-``MINCAM_DEBUG=1``) shows the traceback instead. Progress bars go to stderr unless ``--quiet``.
+``MINCAM_DEBUG=1``) shows the traceback instead. Warnings are one line ``warning: ...`` each. Progress bars go
+to stderr unless ``--quiet`` (periodic lines when stderr is not a terminal).
 """
 
 from __future__ import annotations
@@ -65,15 +66,47 @@ def user_error_message(err: BaseException) -> str:
     if isinstance(err, EOFError):
         return f"unexpected end of file ({err or 'no data left'}); the file is empty or truncated"
     if isinstance(err, OSError) and not isinstance(err, MincamError) and err.strerror:
+        import errno
+
         target = f": {err.filename}" if err.filename else ""
         other = f" -> {err.filename2}" if getattr(err, "filename2", None) else ""
-        return _one_line(f"{err.strerror}{target}{other}")
+        fix = ""
+        if err.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
+            fix = " (nothing half-written is left there); free some space or choose another output location"
+        elif err.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+            fix = "; choose an output location you can write to"
+        return _one_line(f"{err.strerror}{target}{other}{fix}")
     text = _one_line(str(err))
     if not text:
         text = type(err).__name__
     if isinstance(err, MincamError | ValueError):
         return text
     return f"{text} ({type(err).__name__})"
+
+
+def _show_warning(message: Any, category: type[Warning], filename: str, lineno: int, file: Any = None,
+                  line: str | None = None) -> None:
+    """A warning as one line ``warning: <message> (<Category>)`` on stderr, without the source line."""
+    stream = sys.stderr if file is None else file
+    try:
+        stream.write(f"warning: {_one_line(str(message))} ({category.__name__})\n")
+    except (OSError, ValueError):  # a closed stream: nothing to tell
+        pass
+
+
+# library warnings that say nothing about the user's run
+QUIET_WARNINGS = (
+    r"Port \d+ is already in use",  # dask's dashboard moved to another port: no dashboard is used
+)
+
+
+def install_warning_format() -> None:
+    """Print warnings as one line each (:func:`_show_warning`) and drop the :data:`QUIET_WARNINGS`."""
+    import warnings
+
+    warnings.showwarning = _show_warning
+    for pattern in QUIET_WARNINGS:
+        warnings.filterwarnings("ignore", message=pattern)
 
 
 def _fail_line(message: str, code: int = 2) -> typer.Exit:
@@ -98,6 +131,7 @@ class _MincamGroup(TyperGroup):
              standalone_mode: bool = True, **extra: Any) -> Any:
         _state.update(verbose=False, quiet=False, debug=os.environ.get(ENV_DEBUG, "") not in ("", "0"),
                       variant=None)
+        install_warning_format()
         try:
             rv = super().main(args=args, prog_name=prog_name, complete_var=complete_var, standalone_mode=False,
                               **extra)
@@ -260,6 +294,15 @@ def check_out_file(path: Path, what: str = "output file") -> Path:
 
 
 # ------------------------------------------------------------------------------------------------- render
+def _echo_table(m) -> None:
+    """One line per frame: each mixel's value +/- standard error."""
+    typer.echo("frame  " + "  ".join(f"{n:>24}" for n in m.mixel_names))
+    for i in range(m.n_frames):
+        cells = "  ".join(f"{v:12.5e} +/- {e:8.1e}" for v, e in zip(m.irradiance_w_m2[i], m.stderr_w_m2[i],
+                                                                     strict=True))
+        typer.echo(f"{i:5d}  {cells}")
+
+
 def _render_world(config: Path, out_dir: Path | None, check: bool, overwrite: bool) -> None:
     from .world_config import load_world_config
     from .world_job import run_world_config, world_summary
@@ -280,11 +323,7 @@ def _render_world(config: Path, out_dir: Path | None, check: bool, overwrite: bo
     typer.echo(f"# {ch.n_frames} frames x {len(ch.mixel_names)} mixels, dP [W/m^2] +/- stderr ({ch.info.estimator}, "
                f"{ch.info.rays_per_mixel_per_frame} rays per mixel per frame, worst relative stderr "
                f"{'n/a' if reached is None else f'{reached:.2e}'}); outputs in {cfg.run.out_dir}")
-    typer.echo("frame  " + "  ".join(f"{n:>24}" for n in ch.mixel_names))
-    for i in range(ch.n_frames):
-        cells = "  ".join(f"{v:12.5e} +/- {e:8.1e}" for v, e in zip(ch.dp.irradiance_w_m2[i], ch.dp.stderr_w_m2[i],
-                                                                     strict=True))
-        typer.echo(f"{i:5d}  {cells}")
+    _echo_table(ch.dp)
 
 
 
@@ -296,11 +335,15 @@ def render(
                                                         "nothing")] = False,
     overwrite: Annotated[bool, typer.Option("--overwrite", help="replace the results of a different run in the "
                                                                 "output directory")] = False,
+    time_limit_s: Annotated[float, typer.Option(help="refuse a render estimated to take longer than this [s] "
+                                                     "(the estimate is in --check)")] = 4 * 3600.0,
 ) -> None:
-    """Render the measurements a config describes; write measurements.npz/.csv (+ response maps as EXR).
+    """Render the measurements a config describes; write measurements.npz/.csv (with each frame's position),
+    measurements.png (each mixel against position or frame, 2 sigma) and the response maps (EXR + PNG).
 
     A config with a [world] section renders your own scene (a Mitsuba XML file, meshes, lights, movers): dP and P
     per frame, a plot and the CSV (see `mincam-sim config-example --world`)."""
+    from .plots import plot_render, plot_response_maps
     from .render_job import config_summary, run_render_config
     from .world_config import is_world_config
 
@@ -320,18 +363,23 @@ def render(
         for line in config_summary(cfg, variant):
             typer.echo(line)
         return
+    if not (np.isfinite(time_limit_s) and time_limit_s > 0):
+        raise ConfigError(f"--time-limit-s must be a positive number of seconds, got {time_limit_s}")
     check_out_dir(cfg.run.out_dir)
     _announce_variant()
-    m, _ = run_render_config(cfg, show_progress=_show_progress(), overwrite=overwrite, reuse=True, say=_say)
+    m, maps = run_render_config(cfg, show_progress=_show_progress(), overwrite=overwrite, reuse=True, say=_say,
+                                time_limit_s=time_limit_s)
+    out = Path(cfg.run.out_dir)
+    figures = [plot_render(m, out / "measurements.png", cfg.frame_positions_m, cfg.frames_kind)]
+    if maps is not None:
+        figures.append(plot_response_maps(maps, cfg.screen, out / "response_maps.png"))
+    elif cfg.run.form == "response_map" and (out / "response_maps.png").is_file():
+        figures.append(out / "response_maps.png")  # a finished run shown again: its maps' figure is still there
     np.set_printoptions(precision=6, suppress=False, linewidth=120)
     typer.echo(f"# {m.n_frames} frames x {len(m.mixel_names)} mixels, irradiance [W/m^2] +/- stderr, "
                f"variant {m.meta.get('variant')}, worst relative stderr {m.meta['reached_rel_stderr']:.2e}")
-    typer.echo("frame  " + "  ".join(f"{n:>24}" for n in m.mixel_names))
-    for i in range(m.n_frames):
-        cells = "  ".join(f"{v:12.5e} +/- {e:8.1e}" for v, e in zip(m.irradiance_w_m2[i], m.stderr_w_m2[i],
-                                                                     strict=True))
-        typer.echo(f"{i:5d}  {cells}")
-    typer.echo(f"# written to {cfg.run.out_dir}")
+    _echo_table(m)
+    typer.echo(f"# written to {cfg.run.out_dir} (figures: {', '.join(p.name for p in figures)})")
 
 
 @app.command("config-example")
@@ -367,32 +415,61 @@ def masks_generate(
 @masks_app.command("export")
 def masks_export(
     spec: Annotated[str, typer.Argument(help="'ramp:x', 'constant:0.5', 'file:path.png' ...")],
-    out: Annotated[Path, typer.Option("--out", help="PNG to send to the printer")],
+    out: Annotated[Path, typer.Option("--out", help="PNG to send to the printer (name ending in .png)")],
     size_m: Annotated[float, typer.Option(help="physical mask side [m]")] = 2e-3,
-    dpi: Annotated[int, typer.Option(help="printer resolution [dots per inch]")] = 600,
-    levels: Annotated[int, typer.Option(help="grey levels the printer reproduces per dot")] = 256,
+    dpi: Annotated[int, typer.Option(help="printer resolution [dots per inch], 50 to 4800")] = 600,
+    levels: Annotated[int, typer.Option(help="grey levels the printer reproduces per dot, 2 to 65536 (above 256 "
+                                             "the PNG has 16 bits)")] = 256,
     halftone: Annotated[bool, typer.Option(help="print with an ordered (Bayer) halftone")] = False,
     film_t_min: Annotated[float, typer.Option(help="transmission of fully inked film")] = 0.02,
     film_t_max: Annotated[float, typer.Option(help="transmission of clear film")] = 0.9,
+    srgb: Annotated[bool, typer.Option("--srgb", help="a file: mask's PNG values are sRGB-encoded (decoded to "
+                                                      "linear transmission); default: values are transmission")
+                    ] = False,
+    sheet: Annotated[Path | None, typer.Option(help="print sheet (.png at --dpi or .pdf) with crop and "
+                                                    "registration marks, the detector side and the film mapping; "
+                                                    "default: <out>_sheet.png, notes in <sheet>.txt")] = None,
     preview: Annotated[Path | None, typer.Option(help="also write what the film will transmit (OpenEXR)")] = None,
 ) -> None:
-    """Export a mask as a print-ready PNG at DPI and physical size; optionally preview the printed film."""
+    """Export a mask as a print-ready PNG at DPI and physical size, and a print sheet with its notes; optionally
+    preview the printed film."""
+    from .masks.sheet import write_print_sheet
 
     if not (np.isfinite(size_m) and size_m > 0):
         raise ConfigError(f"--size-m must be a positive mask side in metres, got {size_m}")
+    if not 50 <= dpi <= 4800:
+        raise ConfigError(f"--dpi must be a printer resolution of 50 to 4800 dots per inch, got {dpi}")
+    if not 2 <= levels <= 65536:
+        raise ConfigError(f"--levels must be 2 to 65536 grey levels (256 for an 8-bit printer; a PNG holds at most "
+                          f"16 bits), got {levels}")
+    if out.suffix.lower() != ".png":
+        raise ConfigError(f"--out {out}: the print file is a PNG; give a name ending in .png")
+    sheet = out.with_name(f"{out.stem}_sheet.png") if sheet is None else sheet
+    if sheet.suffix.lower() not in (".png", ".pdf"):
+        raise ConfigError(f"--sheet {sheet}: give a name ending in .png (at --dpi) or .pdf")
+    if sheet.resolve() == out.resolve():
+        raise ConfigError(f"--sheet {sheet} is the --out file; give the sheet another name")
     check_out_file(out, "--out file")
+    check_out_file(sheet, "--sheet file")
     if preview is not None:
         check_out_file(preview, "--preview file")
-    mask = parse_mask(spec, size_m, 512, "mask")
-    film = PrintedFilm(t_min=film_t_min, t_max=film_t_max, dpi=dpi, levels=levels,
-                       halftone="ordered" if halftone else None)
+        if preview.suffix.lower() != ".exr":
+            raise ConfigError(f"--preview {preview}: the preview is OpenEXR; give a name ending in .exr")
+    mask = parse_mask(spec, size_m, 512, "mask", encoding="srgb" if srgb else "linear")
+    try:
+        film = PrintedFilm(t_min=film_t_min, t_max=film_t_max, dpi=dpi, levels=levels,
+                           halftone="ordered" if halftone else None)
+    except ValueError as err:
+        raise ConfigError(str(err).replace("t_min", "--film-t-min").replace("t_max", "--film-t-max")) from None
     path = export_print_png(mask, out, dpi=dpi, film=film)
+    sheet_path, notes = write_print_sheet([mask], [(0.0, 0.0)], dpi, film, sheet, title=f"mask {spec}")
     if preview is not None:
         printed = film.print(mask)
         save_exr(printed, preview)
         typer.echo(f"{preview}: printed film transmits {printed.transmission.min():.3f}.."
                    f"{printed.transmission.max():.3f} on a {printed.shape[1]}x{printed.shape[0]} dot grid")
     typer.echo(str(path))
+    typer.echo(f"{sheet_path} (notes: {notes})")
 
 
 def _render_demo(out_dir: Path) -> None:
@@ -437,6 +514,9 @@ def _print_reused(results: dict, out_dir: Path) -> None:
                    f"{', '.join(reused)}; --overwrite recomputes")
 
 
+MIN_BIT_DEPTH = 2  # reproduce --quick runs at 2 bits (large errors); at 1 bit the calibration fit is singular
+
+
 def _reproduce_config(config: Path | None, quick: bool, **flags: Any) -> tuple[Any, dict]:
     """Set-up and parameters from an optional reproduce config, then the command-line flags given."""
     from .experiments import load_reproduce_config
@@ -448,13 +528,18 @@ def _reproduce_config(config: Path | None, quick: bool, **flags: Any) -> tuple[A
     if given.get("seed", 0) < 0:
         raise ConfigError(f"--seed must be an integer >= 0, got {given['seed']}")
     try:
-        return load_reproduce_config(config, quick=quick, **given)
+        setup, params = load_reproduce_config(config, quick=quick, **given)
     except ConfigError as err:
         text = str(err)
         if not text.startswith("[command line]"):
             raise
         flag = re.sub(r"Setup\.(\w+)", lambda m: "--" + m.group(1).replace("_", "-"), text)
         raise ConfigError(flag.replace("[command line]: ", "")) from None
+    if getattr(setup, "bit_depth", MIN_BIT_DEPTH) < MIN_BIT_DEPTH:
+        where = "--bit-depth" if "bit_depth" in given else "[setup] bit_depth"
+        raise ConfigError(f"{where} = {setup.bit_depth}: give 2 to 32 bits (the paper: 12); a 1-bit ADC reads every "
+                          "change as 0 or 1 DN and the calibration has nothing to fit")
+    return setup, params
 
 
 @app.command()

@@ -50,8 +50,12 @@ EXAMPLE_TOML = """\
 
 [run]
 form = "response_map"      # "response_map" (fast, display scenes), "fast" (mixel-sensor plugin), "reference"
-spp = 65536                # samples per mixel per frame ("fast"/"reference")
-samples_per_texel = 64     # samples per display texel per mixel ("response_map")
+spp = 65536                # samples per mixel per frame ("fast"/"reference"); rounded UP to a multiple of
+                           # replicates (65536 with 8 replicates runs exactly)
+samples_per_texel = 64     # samples per display texel per mixel ("response_map"): traced as replicates x k^2
+                           # stratified samples, k = floor(sqrt(samples_per_texel / replicates)), i.e. rounded
+                           # DOWN: 64 with 8 replicates traces 32 (8 x 2^2); 72 (8 x 3^2) and 128 (8 x 4^2) run
+                           # exactly. `render` prints the count it traces when it differs from the one asked.
 target_rel_stderr = 0.0    # > 0: pick samples automatically to reach this relative standard error
 replicates = 8             # independent estimates per value, for the standard error
 seed = 0                   # same seed, same numbers
@@ -65,6 +69,8 @@ d_f_m = 0.002              # mask-to-detector distance
 detector_size_m = 0.0001   # side of the square detector (paper: 48x48 pixels ~ 0.1 mm)
 mask_size_m = 0.002        # side of the square mask (aperture)
 mask_resolution = 256      # texels per side of generated masks
+mask_encoding = "linear"   # how file: PNG values map to transmission: "linear" (value/255 is the transmission;
+                           # 128 passes 50 %) or "srgb" (sRGB-encoded, as image editors save; 128 passes 22 %)
 optics = "geometric"       # "geometric" (rays) or "wave" (each mixel's scalar-wave angular response, see README)
 wavelengths_m = [550e-9]   # wavelengths of the wave response, weighted by a silicon QE curve ("wave" only)
 
@@ -76,6 +82,10 @@ wavelengths_m = [550e-9]   # wavelengths of the wave response, weighted by a sil
 #                          # {kind = "sinusoid", omega_rad_per_m = 15708.0, a0 = 0.5, a1 = 0.5, phase_rad = 0.0,
 #                          #  direction_deg = 0.0}
 # optics = "wave"          # optional: overrides [mincam] optics for this mixel
+# mask_size_m = 0.002      # optional: this mixel's mask, one side (square) or [width, height] in metres; a
+#                          # file: image must have the mask's aspect ratio (a non-square image needs
+#                          # [width, height]; nothing is stretched)
+# mask_encoding = "srgb"   # optional: overrides [mincam] mask_encoding for this mixel's file: PNG
 # position_m = [-0.0165, 0.0, 0.0]
 # forward = [0.0, 0.0, -1.0]
 # up = [0.0, 1.0, 0.0]
@@ -109,7 +119,8 @@ _SCHEMA: dict[str, dict[str, Any]] = {
     "mincam": {
         "layout": "pair", "spacing_m": PAPER_SPACING_M, "d_f_m": DEFAULT_D_F_M,
         "detector_size_m": DEFAULT_DETECTOR_SIZE_M, "mask_size_m": masks_mod.DEFAULT_MASK_SIZE_M,
-        "mask_resolution": masks_mod.DEFAULT_RESOLUTION, "optics": "geometric", "wavelengths_m": [550e-9],
+        "mask_resolution": masks_mod.DEFAULT_RESOLUTION, "mask_encoding": "linear", "optics": "geometric",
+        "wavelengths_m": [550e-9],
     },
     "screen": {"diagonal_in": 50.0, "aspect": [16, 9], "resolution": list(DEFAULT_SCREEN_RESOLUTION),
                "distance_m": 0.5},
@@ -120,11 +131,13 @@ _SCHEMA: dict[str, dict[str, Any]] = {
     },
 }
 _MIXEL_KEYS = {"name": None, "mask": None, "position_m": [0.0, 0.0, 0.0], "forward": [0.0, 0.0, -1.0],
-               "up": [0.0, 1.0, 0.0], "d_f_m": None, "detector_size_m": None, "optics": None}
+               "up": [0.0, 1.0, 0.0], "d_f_m": None, "detector_size_m": None, "optics": None, "mask_size_m": None,
+               "mask_encoding": None}
 _SINUSOID_KEYS = {"omega_rad_per_m": None, "a0": 0.5, "a1": 0.5, "phase_rad": 0.0, "direction_deg": 0.0}
 MAX_FRAMES = 10_000_000  # frames stream through the renderer; this bounds run time and the result files
 _FORMS = ("response_map", "fast", "reference")
 _OPTICS = ("geometric", "wave")
+_ENCODINGS = ("linear", "srgb")
 _LAYOUTS = ("pair", "cross", "custom")
 _FRAME_KINDS = ("line_sweep", "grid_sweep", "npy")
 _VARIANTS = ("", "cuda_ad_mono", "llvm_ad_mono", "scalar_rgb")
@@ -270,7 +283,33 @@ class RenderConfig:
     frames_kind: str = "line_sweep"
 
 
-def parse_mask(spec: Any, size_m: float, resolution: int, where: str, base_dir: str | Path | None = None) -> Mask:
+def traced_samples(run: RunConfig) -> tuple[int, str | None]:
+    """The sample count a fixed-budget run traces, and one line saying so when it is not the count asked.
+
+    ``response_map`` traces ``replicates x k^2`` samples per texel with ``k = floor(sqrt(samples_per_texel /
+    replicates))`` (stratified, rounded down); ``fast`` / ``reference`` trace ``replicates x ceil(spp /
+    replicates)`` samples per mixel per frame (rounded up). With ``target_rel_stderr > 0`` the counts are chosen
+    automatically and this returns the starting count and None.
+    """
+    if run.form == "response_map":
+        k = max(1, int(np.sqrt(run.samples_per_texel / run.replicates)))
+        traced = run.replicates * k * k
+        if traced == run.samples_per_texel or run.target_rel_stderr > 0:
+            return traced, None
+        up = run.replicates * (k + 1) ** 2
+        return traced, (f"[run] samples_per_texel = {run.samples_per_texel} traces {traced} samples per texel "
+                        f"({run.replicates} replicates x {k}x{k} strata, rounded down); ask {traced} or {up} to "
+                        "get exactly what runs")
+    per = -(-run.spp // run.replicates)
+    traced = run.replicates * per
+    if traced == run.spp or run.target_rel_stderr > 0:
+        return traced, None
+    return traced, (f"[run] spp = {run.spp} traces {traced} samples per mixel per frame ({run.replicates} "
+                    f"replicates x {per}, rounded up); give a multiple of replicates to get exactly what runs")
+
+
+def parse_mask(spec: Any, size_m: float, resolution: int, where: str, base_dir: str | Path | None = None,
+               height_m: float | None = None, encoding: str = "linear") -> Mask:
     """A mask from a config value: ``"ramp:x"``, ``"constant:0.5"``, ``"file:path"`` or a sinusoid table.
 
     Parameters
@@ -278,25 +317,35 @@ def parse_mask(spec: Any, size_m: float, resolution: int, where: str, base_dir: 
     spec : str or dict
         The mask description.
     size_m : float
-        Side of generated masks (and width of loaded PNGs) [m].
+        Width of the mask [m] (its side, for a square mask).
     resolution : int
-        Texels per side of generated masks.
+        Texels across the width of generated masks (rows follow the aspect ratio).
     where : str
         Named in error messages (``"[[mixel]] #2"``).
     base_dir : str or Path, optional
         Relative ``file:`` paths resolve against it (the config file's directory); default: the working
         directory.
+    height_m : float, optional
+        Height of the mask [m]; default ``size_m`` (square). A ``file:`` image must have the mask's aspect
+        ratio (within 1 %): a non-square image with a square size, or any other mismatch, is refused rather than
+        stretched.
+    encoding : {"linear", "srgb"}
+        How ``file:`` PNG values map to transmission: ``"linear"`` (value / 255 or / 65535 is the transmission)
+        or ``"srgb"`` (values are sRGB-encoded, as image editors save them, and are decoded first).
 
     Raises
     ------
     ConfigError
         Naming ``where`` and how to fix the value.
     """
+    width_m = size_m
+    height = size_m if height_m is None else height_m
+    res = (max(1, round(resolution * height / width_m)), resolution)
     if isinstance(spec, str):
         kind, _, arg = spec.partition(":")
         if kind == "ramp":
             try:
-                return masks_mod.ramp(arg, resolution, size_m)
+                return masks_mod.ramp(arg, res, width_m, height)
             except ValueError as err:
                 raise ConfigError(f"{where}: {err}") from None
         if kind == "constant":
@@ -308,7 +357,7 @@ def parse_mask(spec: Any, size_m: float, resolution: int, where: str, base_dir: 
             if not 0.0 <= value <= 1.0:
                 raise ConfigError(f"{where}: constant mask needs a transmission in [0, 1], got {spec!r}")
             try:
-                return masks_mod.constant(value, 1, size_m)
+                return masks_mod.constant(value, 1, width_m, height)
             except ValueError as err:
                 raise ConfigError(f"{where}: {err}") from None
         if kind == "file":
@@ -323,9 +372,18 @@ def parse_mask(spec: Any, size_m: float, resolution: int, where: str, base_dir: 
                 rel = " (relative paths are relative to the config file)" if base_dir is not None else ""
                 raise ConfigError(f"{where}: mask file {str(path)!r} does not exist or is not a file{rel}")
             try:
-                return masks_mod.load(path, size_m)
+                mask = masks_mod.load(path, width_m, height, encoding=encoding)
             except Exception as err:  # a user's file: any failure to read it is a config error
                 raise ConfigError(f"{where}: cannot use mask file {str(path)!r}: {err}") from None
+            rows, cols = mask.shape
+            if abs((cols / rows) / (width_m / height) - 1) > 0.01:
+                fix = (f"give mask_size_m = [{width_m:g}, {width_m * rows / cols:.6g}] (width, height in metres) "
+                       "in its [[mixel]] table" if height_m is None else "give mask_size_m with the image's aspect "
+                       "ratio")
+                raise ConfigError(f"{where}: mask file {str(path)!r} is {cols} x {rows} texels but the mask is "
+                                  f"{1e3 * width_m:g} x {1e3 * height:g} mm; it would be stretched: {fix}, or "
+                                  "use an image of the mask's shape")
+            return mask
         raise ConfigError(
             f"{where}: mask {spec!r} not understood; use 'ramp:x|1-x|y|1-y', 'constant:<t>', 'file:<path>' or a "
             "table {kind = \"sinusoid\", omega_rad_per_m = ...}"
@@ -346,7 +404,7 @@ def parse_mask(spec: Any, size_m: float, resolution: int, where: str, base_dir: 
         values = {k: _number(section, k, v) for k, v in params.items()}
         _number(section, "omega_rad_per_m", params["omega_rad_per_m"], minimum=0.0)
         try:
-            return masks_mod.sinusoid(resolution=resolution, width_m=size_m, **values)
+            return masks_mod.sinusoid(resolution=res, width_m=width_m, height_m=height, **values)
         except (TypeError, ValueError) as err:
             raise ConfigError(f"{where}: {err}") from None
     raise ConfigError(f"{where}: mask must be a string like \"ramp:x\" or a sinusoid table, got {_describe(spec)}")
@@ -361,8 +419,9 @@ def _build_mincam(cfg: dict, mixel_tables: list, base: Path) -> Mincam:
     res = _integer("mincam", "mask_resolution", m["mask_resolution"], maximum=MAX_MASK_RESOLUTION)
     kind = _choice("mincam", "layout", m["layout"], _LAYOUTS)
     optics = _choice("mincam", "optics", m["optics"], _OPTICS)
+    encoding = _choice("mincam", "mask_encoding", m["mask_encoding"], _ENCODINGS)
     wavelengths = _wavelengths(m["wavelengths_m"])
-    common = {"d_f_m": d_f, "detector_size_m": det}
+    common = {"d_f_m": d_f, "detector_size_m": det, "mask_encoding": encoding}
     if kind != "custom" and mixel_tables:
         raise ConfigError("[[mixel]] tables are only used with [mincam] layout = \"custom\"; remove them or set "
                           "layout = \"custom\"")
@@ -384,13 +443,27 @@ def _wavelengths(value: Any) -> tuple[float, ...]:
     return tuple(float(v) for v in value)
 
 
+def _mask_size(where: str, value: Any, default: float) -> tuple[float, float | None]:
+    """(width, height or None for square) [m] from a [[mixel]] mask_size_m: a side, or [width, height]."""
+    if value is None:
+        return default, None
+    if isinstance(value, list | tuple):
+        if len(value) != 2:
+            raise ConfigError(f"{where} mask_size_m must be one side or [width, height] in metres, got "
+                              f"{_describe(value)}")
+        w = _number(where, "mask_size_m[0]", value[0], positive=True)
+        h = _number(where, "mask_size_m[1]", value[1], positive=True)
+        return w, h
+    return _number(where, "mask_size_m", value, positive=True), None
+
+
 def _build_layout(kind, spacing, res, size, common, mixel_tables, base, optics, wavelengths) -> Mincam:
-    d_f, det = common["d_f_m"], common["detector_size_m"]
+    d_f, det, encoding = common["d_f_m"], common["detector_size_m"], common["mask_encoding"]
     try:
         if kind == "pair":
-            return pair_layout(spacing, res, size, **common)
+            return pair_layout(spacing, res, size, d_f_m=d_f, detector_size_m=det)
         if kind == "cross":
-            return cross_layout(spacing, res, size, **common)
+            return cross_layout(spacing, res, size, d_f_m=d_f, detector_size_m=det)
     except ValueError as err:
         raise ConfigError(f"[mincam]: {err}") from None
     if not mixel_tables:
@@ -404,7 +477,10 @@ def _build_layout(kind, spacing, res, size, common, mixel_tables, base, optics, 
         name = f"m{i}" if t["name"] is None else _string(where, "name", t["name"])
         if not name.strip():
             raise ConfigError(f"{where} name must not be empty")
-        mask = parse_mask(t["mask"], size, res, where, base_dir=base)
+        width, height = _mask_size(where, t["mask_size_m"], size)
+        mask_encoding = encoding if t["mask_encoding"] is None else _choice(where, "mask_encoding",
+                                                                             t["mask_encoding"], _ENCODINGS)
+        mask = parse_mask(t["mask"], width, res, where, base_dir=base, height_m=height, encoding=mask_encoding)
         position = _vector(where, "position_m", t["position_m"], 3)
         forward = _vector(where, "forward", t["forward"], 3)
         up = _vector(where, "up", t["up"], 3)
@@ -528,7 +604,7 @@ def _read_source(source: Any, base_dir: str | Path | None) -> tuple[dict, Path, 
         if path.is_dir():
             raise ConfigError(f"config file {path} is a directory; give a .toml file")
         try:
-            text = path.read_bytes().decode("utf-8")
+            text = path.read_bytes().decode("utf-8-sig")  # a byte-order mark (Windows editors) is dropped
         except UnicodeDecodeError:
             raise ConfigError(f"config file {path} is not UTF-8 text; give a TOML file") from None
         except OSError as err:
@@ -536,7 +612,7 @@ def _read_source(source: Any, base_dir: str | Path | None) -> tuple[dict, Path, 
         where = f"config file {path}"
         base = path.parent if base_dir is None else Path(base_dir)
     elif isinstance(source, str):
-        text, where, base, path = source, "config", Path(base_dir or "."), None
+        text, where, base, path = source.removeprefix("\ufeff"), "config", Path(base_dir or "."), None
     else:
         raise ConfigError(f"a config is a TOML file path, TOML text or a dict, got {type(source).__name__}")
     try:

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 
 from . import masks, wave
-from .optics import Mixel, pair_layout
-from .plots import _save, plot_mask, plot_mixel_geometry, plot_response_maps, plt
+from .optics import Mixel, cross_layout, pair_layout
+from .plots import _save, plot_mask, plot_mixel_geometry, plot_render, plot_response_maps, plt
 from .scene.display import Screen
 from .wave.report import DEFAULT_PERIOD_M, print_deviation, rim_profile
 
@@ -28,7 +28,29 @@ def make_figures(out_dir: str | Path) -> list[Path]:
     screen = Screen()
     maps = response_maps(pair_layout(), screen, samples_per_texel=64, seed=0)
     paths.append(plot_response_maps(maps, screen, out_dir / "response_maps.png"))
+    paths.append(render_figure(maps, screen, out_dir / "render_measurements.png"))
+    paths.append(print_sheet_figure(out_dir / "print_sheet.png")[0])
     return paths
+
+
+def render_figure(maps, screen: Screen, path: str | Path) -> Path:
+    """What ``mincam-sim render`` draws (``measurements.png``) for the default config's sweep, from ``maps``."""
+    from .scene.display import line_sweep
+
+    sweep = line_sweep((-0.25, 0.0), (0.25, 0.0), 26, 0.03, 1.0)
+    m = maps.measure(np.stack(list(sweep.frame_source(screen, 0.0))))
+    return plot_render(m, path, sweep.positions_m, "line_sweep")
+
+
+def print_sheet_figure(path: str | Path, dpi: float = 300.0) -> tuple[Path, Path]:
+    """The print sheet of the paper's tracking mincam (four ramps 3.3 cm from the centre) on the default film,
+    as ``masks export`` / ``design`` write it (here at ``dpi`` to keep the file small)."""
+    from .masks.sheet import write_print_sheet
+
+    cam = cross_layout()
+    positions = [(float(m.pose.position_m[0]), float(m.pose.position_m[1])) for m in cam]  # world +x: right
+    return write_print_sheet([m.mask for m in cam], positions, dpi, masks.PrintedFilm(dpi=dpi), path,
+                             names=cam.names, title="the paper's tracking mincam (cross layout), default film")
 
 
 def make_wave_figure(path: str | Path, halftone_dpi: float = 600, n_print: int = 31) -> Path:

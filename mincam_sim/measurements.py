@@ -43,6 +43,13 @@ class Measurements:
             raise ValueError("irradiance and stderr must have the same shape (n_frames, n_mixels)")
         if self.irradiance_w_m2.shape[1] != len(self.mixel_names):
             raise ValueError(f"{self.irradiance_w_m2.shape[1]} columns but {len(self.mixel_names)} mixel names")
+        bad = ~(self.stderr_w_m2 >= 0)  # negative or NaN
+        if bad.any():
+            i, k = np.argwhere(bad)[0]
+            raise ValueError(f"stderr_w_m2 must be standard errors >= 0 W/m^2 (not NaN), got "
+                             f"{self.stderr_w_m2[i, k]!r} at frame {i}, mixel {self.mixel_names[k]!r} "
+                             f"({int(bad.sum())} such value(s)); pass the Monte Carlo standard error, not a signed "
+                             "difference")
 
     @property
     def n_frames(self) -> int:
@@ -80,19 +87,36 @@ class Measurements:
                 json.loads(str(data["meta_json"])),
             )
 
+    def frame_columns(self) -> dict[str, np.ndarray]:
+        """Per-frame columns known from ``meta``: ``time_s`` (``meta["frame_times_s"]``) and the frame's position
+        (``meta["frame_positions_m"]``, one (x, y[, z]) per frame: ``position_x_m``, ``position_y_m`` ...)."""
+        cols: dict[str, np.ndarray] = {}
+        times = self.meta.get("frame_times_s")
+        if times is not None and len(times) == self.n_frames:
+            cols["time_s"] = np.asarray(times, dtype=np.float64).reshape(-1)
+        pos = self.meta.get("frame_positions_m")
+        if pos is not None and len(pos) == self.n_frames:
+            arr = np.asarray(pos, dtype=np.float64).reshape(self.n_frames, -1)
+            for j in range(min(arr.shape[1], 3)):
+                cols[f"position_{'xyz'[j]}_m"] = arr[:, j]
+        return cols
+
     def save_csv(self, path: str | Path) -> Path:
-        """Write one row per frame: frame, <mixel>_w_m2, <mixel>_stderr_w_m2 ...; metadata in a ``#`` header."""
+        """Write one row per frame: frame, [time_s,] [position_x_m, position_y_m,] <mixel>_w_m2,
+        <mixel>_stderr_w_m2 ...; metadata in a ``#`` header (:meth:`frame_columns` says where the time and
+        position come from: the square's centre on the screen [m] for sweeps)."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
+        extra = self.frame_columns()
         with atomic_open(path, "w") as fh:
             fh.write("# " + json.dumps(self.meta, default=json_default) + "\n")
             writer = csv.writer(fh)
-            header = ["frame"]
+            header = ["frame", *extra]
             for name in self.mixel_names:
                 header += [f"{name}_w_m2", f"{name}_stderr_w_m2"]
             writer.writerow(header)
             for i in range(self.n_frames):
-                row: list = [i]
+                row: list = [i, *(repr(float(v[i])) for v in extra.values())]
                 for k in range(len(self.mixel_names)):
                     row += [repr(float(self.irradiance_w_m2[i, k])), repr(float(self.stderr_w_m2[i, k]))]
                 writer.writerow(row)

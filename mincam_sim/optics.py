@@ -11,15 +11,25 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from numbers import Real
 
 import numpy as np
 
+from .errors import ConfigError
 from .geometry import Pose
 from .masks import DEFAULT_MASK_SIZE_M, Mask, constant, ramp
 
 DEFAULT_DETECTOR_SIZE_M = 1e-4  # [m] 0.1 mm: the paper's 48x48-pixel region of interest
 DEFAULT_D_F_M = 2e-3  # [m] mask-to-detector distance
 PAPER_SPACING_M = 0.033  # [m] distance between neighbouring mixels in the paper's prototype
+
+
+def _real(where: str, value, unit: str = "metres") -> float:
+    """``value`` as a float if it is a real number (not a string, not a boolean); ConfigError naming ``where``."""
+    if isinstance(value, bool) or not isinstance(value, Real):
+        raise ConfigError(f"{where} must be a number of {unit} (no quotes, no units: 0.002 for 2 mm), got "
+                          f"{value!r} ({type(value).__name__})")
+    return float(value)
 
 
 @dataclass(frozen=True, eq=False)
@@ -56,8 +66,20 @@ class Mixel:
     wavelengths_m: tuple[float, ...] = field(default=(550e-9,), metadata={"identity_omit_default": True})
 
     def __post_init__(self) -> None:
+        if not isinstance(self.name, str):
+            raise ConfigError(f"Mixel name must be a string, got {self.name!r} ({type(self.name).__name__})")
         if not isinstance(self.mask, Mask):
-            raise TypeError(f"mixel {self.name!r}: mask must be a mincam_sim.masks.Mask, got {type(self.mask)}")
+            raise TypeError(f"mixel {self.name!r}: mask must be a mincam_sim.masks.Mask (e.g. masks.ramp('x')), got "
+                            f"{type(self.mask).__name__}")
+        if not isinstance(self.pose, Pose):
+            raise ConfigError(f"mixel {self.name!r}: pose must be a mincam_sim.geometry.Pose, got "
+                              f"{type(self.pose).__name__}")
+        _real(f"mixel {self.name!r}: d_f_m (mask-to-detector distance)", self.d_f_m)
+        _real(f"mixel {self.name!r}: detector_size_m", self.detector_size_m)
+        if isinstance(self.wavelengths_m, str) or not all(
+                isinstance(v, Real) and not isinstance(v, bool) for v in np.atleast_1d(self.wavelengths_m).tolist()):
+            raise ConfigError(f"mixel {self.name!r}: wavelengths_m must be numbers in metres (550e-9 for 550 nm), "
+                              f"got {self.wavelengths_m!r}")
         if not (np.isfinite(self.d_f_m) and self.d_f_m > 0):
             raise ValueError(
                 f"mixel {self.name!r}: d_f_m (mask-to-detector distance) must be > 0 metres, got {self.d_f_m!r}"
@@ -123,7 +145,16 @@ class Mincam:
     allow_overlap: bool = False
 
     def __post_init__(self) -> None:
+        if isinstance(self.mixels, Mixel) or isinstance(self.mixels, str | bytes) or not isinstance(
+                self.mixels, Sequence):
+            raise ConfigError(f"Mincam(mixels) takes a tuple of Mixel objects, e.g. Mincam((Mixel(ramp('x')),)), "
+                              f"got {type(self.mixels).__name__}")
         mixels = tuple(self.mixels)
+        bad = [i for i, m in enumerate(mixels) if not isinstance(m, Mixel)]
+        if bad:
+            raise ConfigError(f"Mincam(mixels): item {bad[0]} is {mixels[bad[0]]!r} "
+                              f"({type(mixels[bad[0]]).__name__}), not a Mixel; build each with "
+                              "mincam_sim.optics.Mixel(mask, ...)")
         if not mixels:
             raise ValueError("a mincam needs at least one mixel")
         names = [m.name for m in mixels]
@@ -302,5 +333,6 @@ def single(mask: Mask | None = None, pose: Pose | None = None, **kw) -> Mincam:
 
 
 def _check_spacing(spacing_m: float) -> None:
+    _real("spacing_m", spacing_m)
     if not (np.isfinite(spacing_m) and spacing_m >= 0):
         raise ValueError(f"spacing_m must be >= 0 metres, got {spacing_m!r}")

@@ -15,17 +15,77 @@ import numpy as np  # noqa: E402
 
 plt.rcParams["figure.constrained_layout.use"] = True
 
+from .atomic import atomic_path  # noqa: E402
 from .masks import Mask  # noqa: E402
 from .measurements import Measurements  # noqa: E402
 from .scene.display import Screen  # noqa: E402
 
 
 def _save(fig, path: str | Path) -> Path:
+    """Save ``fig`` atomically (a temporary file beside ``path``, moved into place) and close it."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120, bbox_inches="tight")
-    plt.close(fig)
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=120, bbox_inches="tight", format=path.suffix.lstrip(".") or "png")
+    finally:
+        plt.close(fig)
     return path
+
+
+def plot_render(m: Measurements, path: str | Path, positions_m: np.ndarray | None = None,
+                kind: str = "line_sweep") -> Path:
+    """What a render measured: each mixel's irradiance with 2-sigma error bars against the frame's position
+    (a line sweep: the square's x or y on the screen, whichever changes more) or against the frame number; a
+    grid sweep adds each mixel's irradiance as an image over the square's positions.
+
+    Parameters
+    ----------
+    m : Measurements
+        The render's measurements (values and standard errors [W/m^2]).
+    path : str or Path
+        Output image.
+    positions_m : (n, 2) array, optional
+        The square's centre on the screen per frame [m] (sweeps); None: frames are numbered.
+    kind : str
+        ``"line_sweep"``, ``"grid_sweep"`` or ``"npy"`` (named in the title).
+    """
+    n = m.n_frames
+    if positions_m is not None and kind == "line_sweep" and n > 1:
+        pos = np.asarray(positions_m, dtype=np.float64).reshape(n, -1)
+        axis = int(np.ptp(pos[:, 1]) > np.ptp(pos[:, 0]))
+        x = 100 * pos[:, axis]
+        xlabel = f"square position {'xy'[axis]} on the screen [cm]"
+    else:
+        x = np.arange(n)
+        xlabel = "frame" + (" (grid sweep, row by row)" if kind == "grid_sweep" else "")
+    grid = _grid_of(positions_m, n) if kind == "grid_sweep" else None
+    if grid is None:
+        fig, ax = plt.subplots(figsize=(6.4, 3.8))
+    else:
+        k_mixels = len(m.mixel_names)
+        fig = plt.figure(figsize=(max(6.4, 3.2 * k_mixels), 7.0))
+        top = fig.subfigures(2, 1, height_ratios=[1.1, 1])
+        maps = top[0].subplots(1, k_mixels, squeeze=False)[0]
+        ax = top[1].subplots()
+        xs, ys, index = grid
+        for k, (name, mx) in enumerate(zip(m.mixel_names, maps, strict=True)):
+            img = np.full((len(ys), len(xs)), np.nan)
+            img[index[:, 1], index[:, 0]] = m.irradiance_w_m2[:, k]
+            im = mx.imshow(img, origin="lower", cmap="magma", aspect="auto", extent=_cell_extent_cm(xs, ys))
+            mx.set_title(f"mixel {name}", fontsize=9)
+            mx.set_xlabel("square x [cm]")
+            mx.set_ylabel("square y [cm]")
+            top[0].colorbar(im, ax=mx, label="irradiance [W/m$^2$]")
+    for k, name in enumerate(m.mixel_names):
+        ax.errorbar(x, m.irradiance_w_m2[:, k], yerr=2 * m.stderr_w_m2[:, k], marker="o", ms=3, capsize=2,
+                    lw=1, label=f"mixel {name}")
+    worst = float(np.nanmax(m.relative_stderr()[np.isfinite(m.relative_stderr())], initial=0.0))
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("irradiance on detector [W/m$^2$]")
+    ax.set_title(f"{n} frames ({kind}), error bars 2 sigma (worst relative sigma {worst:.1e})", fontsize=9)
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    return _save(fig, path)
 
 
 def plot_sweep(positions_m: np.ndarray, m: Measurements, path: str | Path, xlabel: str = "square position x [cm]"):
@@ -41,6 +101,27 @@ def plot_sweep(positions_m: np.ndarray, m: Measurements, path: str | Path, xlabe
     ax.legend()
     ax.grid(alpha=0.3)
     return _save(fig, path)
+
+
+def _grid_of(positions_m, n: int):
+    """(x values, y values, (n, 2) column/row index of each frame) of a grid sweep's positions, or None."""
+    if positions_m is None:
+        return None
+    pos = np.asarray(positions_m, dtype=np.float64).reshape(n, -1)[:, :2]
+    xs, ix = np.unique(np.round(pos[:, 0], 12), return_inverse=True)
+    ys, iy = np.unique(np.round(pos[:, 1], 12), return_inverse=True)
+    if len(xs) * len(ys) != n:
+        return None
+    return xs, ys, np.column_stack([ix, iy])
+
+
+def _cell_extent_cm(xs: np.ndarray, ys: np.ndarray) -> list[float]:
+    """imshow extent [cm] putting each cell's centre on its grid position (half a step beyond the ends)."""
+    def edges(v: np.ndarray) -> tuple[float, float]:
+        half = (v[-1] - v[0]) / (2 * (len(v) - 1)) if len(v) > 1 else 0.005
+        return 100 * (v[0] - half), 100 * (v[-1] + half)
+
+    return [*edges(xs), *edges(ys)]
 
 
 def plot_response_maps(maps, screen: Screen, path: str | Path):
@@ -135,7 +216,9 @@ def plot_calibration_2d(true_m, observed, calibration, path):
     pred = calibration.apply(observed)
     b.plot(100 * true_m[:, 0], 100 * true_m[:, 1], "k+", label="true")
     b.plot(100 * pred[:, 0], 100 * pred[:, 1], "r.", label="calibrated")
-    b.set_title("grid on the screen [cm]")
+    b.set_title("grid on the screen: truth and calibrated")
+    b.set_xlabel("screen x [cm]")
+    b.set_ylabel("screen y [cm]")
     b.set_aspect("equal")
     b.legend(fontsize=8)
     return _save(fig, path)
@@ -168,28 +251,75 @@ def plot_overlays(images, points, half_extent_m: float, path, frame_numbers=None
     return _save(fig, path)
 
 
-def plot_tracks(predicted, truth, sequence_ids, path):
-    """Predicted (calibrated mincam) and ground-truth paths on the table [cm]."""
-    fig, ax = plt.subplots(figsize=(4.8, 4.8))
+def tracks_figure(predicted, truth, sequence_ids, frame_numbers=None, label_every: int | None = None):
+    """The figure of :func:`plot_tracks` (returned, not saved)."""
+    predicted, truth = np.asarray(predicted, dtype=float), np.asarray(truth, dtype=float)
+    sequence_ids = np.asarray(sequence_ids)
+    numbers = np.arange(len(truth)) if frame_numbers is None else np.asarray(frame_numbers)
+    step = label_every or max(1, len(truth) // 12)
+    fig, ax = plt.subplots(figsize=(5.6, 5.6))
     for sid in np.unique(sequence_ids):
-        sel = sequence_ids == sid
+        sel = np.flatnonzero(sequence_ids == sid)
         line, = ax.plot(100 * truth[sel, 0], 100 * truth[sel, 1], "-", lw=1, label=f"{sid}: ground truth")
-        ax.plot(100 * predicted[sel, 0], 100 * predicted[sel, 1], "o", ms=3, color=line.get_color(),
-                label=f"{sid}: mincam")
+        colour = line.get_color()
+        ax.plot(100 * predicted[sel, 0], 100 * predicted[sel, 1], "o", ms=3, color=colour,
+                label=f"{sid}: mincam (line to its frame's truth)")
+        for i in sel:  # each estimate linked to the ground truth of its own frame
+            if np.all(np.isfinite(predicted[i])):
+                ax.plot(100 * np.array([truth[i, 0], predicted[i, 0]]), 100 * np.array([truth[i, 1], predicted[i, 1]]),
+                        "-", color=colour, lw=0.5, alpha=0.6)
+        for i in sel[::step]:
+            ax.annotate(f"{int(numbers[i])}", 100 * truth[i], fontsize=6, color=colour, xytext=(3, 3),
+                        textcoords="offset points")
     ax.set_xlabel("x [cm]")
     ax.set_ylabel("y [cm]")
-    ax.set_aspect("equal")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_title("paths on the table (numbers: frames)", fontsize=9)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
-    return _save(fig, path)
+    return fig
+
+
+def plot_tracks(predicted, truth, sequence_ids, path, frame_numbers=None):
+    """Predicted (calibrated mincam) and ground-truth paths on the table [cm], equal scales on both axes; each
+    estimate is joined to the ground truth of its own frame, and every few frames are numbered
+    (``frame_numbers``, default 0, 1, ...)."""
+    return _save(tracks_figure(predicted, truth, sequence_ids, frame_numbers), path)
+
+
+def highest_peak_note(spec) -> str | None:
+    """Why the detected peak is not the spectrum's highest, or None when it is.
+
+    :func:`~mincam_sim.estimators.spectrum` takes the largest local maximum inside its search band; a higher
+    local maximum therefore lies outside that band (below its lower limit: the DC lobe, or slower than the
+    slowest speed searched; above its upper limit otherwise).
+    """
+    mag, omega = np.asarray(spec.magnitude), 2 * np.pi * np.asarray(spec.freqs_hz)
+    is_max = np.zeros(mag.size, dtype=bool)
+    is_max[1:-1] = (mag[1:-1] >= mag[:-2]) & (mag[1:-1] >= mag[2:])
+    if not is_max.any():
+        return None
+    k = int(np.flatnonzero(is_max)[np.argmax(mag[is_max])])
+    if mag[k] <= spec.peak_magnitude * (1 + 1e-9) or abs(omega[k] - spec.peak_omega_rad_s) < 2 * (omega[1] - omega[0]):
+        return None
+    where = "below" if omega[k] < spec.peak_omega_rad_s else "above"
+    reason = ("the DC lobe, or slower than the slowest speed searched" if where == "below"
+              else "faster than the fastest speed searched")
+    return (f"highest peak {omega[k]:.2f} rad/s is {where} the search band ({reason}); "
+            "the detected peak is the highest inside it")
 
 
 def plot_spectrum(spec, true_omega, path, title="mixel signal spectrum"):
-    """Like the paper's Fig. 9a: the measurement's amplitude spectrum and its peak."""
-    fig, ax = plt.subplots(figsize=(5.5, 3.4))
+    """Like the paper's Fig. 9a: the measurement's amplitude spectrum and its detected peak; when a higher peak
+    lies outside the search band the figure says so (:func:`highest_peak_note`)."""
+    fig, ax = plt.subplots(figsize=(5.5, 3.6))
     ax.plot(2 * np.pi * spec.freqs_hz, spec.magnitude, lw=1)
-    ax.axvline(spec.peak_omega_rad_s, color="r", ls="--", label=f"peak {spec.peak_omega_rad_s:.2f} rad/s")
+    ax.axvline(spec.peak_omega_rad_s, color="r", ls="--", label=f"detected peak {spec.peak_omega_rad_s:.2f} rad/s")
     ax.axvline(true_omega, color="k", ls=":", label=f"expected {true_omega:.2f} rad/s")
+    note = highest_peak_note(spec)
+    if note is not None:
+        ax.text(0.98, 0.6, note.replace("; ", ";\n"), transform=ax.transAxes, ha="right", va="top", fontsize=7,
+                bbox={"facecolor": "white", "alpha": 0.8, "edgecolor": "0.7"})
     ax.set_xlabel("omega [rad/s]")
     ax.set_ylabel("amplitude")
     ax.set_title(title)

@@ -12,7 +12,8 @@ from typing import Any
 import numpy as np
 
 from .atomic import atomic_path
-from .config import RenderConfig
+from .config import RenderConfig, traced_samples
+from .errors import ConfigError
 from .identity import fingerprint, frames_fingerprint, library_versions, run_key
 from .measurements import Measurements
 from .render import backend
@@ -76,7 +77,7 @@ def _finished_results(out: Path, key: str, n_frames: int) -> Any:
 
 def run_render_config(
     cfg: RenderConfig, show_progress: bool = False, overwrite: bool = False, reuse: bool = False,
-    say: Callable[[str], None] | None = None,
+    say: Callable[[str], None] | None = None, time_limit_s: float | None = None,
 ) -> tuple[Measurements, ResponseMaps | None]:
     """Render a validated :class:`~mincam_sim.config.RenderConfig`; write outputs; return (measurements, maps).
 
@@ -84,13 +85,18 @@ def run_render_config(
     of everything the numbers depend on (:func:`config_identity`); a rerun with different content is refused
     (StaleResultError naming what changed) unless ``overwrite``, which first removes the previous run's store
     and maps. With ``reuse``, a finished run with the same identity is not rendered again: its
-    ``measurements.npz`` is returned (and maps as None), and ``say`` (if given) is told so.
+    ``measurements.npz`` is returned (and maps as None), and ``say`` (if given) is told so. With
+    ``time_limit_s``, a render estimated to take longer (:func:`check_budget`) is refused before it starts;
+    ``say`` is told when the sample count traced differs from the one asked (:func:`~mincam_sim.config.traced_samples`).
     """
     out = Path(cfg.run.out_dir)
     run_dir = out / "run"
     identity = config_identity(cfg, backend.variant())  # the variant in use: CUDA and LLVM differ in the last bits
     key = run_key(identity)
     with lock_out_dir(out):
+        finished = not overwrite and reuse and _finished_results(out, key, len(cfg.frames)) is not None
+        if time_limit_s is not None and not finished:  # before anything is written: a refusal claims nothing
+            check_budget(cfg, backend.variant(), time_limit_s)
         if overwrite:
             clear_store(run_dir, extra=("response_maps.npz",))
         same = check_identity(out, identity, overwrite=overwrite)
@@ -101,6 +107,9 @@ def run_render_config(
                     say(f"mincam-sim: {out} holds the finished results of this same run; shown again (--overwrite "
                         "renders anew)")
                 return done, None
+        _, rounding = traced_samples(cfg.run)
+        if rounding is not None and say is not None and not (run_dir / "run.json").exists():
+            say(f"mincam-sim: {rounding}")  # on a fresh start only: a resumed run said it when it started
         m, maps = render_frames(
             cfg.mincam, cfg.screen, cfg.frames, cfg.run.form, cfg.run.spp, cfg.run.samples_per_texel,
             cfg.run.target_rel_stderr, cfg.run.seed, cfg.run.replicates, out_dir=run_dir,
@@ -119,16 +128,80 @@ def run_render_config(
     return m, maps
 
 
+# Samples traced per second per form, measured with llvm_ad_mono on a shared 2-core CPU (a 128 x 72 screen,
+# 2 mixels): the estimate is an upper bound of the time on faster machines (a CUDA GPU is far faster).
+SAMPLES_PER_S = {"response_map": 2.0e7, "fast": 1.0e7, "reference": 1.0e6}
+SCALAR_SLOWDOWN = 10.0  # scalar_rgb traces one ray at a time
+DOT_PRODUCTS_PER_S = 5.0e8  # response_map: frame x map products (numpy)
+DEFAULT_TIME_LIMIT_S = 4 * 3600.0
+
+
+def estimate_seconds(cfg: RenderConfig, variant: str | None = None) -> tuple[float, str]:
+    """A rough upper estimate of a render's time [s] and what it counts (from :data:`SAMPLES_PER_S`).
+
+    With ``target_rel_stderr > 0`` the sample counts grow until the target is met; the estimate is then that of
+    the first pass only (the text says so).
+    """
+    run = cfg.run
+    n_mixels, n_frames = len(cfg.mincam), len(cfg.frames)
+    traced, _ = traced_samples(run)
+    if run.form == "response_map":
+        rows, cols = cfg.screen.shape
+        samples = float(rows * cols) * traced * n_mixels
+        what = f"{rows * cols} texels x {traced} samples x {n_mixels} mixels"
+        seconds = samples / SAMPLES_PER_S["response_map"] + n_frames * rows * cols * n_mixels / DOT_PRODUCTS_PER_S
+    else:
+        samples = float(n_frames) * traced * n_mixels
+        what = f"{n_frames} frames x {traced} samples x {n_mixels} mixels"
+        seconds = samples / SAMPLES_PER_S[run.form]
+    if variant == "scalar_rgb":
+        seconds *= SCALAR_SLOWDOWN
+    if run.target_rel_stderr > 0:
+        what += " (first pass; target_rel_stderr adds passes)"
+    return seconds, what
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    if seconds < 3 * 86400:
+        return f"{seconds / 3600:.1f} h"
+    return f"{seconds / 86400:.3g} days"
+
+
+def check_budget(cfg: RenderConfig, variant: str | None, limit_s: float = DEFAULT_TIME_LIMIT_S) -> float:
+    """Refuse a render whose estimated time (:func:`estimate_seconds`) exceeds ``limit_s``; return the estimate.
+
+    Raises
+    ------
+    ConfigError
+        Naming the estimate, what it counts, and the two fixes (fewer samples or frames, or a higher limit).
+    """
+    seconds, what = estimate_seconds(cfg, variant)
+    if seconds > limit_s:
+        key = "samples_per_texel" if cfg.run.form == "response_map" else "spp"
+        raise ConfigError(f"this render would take about {_duration(seconds)} ({what}), over the limit of "
+                          f"{_duration(limit_s)}: lower [run] {key} (or the frames), or raise the limit with "
+                          f"--time-limit-s {max(limit_s, 1.5 * seconds):.0f}")
+    return seconds
+
+
 def config_summary(cfg: RenderConfig, variant: str | None) -> list[str]:
     """What a validated config will render, one line per part (``mincam-sim render --check``)."""
     run, screen = cfg.run, cfg.screen
     lines = [f"config: {cfg.source or 'text'} is valid"]
+    def vec(v) -> str:
+        return "[" + ", ".join(f"{float(x):+.4f}" for x in v) + "]"
+
     for mixel in cfg.mincam:
-        p = ", ".join(f"{v:+.4f}" for v in mixel.pose.position_m)
-        mask = mixel.mask
+        mask, pose = mixel.mask, mixel.pose
+        _, up, forward = pose.axes()  # orthonormal: up made perpendicular to forward
         lines.append(f"mixel {mixel.name}: mask {mask.name} ({mask.shape[1]}x{mask.shape[0]} texels, "
                      f"{1e3 * mask.width_m:g} x {1e3 * mask.height_m:g} mm) at d_f {1e3 * mixel.d_f_m:g} mm, "
-                     f"detector {1e3 * mixel.detector_size_m:g} mm, position [{p}] m")
+                     f"detector {1e3 * mixel.detector_size_m:g} mm, {mixel.optics} optics, position "
+                     f"{vec(pose.position_m)} m, forward {vec(forward)}, up {vec(up)}")
     lines.append(f"screen: {screen.width_m:.4f} x {screen.height_m:.4f} m, {screen.resolution[0]} x "
                  f"{screen.resolution[1]} texels, {-screen.pose.position_m[2]:g} m from the mincam")
     f = cfg.frames
@@ -144,6 +217,12 @@ def config_summary(cfg: RenderConfig, variant: str | None) -> list[str]:
         budget = (f"target relative stderr {run.target_rel_stderr:g}" if run.target_rel_stderr > 0
                   else f"{run.spp} samples per mixel per frame") + f", {run.replicates} replicates"
     lines.append(f"form: {run.form}, {budget}, seed {run.seed}, variant {variant or 'automatic'}")
+    _, rounding = traced_samples(run)
+    if rounding is not None:
+        lines.append(f"samples: {rounding}")
+    seconds, what = estimate_seconds(cfg, variant)
+    lines.append(f"estimate: about {_duration(seconds)} ({what}; limit {_duration(DEFAULT_TIME_LIMIT_S)}, "
+                 "--time-limit-s raises it)")
     out = Path(run.out_dir)
     state = "exists" if out.is_dir() else "will be created"
     if (out / "identity.json").exists() or (out / "run" / "run.json").exists():

@@ -57,6 +57,10 @@ class Case:
     pre: list[list[str]] = field(default_factory=list)
     between: Callable[[Path], None] | None = None  # after ``pre``, before ``argv``
     env: dict[str, str] = field(default_factory=dict)
+    notes: tuple[str, ...] = ()  # "ok" cases: each must be said on stderr (else "silent")
+    outputs: tuple[str, ...] = ()  # "ok" cases: files that must exist and not be empty (else "silent")
+    fsize_limit: int | None = None  # bytes: the command runs as on a full disk (writes past it fail)
+    clean_stderr: bool = False  # stderr must be whole lines (no carriage returns) and show no source code
 
 
 def _npy(array, **kw) -> Callable[[Path], None]:
@@ -75,6 +79,12 @@ def _png(path: Path) -> None:
     from PIL import Image
 
     Image.fromarray((np.linspace(0, 255, 64)[None, :] * np.ones((64, 1))).astype(np.uint8)).save(path)
+
+
+def _png_shape(path: Path, rows: int, cols: int) -> None:
+    from PIL import Image
+
+    Image.fromarray((np.linspace(0, 255, cols)[None, :] * np.ones((rows, 1))).astype(np.uint8)).save(path)
 
 
 def _write(rel: str, data: bytes | Callable[[Path], None]) -> Callable[[Path], None]:
@@ -243,6 +253,43 @@ CASES: list[Case] = [
     Case("rerun_after_wrong_shape_values_npy", R, {"c.toml": toml()}, pre=[R],
          between=_both(_unlink("out/measurements.npz"), _write("out/run/values.npy", _npy(np.zeros((5, 5))))),
          keywords=("values.npy",)),
+    # --- inputs a new user tried (outputs, print sheets, budgets, what runs)
+    Case("config_with_utf8_bom", R, {"c.toml": b"\xef\xbb\xbf" + toml().encode()}, expect="ok"),
+    Case("reproduce_bit_depth_1", ["reproduce", "intrusion", "--quick", "--bit-depth", "1"],
+         keywords=("--bit-depth",)),
+    Case("masks_export_levels_70000", ["masks", "export", "ramp:x", "--out", "m.png", "--levels", "70000"],
+         keywords=("--levels",)),
+    Case("masks_export_out_jpg", ["masks", "export", "ramp:x", "--out", "m.jpg"], keywords=(".png",)),
+    Case("masks_export_writes_a_sheet", ["masks", "export", "ramp:x", "--out", "m.png"], expect="ok",
+         outputs=("m.png", "m_sheet.png", "m_sheet.txt")),
+    Case("masks_export_pdf_sheet", ["masks", "export", "ramp:x", "--out", "m.png", "--sheet", "s.pdf"],
+         expect="ok", outputs=("s.pdf", "s.txt")),
+    Case("sinusoid_direction_1e308", R, {"c.toml": toml(mixel(
+        mask='{kind = "sinusoid", omega_rad_per_m = 3000.0, direction_deg = 1e308}'), mincam=CUSTOM)},
+         keywords=("direction_deg",)),
+    Case("file_mask_not_square", R, {"c.toml": toml(mixel(mask='"file:m.png"'), mincam=CUSTOM),
+                                     "m.png": lambda p: _png_shape(p, 32, 64)}, keywords=("mask_size_m",)),
+    Case("file_mask_not_square_with_its_size", R,
+         {"c.toml": toml(mixel(mask='"file:m.png"', mask_size_m="[0.002, 0.001]"), mincam=CUSTOM),
+          "m.png": lambda p: _png_shape(p, 32, 64)}, expect="ok"),
+    Case("mixel_mask_size_three_numbers", R,
+         {"c.toml": toml(mixel(mask_size_m="[0.002, 0.002, 0.002]"), mincam=CUSTOM)}, keywords=("mask_size_m",)),
+    Case("file_mask_srgb", R, {"c.toml": toml(mixel(mask='"file:m.png"', mask_encoding='"srgb"'), mincam=CUSTOM),
+                               "m.png": _png}, expect="ok"),
+    Case("mask_encoding_unknown", R, {"c.toml": toml(mincam={"mask_encoding": '"gamma"'})},
+         keywords=("mask_encoding",)),
+    Case("samples_per_texel_rounded", R, {"c.toml": toml()}, expect="ok", notes=("traces 8",)),
+    Case("render_writes_its_figures", R, {"c.toml": toml()}, expect="ok",
+         outputs=("out/measurements.png", "out/response_maps.png", "out/measurements.csv")),
+    Case("fast_spp_2_40", R, {"c.toml": toml(run={"form": '"fast"', "spp": str(2**40)})},
+         keywords=("--time-limit-s",)),
+    Case("render_warning_is_one_line", R, {"c.toml": toml(frames={"start_m": "[0.0, 0.3]", "end_m": "[0.0, 0.3]"})},
+         expect="ok", notes=("warning: ",), clean_stderr=True),
+    Case("progress_into_a_file_is_lines", R, {"c.toml": toml()}, expect="ok", notes=("frames",), clean_stderr=True),
+    Case("masks_generate_on_a_full_disk", ["masks", "generate", "--resolution", "64", "--out", "lib"],
+         fsize_limit=2000, keywords=("lib/",)),
+    Case("masks_export_on_a_full_disk", ["masks", "export", "ramp:x", "--out", "m.png", "--dpi", "4800",
+                                         "--size-m", "0.02"], fsize_limit=20000, keywords=("m.png", "m_sheet")),
 ]
 
 _PROGRESS = re.compile(r"(\d+%\||/s\]|s/\w+\]|\d+\w* \[\d+:\d+)")  # any tqdm bar: "42%|", "it/s]", "3chunk [00:01"
@@ -266,14 +313,32 @@ def _message_lines(stderr: str) -> list[str]:
     return [p.strip() for p in parts if p.strip() and not _PROGRESS.search(p)]
 
 
-def classify(case: Case, rc: int, stderr: str) -> str:
-    """"ok" (the expected outcome), or "traceback", "silent", "unclear", "failed" (an ok case that failed)."""
+_SOURCE = re.compile(r"\.py:\d+:|^\s{2,}\S.*\(.*\)\s*$", re.M)  # a warning's "file.py:12:" or its code line
+
+
+def classify(case: Case, rc: int, stderr: str, tmp: Path | None = None) -> str:
+    """"ok" (the expected outcome), or "traceback", "silent", "unclear", "failed" (an ok case that failed).
+
+    An "ok" case that does not say its ``notes`` or lacks one of its ``outputs`` is "silent"; one whose stderr
+    should be clean but holds carriage returns or source code is "unclear". An error case must leave no empty
+    file behind (a half-written output: "unclear")."""
     if "Traceback" in stderr:
         return "traceback"
+    if case.clean_stderr and ("\r" in stderr or _SOURCE.search(stderr)):
+        return "unclear"
     if case.expect == "ok":
-        return "ok" if rc == 0 else "failed"
+        if rc != 0:
+            return "failed"
+        if not all(n.lower() in stderr.lower() for n in case.notes):
+            return "silent"
+        if tmp is not None and not all((tmp / o).is_file() and (tmp / o).stat().st_size > 0 for o in case.outputs):
+            return "silent"
+        return "ok"
     if rc == 0:
         return "silent"
+    if tmp is not None and case.fsize_limit is not None and any(
+            p.is_file() and p.stat().st_size == 0 for p in tmp.rglob("*")):
+        return "unclear"
     lines = _message_lines(stderr)
     clear = (rc == 2 and len(lines) == 1 and lines[0].startswith("error: ")
              and (not case.keywords or any(k.lower() in lines[0].lower() for k in case.keywords)))
@@ -292,9 +357,17 @@ def run_case(case: Case, tmp: Path, pythonpath: Path | None = None, timeout: flo
         subprocess.run([*cmd, *argv], cwd=tmp, env=env, capture_output=True, timeout=timeout, check=False)
     if case.between is not None:
         case.between(tmp)
-    proc = subprocess.run([*cmd, *case.argv], cwd=tmp, env=env, capture_output=True, text=True, timeout=timeout,
-                          check=False)
-    return classify(case, proc.returncode, proc.stderr), proc.returncode, proc.stderr
+    limit = None
+    if case.fsize_limit is not None:
+        import resource
+
+        def limit() -> None:  # writes past the limit fail with EFBIG, as on a full disk (Python ignores SIGXFSZ)
+            resource.setrlimit(resource.RLIMIT_FSIZE, (case.fsize_limit, case.fsize_limit))
+
+    proc = subprocess.run([*cmd, *case.argv], cwd=tmp, env=env, capture_output=True, timeout=timeout,
+                          check=False, preexec_fn=limit)
+    stderr = proc.stderr.decode("utf-8", errors="replace")  # bytes: text mode would turn "\r" into "\n"
+    return classify(case, proc.returncode, stderr, tmp), proc.returncode, stderr
 
 
 # ---------------------------------------------------------------------------------------------------- tests
@@ -314,7 +387,7 @@ def _cli(argv: list[str], cwd: Path):
 
 
 FAST = [c for c in CASES if not c.pre and c.argv[0] in ("render", "--variant", "study", "masks")
-        and "reproduce" not in c.argv and not c.env and c.expect == "error"
+        and "reproduce" not in c.argv and not c.env and c.expect == "error" and c.fsize_limit is None
         and c.name not in ("variant_cuda_without_gpu", "masks_generate_out_is_a_file")]
 
 
@@ -363,7 +436,10 @@ def test_quiet_silences_progress(tmp_path):
     quiet = _cli(["--quiet", "render", "c.toml", "--overwrite"], tmp_path)
     assert loud.exit_code == 0 and quiet.exit_code == 0
     assert "frames" in _stderr(loud)  # the bar's label
-    assert _stderr(quiet).strip() == ""
+    # --quiet keeps only the one note that the sample count traced is not the one asked (16 -> 8 per texel)
+    assert [line for line in _stderr(quiet).splitlines() if line.strip()] == [
+        "mincam-sim: [run] samples_per_texel = 16 traces 8 samples per texel (8 replicates x 1x1 strata, rounded "
+        "down); ask 8 or 32 to get exactly what runs"]
 
 
 @pytest.mark.parametrize("name", ["seed_boolean", "npy_zero_bytes", "variant_cuda_without_gpu", "out_is_a_file"])
@@ -402,6 +478,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="Count clear errors over CASES for the code at --pythonpath.")
     parser.add_argument("--pythonpath", type=Path, default=ROOT)
     parser.add_argument("--only", nargs="*", default=None)
+    parser.add_argument("--timeout", type=float, default=300, help="seconds per case (over it: 'timeout')")
     args = parser.parse_args(argv)
     counts: dict[str, int] = {}
     for case in CASES:
@@ -409,7 +486,7 @@ def main(argv: list[str] | None = None) -> int:
             continue
         with tempfile.TemporaryDirectory() as tmp:
             try:
-                verdict, rc, stderr = run_case(case, Path(tmp), args.pythonpath)
+                verdict, rc, stderr = run_case(case, Path(tmp), args.pythonpath, args.timeout)
             except subprocess.TimeoutExpired:
                 verdict, rc, stderr = "timeout", -1, ""
         counts[verdict] = counts.get(verdict, 0) + 1

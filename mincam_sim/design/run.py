@@ -1,5 +1,6 @@
 """One design run: gradient check, optimisation, physical held-out evaluation against the paper's ramps, and
-the outputs (``design.json``, print-ready PNG masks, figures), all written atomically."""
+the outputs (``design.json``, print-ready PNG masks, a print sheet of all four at their places with its notes,
+figures), all written atomically. A finished design of another identity in the same folder is refused."""
 
 from __future__ import annotations
 
@@ -9,7 +10,11 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_path, atomic_save_npz, atomic_write_json
+from ..errors import StaleResultError
+from ..identity import library_versions
 from ..masks import export_print_png
+from ..masks.sheet import write_print_sheet
+from ..store import check_identity
 from . import tracking as tr
 
 TASKS = ("tracking",)
@@ -19,8 +24,17 @@ def _summary(res: dict) -> dict:
     return {k: v for k, v in res.items() if k != "arrays"}
 
 
+IDENTITY_FILE = "design_identity.json"
+
+
+def design_identity(task_name: str, task: tr.TrackingTask, quick: bool, seed: int) -> dict:
+    """Everything a design's outputs depend on: task, its sizes (dpi included), seed and library versions."""
+    return {"task": task_name, "quick": bool(quick), "seed": int(seed), "setup": task.as_dict(),
+            "versions": library_versions()}
+
+
 def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: int = 0, dpi: float = 600.0,
-               show_progress: bool = False) -> dict:
+               show_progress: bool = False, overwrite: bool = False) -> dict:
     """Design masks for ``task_name`` and write the outputs in ``out_dir``; return the ``design.json`` dict.
 
     Parameters
@@ -35,6 +49,9 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
         Seed of the training and held-out draws, the sensor noise and the Monte Carlo samples.
     dpi : float
         Printer resolution [dots per inch] of the film and of the PNG masks.
+    overwrite : bool
+        Replace a finished design of another identity (task, sizes, seed, dpi, versions) in ``out_dir``;
+        without it that design is refused (StaleResultError naming what changed), as other runs are.
     """
     from dataclasses import asdict, replace
 
@@ -53,6 +70,12 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
     task = tr.TrackingTask.quick(seed) if quick else tr.TrackingTask(seed=seed)
     task = replace(task, dpi=float(dpi))
     film = task.film()
+    identity = design_identity(task_name, task, quick, seed)
+    if (out / "design.json").exists() and not overwrite:
+        if not (out / IDENTITY_FILE).exists():
+            raise StaleResultError(f"{out} holds a finished design without a record of what it was computed from "
+                                   "(an older version); choose another output directory or rerun with --overwrite")
+        check_identity(out, identity, name=IDENTITY_FILE)
 
     grad = check_gradients(seed=seed)
     t_check = time.perf_counter() - start
@@ -125,7 +148,10 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
         "runtime_s": {"gradient_check": t_check, "design": t_design, "evaluation": t_eval,
                       "total": time.perf_counter() - start},
     }
+    write_print_sheet(list(result.printer_masks), list(tr.OFFSETS_M), dpi, film, out / "print_sheet.png",
+                      names=labels, title=f"designed {task_name} masks (seed {seed}), seen from the detectors")
     atomic_write_json(out / "design.json", report, indent=1, default=float)
+    check_identity(out, identity, overwrite=True, name=IDENTITY_FILE)  # last: the design is finished
     return report
 
 

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import imageio
+from ..atomic import atomic_path
 from .mask import Mask
 
 _LUMA_709 = np.array([0.2126, 0.7152, 0.0722])
@@ -45,6 +46,7 @@ def load(
     height_m: float | None = None,
     invert: bool = False,
     name: str | None = None,
+    encoding: str = "linear",
 ) -> Mask:
     """Load a mask from a PNG (8/16-bit) or OpenEXR file.
 
@@ -62,6 +64,11 @@ def load(
         Use ``1 - value`` (for files where black means clear).
     name : str, optional
         Mask name; defaults to the stored name (EXR) or the file stem.
+    encoding : {"linear", "srgb"}
+        Transfer function of PNG values: ``"linear"`` (default: the value / 255 or / 65535 *is* the
+        transmission) or ``"srgb"`` (the values are sRGB-encoded, as most image editors write them, and are
+        decoded with the IEC 61966-2-1 curve before anything else). OpenEXR files are linear by definition; asking
+        ``"srgb"`` for one is refused.
 
     Returns
     -------
@@ -78,13 +85,19 @@ def load(
 
     Notes
     -----
-    PNG values are divided by 255 (8-bit) or 65535 (16-bit). RGB images are reduced to luminance with the
-    Rec. 709 weights 0.2126 R + 0.7152 G + 0.0722 B applied to the stored values (no gamma decoding: the file
-    value is taken to be the intended transmission). An alpha channel is accepted only if fully opaque.
+    PNG values are divided by 255 (8-bit) or 65535 (16-bit). With ``encoding = "linear"`` that value is the
+    transmission (no gamma decoding: a mid-grey 128 passes 50.2 %); with ``"srgb"`` it is decoded first (128
+    passes 21.6 %). RGB images are reduced to luminance with the Rec. 709 weights 0.2126 R + 0.7152 G + 0.0722 B
+    applied to the (decoded) values. An alpha channel is accepted only if fully opaque.
     """
+    if encoding not in ("linear", "srgb"):
+        raise ValueError(f"encoding must be 'linear' or 'srgb', got {encoding!r}")
     p = Path(path)
     fmt = imageio.sniff_format(p, "mask file")
     stored: dict = {}
+    if fmt == "exr" and encoding == "srgb":
+        raise ValueError(f"mask file {str(p)!r} is OpenEXR, whose values are linear transmission; the sRGB "
+                         "encoding applies to PNG files only (use mask_encoding = \"linear\")")
     if fmt == "exr":
         arr, info = imageio.read_exr(p)
         arr = np.asarray(arr, dtype=np.float64)
@@ -104,6 +117,13 @@ def load(
             )
     else:
         arr, info = imageio.read_png(p)
+        if encoding == "srgb":
+            arr = np.asarray(arr, dtype=np.float64).copy()
+            colour = [k for k, c in enumerate(info["channels"]) if c != "A"] if arr.ndim == 3 else None
+            if colour is None:
+                arr = srgb_to_linear(arr)
+            else:
+                arr[..., colour] = srgb_to_linear(arr[..., colour])
         t = _to_transmission(arr, info["channels"], str(p))
     h, w = t.shape
     if width_m is None:
@@ -124,9 +144,18 @@ def load(
     label = name if name is not None else str(stored.get("name") or p.stem)
     meta = dict(stored.get("meta", {})) if isinstance(stored.get("meta"), dict) else {}
     meta.update({"source": str(p), "format": fmt, "invert": bool(invert)})
+    if encoding != "linear":  # recorded only when not the default (older records stay the same)
+        meta["encoding"] = encoding
     if fmt == "png":
         meta["bit_depth"] = info["bit_depth"]
     return Mask(t, width_m, height_m, label, meta)
+
+
+def srgb_to_linear(v: np.ndarray) -> np.ndarray:
+    """Decode sRGB-encoded values in [0, 1] to linear (IEC 61966-2-1: v / 12.92 below 0.04045, else
+    ((v + 0.055) / 1.055) ** 2.4)."""
+    v = np.asarray(v, dtype=np.float64)
+    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
 
 
 def save_exr(mask: Mask, path: str | Path) -> Path:
@@ -134,6 +163,8 @@ def save_exr(mask: Mask, path: str | Path) -> Path:
 
     The header records ``width_m``, ``height_m``, ``units`` ("m"), ``name``, the array convention and the
     mask's ``meta``; :func:`load` reads them back (values exact to float32, ~6e-8).
+
+    The file is written atomically (a temporary file beside it, moved into place when complete).
 
     Returns
     -------
@@ -149,4 +180,7 @@ def save_exr(mask: Mask, path: str | Path) -> Path:
         "convention": "row 0 = top, column 0 = left, as seen from the detector looking out",
         "meta": mask.meta,
     }
-    return imageio.write_exr(path, mask.transmission, ("Y",), metadata)
+    path = Path(path)
+    with atomic_path(path) as tmp:  # a full disk or a kill leaves the old file or none, never a torn one
+        imageio.write_exr(tmp, mask.transmission, ("Y",), metadata)
+    return path

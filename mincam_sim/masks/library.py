@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import imageio
+from ..atomic import atomic_path
 from .curves import circular_ramp
 from .files import save_exr
 from .mask import DEFAULT_MASK_SIZE_M, DEFAULT_RESOLUTION, Mask, constant, ramp, sinusoid
@@ -32,7 +33,7 @@ def generate_library(
 
     Files are ``<name>.exr`` and ``<name>.png`` in ``out_dir`` (created if needed): ``ramp_x``, ``ramp_1-x``,
     ``ramp_y``, ``ramp_1-y``, ``constant_1``, ``sinusoid_period0.5mm``, ``circular_ramp``. Output is
-    deterministic (byte-identical for equal arguments).
+    deterministic (byte-identical for equal arguments) and every file is written atomically.
 
     Parameters
     ----------
@@ -53,5 +54,8 @@ def generate_library(
     paths: list[Path] = []
     for m in standard_library(resolution, size_m):
         paths.append(save_exr(m, out / f"{m.name}.exr"))
-        paths.append(imageio.write_png(out / f"{m.name}.png", m.transmission, bit_depth=8))
+        png = out / f"{m.name}.png"
+        with atomic_path(png) as tmp:
+            imageio.write_png(tmp, m.transmission, bit_depth=8)
+        paths.append(png)
     return paths

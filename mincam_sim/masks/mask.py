@@ -249,6 +249,12 @@ def sinusoid(
     """
     if not np.isfinite(omega_rad_per_m) or omega_rad_per_m < 0:
         raise ValueError(f"omega_rad_per_m must be a finite frequency >= 0 [rad/m], got {omega_rad_per_m!r}")
+    if not (np.isfinite(direction_deg) and abs(direction_deg) <= 360.0):
+        raise ValueError(f"direction_deg must be an angle in degrees between -360 and 360, got {direction_deg!r} "
+                         "(take it modulo 360)")
+    if not (np.isfinite(phase_rad) and abs(phase_rad) <= 1e3):
+        raise ValueError(f"phase_rad must be a finite phase of at most 1000 rad in size, got {phase_rad!r} "
+                         "(take it modulo 2 pi)")
     if a0 - abs(a1) < -1e-12 or a0 + abs(a1) > 1 + 1e-12:
         raise ValueError(f"sinusoid a0={a0}, a1={a1} leaves [0, 1]: need a0 - |a1| >= 0 and a0 + |a1| <= 1")
     hgt = width_m if height_m is None else height_m

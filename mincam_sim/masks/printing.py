@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import imageio
+from ..atomic import atomic_path
 from .mask import MAX_TEXELS, Mask, resample
 
 _BAYER8 = np.array(
@@ -136,7 +137,7 @@ def export_print_png(
     path: str | Path,
     dpi: float | None = None,
     film: PrintedFilm | None = None,
-    bit_depth: int = 8,
+    bit_depth: int | None = None,
 ) -> Path:
     """Write a print-ready grayscale PNG of a mask at its physical size.
 
@@ -153,19 +154,33 @@ def export_print_png(
     film : PrintedFilm, optional
         If given, the pixels are the film's printer input (quantised to its levels, or halftoned), i.e.
         exactly what :meth:`PrintedFilm.print` assumes is printed.
-    bit_depth : {8, 16}
-        PNG bit depth (printer drivers generally use 8).
+    bit_depth : {8, 16}, optional
+        PNG bit depth. Default: 8 (what printer drivers generally use), or 16 when the film reproduces more
+        than 256 grey levels. A film with more than 65536 levels, or 8 bits for more than 256 levels, is
+        refused: the file could not hold what the film model assumes is printed.
 
     Returns
     -------
     Path
         The written file.
 
+    Raises
+    ------
+    ValueError
+        A file name that does not end in ``.png`` (the bytes are PNG whatever the name), or levels the bit
+        depth cannot hold.
+
     Notes
     -----
-    The image is the mask as seen from the detector looking out; mount the film so the print reads the same
-    way from the detector side (printing on the far side of the film mirrors it as seen from the scene).
+    The file is written atomically. The image is the mask as seen from the detector looking out; mount the film
+    so the print reads the same way from the detector side (printing on the far side of the film mirrors it as
+    seen from the scene).
     """
+    path = Path(path)
+    if path.suffix.lower() != ".png":
+        raise ValueError(f"print file {str(path)!r}: masks are written as PNG; give a name ending in .png "
+                         f"(not {path.suffix or 'no suffix'!r})")
+    bit_depth = png_bit_depth(film, bit_depth)
     if dpi is None:
         dpi = film.dpi if film is not None else 600.0
     if film is not None:
@@ -174,4 +189,28 @@ def export_print_png(
         values = film.printer_input(mask)
     else:
         values = resample(mask, _dot_grid(mask.width_m, mask.height_m, dpi))
-    return imageio.write_png(path, values, bit_depth=bit_depth, dpi=dpi)
+    with atomic_path(path) as tmp:
+        imageio.write_png(tmp, values, bit_depth=bit_depth, dpi=dpi)
+    return path
+
+
+def png_bit_depth(film: PrintedFilm | None, bit_depth: int | None = None) -> int:
+    """The PNG bit depth that holds ``film``'s grey levels (8 up to 256 levels, 16 up to 65536).
+
+    Raises
+    ------
+    ValueError
+        More than 65536 levels (no PNG holds them), or ``bit_depth = 8`` for more than 256 levels.
+    """
+    levels = None if film is None or film.halftone is not None else film.levels
+    if levels is not None and levels > 65536:
+        raise ValueError(f"levels = {levels}: a PNG holds at most 65536 grey levels (16 bits); give levels <= 65536 "
+                         "(256 for an 8-bit printer)")
+    need = 16 if levels is not None and levels > 256 else 8
+    if bit_depth is None:
+        return need
+    if bit_depth not in (8, 16):
+        raise ValueError(f"bit_depth must be 8 or 16, got {bit_depth!r}")
+    if bit_depth < need:
+        raise ValueError(f"levels = {levels} need a 16-bit PNG; an 8-bit file holds 256 grey levels")
+    return bit_depth

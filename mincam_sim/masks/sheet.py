@@ -1,0 +1,241 @@
+"""Print sheets: every mask of a mincam on one page at its place and spacing, at the printer's dots, with crop and
+registration marks, the side that faces the detectors marked, and the film mapping and dpi printed on the sheet
+and in a text file beside it (:func:`write_print_sheet`). Pure numpy + Pillow (+ matplotlib for PDF).
+
+Sheet geometry: the page is what the detectors see looking out through the film (the convention of every mask
+array and of :func:`~mincam_sim.masks.export_print_png`): mask centre ``(x, y)`` [m] (x right, y up, from the
+mincam's centre) lands ``x`` right and ``y`` up of the page's reference centre (the registration marks' centre).
+Each mask is its own printer-dot grid (``round(size * dpi / 0.0254)`` dots a side, as
+:meth:`~mincam_sim.masks.PrintedFilm.print` models it), placed on the nearest dot: a centre is off by at most half
+a dot (21 um at 600 dpi).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .. import imageio
+from ..atomic import atomic_path, atomic_write_text
+from .mask import MAX_TEXELS, Mask, resample
+from .printing import PrintedFilm, _dot_grid, png_bit_depth
+
+MM = 1e-3
+MARGIN_M = 8 * MM  # [m] blank border around the masks: crop marks and registration marks live in it
+CROP_GAP_M = 1.0 * MM  # [m] gap between a mask's edge and its crop marks
+CROP_LEN_M = 3.0 * MM  # [m] length of a crop mark
+REG_RADIUS_M = 2.0 * MM  # [m] registration mark (circle and cross) radius
+SCALE_BAR_M = 10 * MM  # [m] scale bar to check the print was not scaled
+TEXT_PT = 7.0  # text size [pt]
+
+
+@dataclass(frozen=True)
+class SheetPlacement:
+    """Where one mask lies on the sheet (pixel rows/cols from the top left; metres from the reference centre)."""
+
+    name: str
+    centre_m: tuple[float, float]
+    top_left_px: tuple[int, int]
+    shape_px: tuple[int, int]
+
+
+def _line_px(dpi: float, width_m: float = 0.15 * MM) -> int:
+    return max(1, round(width_m * dpi / 0.0254))
+
+
+def _px(length_m: float, dpi: float) -> int:
+    return int(round(length_m * dpi / 0.0254))
+
+
+def _film_text(film: PrintedFilm | None, dpi: float) -> str:
+    if film is None:
+        return (f"{dpi:g} dpi; grey value v in [0, 1] (PNG value / 255) is the wanted transmission "
+                "(no film model: measure your film)")
+    tone = "ordered 8x8 halftone" if film.halftone else (f"{film.levels} grey levels" if film.levels else
+                                                        "continuous grey")
+    return (f"{dpi:g} dpi, {tone}; film: transmission = {film.t_min:g} + ({film.t_max:g} - {film.t_min:g}) "
+            f"* v^{film.gamma:g}, v = printer grey in [0, 1] (0 = full ink)")
+
+
+def write_print_sheet(
+    masks: Sequence[Mask],
+    positions_m: Sequence[Sequence[float]],
+    dpi: float,
+    film: PrintedFilm | None,
+    path: str | Path,
+    names: Sequence[str] | None = None,
+    title: str = "",
+) -> tuple[Path, Path]:
+    """Write a print sheet (PNG at ``dpi`` or a PDF of that page) of every mask at its place, and its notes.
+
+    Parameters
+    ----------
+    masks : sequence of Mask
+        The masks, as seen from the detector looking out (row 0 at the top).
+    positions_m : sequence of (x, y)
+        Each mask's centre [m] in the mincam's plane: x right, y up, as seen from the detectors looking out (the
+        in-plane offsets of :func:`mincam_sim.optics.layout`).
+    dpi : float
+        Printer resolution [dots per inch]; the PNG records it so that printing at 100 % keeps every size.
+    film : PrintedFilm or None
+        With a film, each mask's dots are the film's printer input (quantised or halftoned) and the mapping from
+        grey to transmission is printed; None: the masks' transmission is printed as grey.
+    path : str or Path
+        ``.png`` or ``.pdf``. A text file ``<name>.txt`` beside it repeats the notes (film mapping, dpi, each
+        mask's place and size). Both are written atomically.
+    names : sequence of str, optional
+        Labels (default: the mask names).
+    title : str
+        First line of the notes.
+
+    Returns
+    -------
+    (Path, Path)
+        The sheet and its text file.
+
+    Raises
+    ------
+    ValueError
+        No masks, a position per mask missing, masks that overlap on the sheet, a sheet too large for ``dpi``,
+        or a file name that is neither ``.png`` nor ``.pdf``.
+    """
+    path = Path(path)
+    kind = path.suffix.lower()
+    if kind not in (".png", ".pdf"):
+        raise ValueError(f"print sheet {str(path)!r}: give a name ending in .png (at the printer's dpi) or .pdf")
+    masks = list(masks)
+    if not masks:
+        raise ValueError("a print sheet needs at least one mask")
+    pos = np.asarray(positions_m, dtype=np.float64)
+    if pos.shape != (len(masks), 2) or not np.isfinite(pos).all():
+        raise ValueError(f"positions_m must be one finite (x, y) in metres per mask ({len(masks)}), got shape "
+                         f"{pos.shape}")
+    if not (np.isfinite(dpi) and 50 <= dpi <= 4800):
+        raise ValueError(f"dpi must be a printer resolution of 50 to 4800 dots per inch, got {dpi!r}")
+    labels = [m.name for m in masks] if names is None else [str(n) for n in names]
+    if len(labels) != len(masks):
+        raise ValueError(f"{len(labels)} names for {len(masks)} masks")
+    bit_depth = png_bit_depth(film)
+    if film is not None and film.dpi != dpi:
+        from dataclasses import replace
+
+        film = replace(film, dpi=float(dpi))
+    half = np.array([[m.width_m / 2, m.height_m / 2] for m in masks])
+    lo, hi = pos - half, pos + half
+    for i in range(len(masks)):
+        for j in range(i + 1, len(masks)):
+            if np.all(lo[i] < hi[j] - 1e-12) and np.all(lo[j] < hi[i] - 1e-12):
+                raise ValueError(f"masks {labels[i]!r} and {labels[j]!r} overlap on the sheet (centres "
+                                 f"{pos[i].tolist()} and {pos[j].tolist()} m, sizes {2e3 * half[i]} and "
+                                 f"{2e3 * half[j]} mm): space the mixels at least a mask width apart")
+
+    notes = [title or "mincam mask print sheet",
+             _film_text(film, dpi),
+             "PRINT AT 100 % (no fit to page). This face towards the detectors: the text reads correctly from the "
+             "detector side.",
+             f"scale bar {SCALE_BAR_M * 1e3:g} mm; registration marks' centre = mincam centre; crop marks "
+             f"{CROP_GAP_M * 1e3:g} mm outside each mask"]
+    for name, (x, y), m in zip(labels, pos, masks, strict=True):
+        notes.append(f"{name}: centre ({1e3 * x:+.2f}, {1e3 * y:+.2f}) mm, {1e3 * m.width_m:g} x "
+                     f"{1e3 * m.height_m:g} mm")
+
+    from PIL import Image, ImageDraw, ImageFont
+
+    font = ImageFont.load_default(size=max(6, round(TEXT_PT / 72 * dpi)))
+    line_h = int(font.getbbox("Ag")[3] * 1.35) + 1
+    text_w = max(int(font.getlength(t)) for t in notes)
+
+    margin = _px(MARGIN_M, dpi)
+    span_lo, span_hi = lo.min(axis=0), hi.max(axis=0)
+    half_span = np.maximum(np.abs(span_lo), np.abs(span_hi))  # the reference centre is the page's centre
+    inner_w = 2 * _px(half_span[0], dpi) + 2 * margin
+    inner_h = 2 * _px(half_span[1], dpi) + 2 * margin
+    width = max(inner_w, text_w + 2 * margin)
+    text_top = inner_h
+    height = inner_h + line_h * (len(notes) + 1) + margin
+    if width * height > MAX_TEXELS:
+        raise ValueError(f"print sheet of {width} x {height} dots at {dpi:g} dpi is too large (max {MAX_TEXELS}); "
+                         "lower the dpi or print the masks on separate sheets")
+    cx, cy = width / 2, inner_h / 2
+    sheet = np.ones((height, width))
+    placements = []
+    for name, (x, y), m in zip(labels, pos, masks, strict=True):
+        shape = _dot_grid(m.width_m, m.height_m, dpi)
+        dots = film.printer_input(m) if film is not None else resample(m, shape)
+        r0 = int(round(cy - _px_f(y, dpi) - shape[0] / 2))
+        c0 = int(round(cx + _px_f(x, dpi) - shape[1] / 2))
+        sheet[r0:r0 + shape[0], c0:c0 + shape[1]] = dots
+        placements.append(SheetPlacement(name, (float(x), float(y)), (r0, c0), shape))
+        _crop_marks(sheet, r0, c0, shape, dpi)
+    img = Image.fromarray(np.zeros((height, width), dtype=np.uint8) + 255, mode="L")
+    draw = ImageDraw.Draw(img)
+    lw = _line_px(dpi)
+    reg = _px(REG_RADIUS_M, dpi)
+    off = margin // 2
+    for rx, ry in ((off, off), (width - off, off), (off, inner_h - off), (width - off, inner_h - off)):
+        draw.ellipse((rx - reg, ry - reg, rx + reg, ry + reg), outline=0, width=lw)
+        draw.line((rx - reg - lw, ry, rx + reg + lw, ry), fill=0, width=lw)
+        draw.line((rx, ry - reg - lw, rx, ry + reg + lw), fill=0, width=lw)
+    bar = _px(SCALE_BAR_M, dpi)
+    y_bar = text_top + line_h // 4
+    draw.line((margin, y_bar, margin + bar, y_bar), fill=0, width=2 * lw)
+    for k, text in enumerate(notes):
+        draw.text((margin, text_top + line_h * (k + 1) - line_h // 2), text, fill=0, font=font)
+    for p in placements:  # each mask's label just above its crop marks, outside the aperture
+        r0, c0 = p.top_left_px
+        draw.text((c0, max(0, r0 - _px(CROP_GAP_M + CROP_LEN_M, dpi) - line_h)), p.name, fill=0, font=font)
+    sheet = np.minimum(sheet, np.asarray(img, dtype=np.float64) / 255.0)
+    for p, m in zip(placements, masks, strict=True):  # the masks' own dots win over any mark or text
+        (r0, c0), (h, w) = p.top_left_px, p.shape_px
+        sheet[r0:r0 + h, c0:c0 + w] = film.printer_input(m) if film is not None else resample(m, (h, w))
+
+    if kind == ".png":
+        with atomic_path(path) as tmp:
+            imageio.write_png(tmp, sheet, bit_depth=bit_depth, dpi=dpi)
+    else:
+        _write_pdf(sheet, dpi, path)
+    text = "\n".join(notes) + "\n" + "\n".join(
+        f"{p.name}: {p.shape_px[1]} x {p.shape_px[0]} dots at column {p.top_left_px[1]}, row {p.top_left_px[0]} "
+        "(top left) of the sheet" for p in placements) + (
+        f"\nsheet: {width} x {height} dots = {width / dpi * 25.4:.2f} x {height / dpi * 25.4:.2f} mm at {dpi:g} "
+        "dpi; each mask centre within half a dot of its place\n")
+    notes_path = atomic_write_text(path.with_suffix(".txt"), text)
+    return path, notes_path
+
+
+def _px_f(length_m: float, dpi: float) -> float:
+    return length_m * dpi / 0.0254
+
+
+def _crop_marks(sheet: np.ndarray, r0: int, c0: int, shape: tuple[int, int], dpi: float) -> None:
+    """Short black lines along each edge line of a mask, starting ``CROP_GAP_M`` outside its corners."""
+    gap, length, lw = _px(CROP_GAP_M, dpi), _px(CROP_LEN_M, dpi), _line_px(dpi)
+    h, w = shape
+    rows, cols = sheet.shape
+
+    def fill(ra: int, rb: int, ca: int, cb: int) -> None:
+        sheet[max(0, ra):max(0, min(rows, rb)), max(0, ca):max(0, min(cols, cb))] = 0.0
+
+    for r in (r0, r0 + h):  # horizontal marks on the top and bottom edge lines, left and right of the mask
+        fill(r - lw // 2, r - lw // 2 + lw, c0 - gap - length, c0 - gap)
+        fill(r - lw // 2, r - lw // 2 + lw, c0 + w + gap, c0 + w + gap + length)
+    for c in (c0, c0 + w):  # vertical marks on the left and right edge lines, above and below the mask
+        fill(r0 - gap - length, r0 - gap, c - lw // 2, c - lw // 2 + lw)
+        fill(r0 + h + gap, r0 + h + gap + length, c - lw // 2, c - lw // 2 + lw)
+
+
+def _write_pdf(sheet: np.ndarray, dpi: float, path: Path) -> None:
+    """One PDF page of exactly the sheet's size, the sheet embedded at ``dpi`` without resampling."""
+    from matplotlib.figure import Figure
+
+    h, w = sheet.shape
+    fig = Figure(figsize=(w / dpi, h / dpi), dpi=dpi)
+    fig.figimage(sheet, cmap="gray", vmin=0.0, vmax=1.0, origin="upper", resize=False)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="pdf", dpi=dpi)
+
+
+__all__ = ["SheetPlacement", "write_print_sheet"]
