@@ -54,7 +54,11 @@ def _is_backend_error(err: BaseException) -> bool:
 
 
 def _is_user_error(err: BaseException) -> bool:
-    if isinstance(err, MincamError | ValueError | OSError | EOFError | MemoryError):
+    """The project's own errors, and what the machine refuses (a full disk, a missing permission, memory): one
+    line. Anything else (a ValueError or KeyError from inside the package) is a bug and shows its traceback."""
+    if isinstance(err, MincamError | MemoryError):
+        return True
+    if isinstance(err, OSError) and err.errno is not None:
         return True
     return isinstance(err, RuntimeError | ImportError) and _is_backend_error(err)
 
