@@ -27,7 +27,6 @@ version = release
 extensions = [
     "myst_parser",
     "sphinx.ext.autodoc",
-    "sphinx.ext.mathjax",
     "sphinx.ext.viewcode",
     "numpydoc",
     "sphinx_gallery.gen_gallery",
@@ -61,7 +60,8 @@ numpydoc_xref_param_type = False
 numpydoc_validation_checks: set[str] = set()
 
 # ---------------------------------------------------------------------------------------------- MyST
-myst_enable_extensions = ["colon_fence", "dollarmath", "amsmath", "deflist"]
+# No dollarmath / mathjax: MathJax would be fetched from a CDN, and the site is read offline too.
+myst_enable_extensions = ["colon_fence", "deflist"]
 myst_heading_anchors = 3
 
 # ---------------------------------------------------------------------------------------------- gallery
@@ -82,6 +82,8 @@ sphinx_gallery_conf = {
     "min_reported_time": 1,
     "show_memory": False,
     "show_signature": False,
+    "capture_repr": (),  # no stray reprs (a colorbar object) under the figures
+    "write_computation_times": False,  # its page loads scripts from a CDN: the site stays offline
 }
 
 # ---------------------------------------------------------------------------------------------- HTML

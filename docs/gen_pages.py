@@ -393,7 +393,7 @@ def reference_toc() -> str:
     entries = ["cli", "config", "api"]
     if (ROOT / "CHANGELOG.md").is_file():
         entries.append("changelog")
-    return ("```{toctree}\n:maxdepth: 2\n:caption: Reference\n\n" + "\n".join(entries) + "\n```\n")
+    return ("```{toctree}\n:maxdepth: 1\n:caption: Reference\n\n" + "\n".join(entries) + "\n```\n")
 
 
 def main() -> list[Path]:
