@@ -48,13 +48,15 @@ def _table(header: list[str], rows: list[list[str]]) -> str:
 
 
 def _g(value: float, digits: int = 6) -> str:
-    """A number with ``digits`` significant digits (no exponent for ordinary magnitudes)."""
+    """``value`` with ``digits`` significant digits, positional for ordinary magnitudes (no exponent)."""
+    import numpy as np
+
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return "-"
     if value == 0:
         return "0"
-    if 1e-3 <= abs(value) < 1e6:
-        return f"{value:.{digits}g}"
+    if 1e-4 <= abs(value) < 1e6:
+        return np.format_float_positional(value, precision=digits, fractional=False, unique=False, trim="k")
     return f"{value:.{max(digits - 1, 1)}e}"
 
 
@@ -63,7 +65,9 @@ def _pm(value: float, sigma: float, digits: int = 6) -> str:
 
 
 def _pct(rel: float, digits: int = 2) -> str:
-    return f"{100 * rel:+.{digits}g} %" if abs(rel) >= 1e-4 else f"{100 * rel:+.1e} %"
+    """A relative deviation as a signed percentage with ``digits`` significant digits."""
+    text = _g(100 * rel, digits)
+    return f"{'+' if rel >= 0 else ''}{text} %"
 
 
 # ------------------------------------------------------------------------------------------------ validation
@@ -132,7 +136,7 @@ def validation_tables(data: dict[str, Any]) -> str:
     for key in sorted(k for k in data if k.startswith("depth_scaling_")):
         used.add(key)
         e = data[key]
-        depth = key.removeprefix("depth_scaling_")
+        depth = key.removeprefix("depth_scaling_").replace("m", " m")
         rows.append([depth, _pm(e["fitted_omega_rad_per_m"], e["fit_sigma"]), _g(e["expected_omega_rad_per_m"]),
                      _pct(e["relative_deviation"])])
     if "fov_offset" in data:

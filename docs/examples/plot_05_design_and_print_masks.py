@@ -94,21 +94,34 @@ print(
 )
 
 # %%
-# The masks as printed, and the error against depth
-# -------------------------------------------------
-# These are the figures the design run writes (``masks.png``, ``error_vs_depth.png``).
-for name in ("masks.png", "error_vs_depth.png"):
-    image = plt.imread(out_dir / name)
+# The masks as printed
+# --------------------
+# The figures below are the ones the design run writes (``masks.png``, ``error_vs_depth.png``): the paper's
+# ramps (top) and the designed masks (bottom), as the film transmits them.
+
+
+def show_png(path: Path) -> None:
+    image = plt.imread(path)
     fig, ax = plt.subplots(
         figsize=(9, 9 * image.shape[0] / image.shape[1]), constrained_layout=True
     )
     ax.imshow(image)
     ax.set_axis_off()
 
+
+show_png(out_dir / "masks.png")
+
+# %%
+# Position error against depth, held-out objects
+# ----------------------------------------------
+show_png(out_dir / "error_vs_depth.png")
+
 # %%
 # The designed masks go to the printer as they are
 # ------------------------------------------------
-designed_pngs = sorted(out_dir.glob("mask_designed_*.png"))
+designed_pngs = [
+    out_dir / f"mask_designed_{p}.png" for p in ("left", "right", "top", "bottom")
+]
 fig, axes = plt.subplots(
     1, len(designed_pngs), figsize=(10, 2.8), constrained_layout=True
 )
