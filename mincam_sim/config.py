@@ -733,7 +733,7 @@ def dataclass_from_section(section: str, table: Any, defaults: Any) -> Any:
 
     Every key must be a field of the dataclass and have the type of its default (integers stay integers,
     numbers carry no units or quotes); the dataclass's own ``__post_init__`` then checks ranges, and its
-    ``ValueError`` comes back as a :class:`ConfigError` naming the section.
+    ``ValueError`` comes back as a :class:`~mincam_sim.errors.ConfigError` naming the section.
     """
     current = {f.name: getattr(defaults, f.name) for f in dataclasses.fields(defaults) if f.init}
     given = _table(f"[{section}]", table)

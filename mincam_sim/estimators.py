@@ -176,7 +176,7 @@ def centroid(
 
     Parameters
     ----------
-    disturbance : array_like, shape (*batch, *grid)
+    disturbance : array_like, shape ``(*batch, *grid)``
         Change D of the scene, one grid per frame.
     coords : array_like of shape grid, or tuple/list of such arrays
         Coordinate(s) of the grid samples (e.g. ``x`` for 1D, ``(X, Y)`` from ``np.meshgrid`` for 2D); each

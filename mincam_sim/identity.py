@@ -169,7 +169,7 @@ def fingerprint(obj: Any, chars: int = FINGERPRINT_CHARS) -> str:
 
 
 def run_key(identity: Any) -> str:
-    """Key of a run's identity: its :func:`fingerprint` (32 hex characters)."""
+    """Key of a run's identity: its :func:`~mincam_sim.identity.fingerprint` (32 hex characters)."""
     return fingerprint(identity)
 
 

@@ -56,7 +56,7 @@ class Measurements:
         return self.irradiance_w_m2.shape[0]
 
     def relative_stderr(self) -> np.ndarray:
-        """stderr / |value| (inf where the value is 0)."""
+        """``stderr / |value|`` (inf where the value is 0)."""
         with np.errstate(divide="ignore", invalid="ignore"):
             return self.stderr_w_m2 / np.abs(self.irradiance_w_m2)
 

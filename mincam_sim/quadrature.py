@@ -129,7 +129,7 @@ def _ccw(poly: np.ndarray) -> np.ndarray:
 
 def polygon_view_factor(point: np.ndarray, normal: np.ndarray, vertices: np.ndarray) -> float:
     """View factor from a differential area (``point``, unit ``normal``) to a planar polygon in front of it
-    (Lambert's contour formula: F = 1/(2 pi) sum gamma_i n . (R_i x R_i+1) / |R_i x R_i+1|)."""
+    (Lambert's contour formula: ``F = 1/(2 pi) sum gamma_i n . (R_i x R_i+1) / |R_i x R_i+1|``)."""
     if len(vertices) < 3:
         return 0.0
     total = 0.0

@@ -67,7 +67,7 @@ def read_out(
     background_irradiance_w_m2 : (mixels,) array
         Irradiance of the empty scene [W/m^2].
     sensor : SensorModel
-        The photodetector and ADC (e.g. :meth:`SensorModel.paper_prototype`).
+        The photodetector and ADC (e.g. :meth:`~mincam_sim.sensor.SensorModel.paper_prototype`).
     rng : numpy.random.Generator
         Source of the sensor noise.
     """

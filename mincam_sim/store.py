@@ -62,7 +62,7 @@ class DirLock:
     The lock file records the holder's PID and host, so a refused process can name it. The lock is released by
     :meth:`release`, when the object is garbage-collected, or by the operating system when the process ends
     (even if killed). Within one process a newer lock on the same directory takes over from an older one, which
-    is marked :attr:`superseded` (its owner's writes then fail instead of interleaving): an interrupted run
+    is marked ``superseded`` (its owner's writes then fail instead of interleaving): an interrupted run
     whose objects are still referenced (say, by a traceback) does not block its own rerun.
 
     Parameters

@@ -1,7 +1,7 @@
 """Mask design by differentiable rendering through the mincam's real geometry (issue 11).
 
 An upper floor beside the experiments: it imports the core (optics, masks, sensor, calibration) and the render
-layer, whose :mod:`mincam_sim.render.differentiable` holds the only Dr.Jit AD code.
+layer, whose ``mincam_sim.render.differentiable`` holds the only Dr.Jit AD code.
 
 * :mod:`.tracking`: the task (four mixels 3.3 cm apart, objects at 0.35-0.7 m, 12-bit sensor).
 * :mod:`.parameterization`: logits on a coarse grid -> printer dots -> film transmission.

@@ -1,8 +1,8 @@
 """Physical evaluation of a tracking mincam on held-out scenes, with the simulator's non-differentiable
-response-map form (:func:`mincam_sim.render.response_map.response_maps`: rays from the detectors through the
+response-map form (:func:`~mincam_sim.render.screen_engine.response_maps`: rays from the detectors through the
 masks, as printed on the film, to every display texel, with visibility in the mincam's scene), the 12-bit
 sensor and the paper's protocol: Eq. 7 ratios, cubic calibration on a grid of 3 cm squares at 0.5 m, scaled
-by ``depth / 0.5`` at other depths (:mod:`.tracking` for the coordinates)."""
+by ``depth / 0.5`` at other depths (:mod:`mincam_sim.design.tracking` for the coordinates)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """Build the tracking design problem from traced samples and run the optimiser (Dr.Jit AD in
-:mod:`mincam_sim.render.differentiable`), from the paper's ramps as the starting point."""
+``mincam_sim.render.differentiable``), from the paper's ramps as the starting point."""
 
 from __future__ import annotations
 

@@ -1,8 +1,8 @@
 """Mask parameterisation for design: a coarse grid of logits, bilinear onto the printer's dot grid, a sigmoid
 onto the printer's grey values, and the film's tone curve onto printable transmissions. Pure numpy.
 
-The optimiser (:func:`mincam_sim.render.differentiable.optimise_masks`) evaluates the same chain in Dr.Jit;
-:func:`dots_from_logits` is its NumPy twin (used for checks and for building the printable mask).
+The optimiser (``mincam_sim.render.differentiable.optimise_masks``) evaluates the same chain in Dr.Jit;
+``dots_from_logits`` is its NumPy twin (used for checks and for building the printable mask).
 """
 
 from __future__ import annotations

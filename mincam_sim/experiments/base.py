@@ -80,7 +80,7 @@ class Experiment(ABC):
 
     def params(self, quick: bool = False, table: dict | None = None) -> Any:
         """The parameters: defaults, the quick-mode overrides if ``quick``, then a TOML ``[name]`` table
-        (validated: unknown keys, wrong types and out-of-range values are :class:`ConfigError`)."""
+        (validated: unknown keys, wrong types and out-of-range values are :class:`~mincam_sim.errors.ConfigError`)."""
         params = self.Params()
         if quick:
             params = dataclasses.replace(params, **self.quick_overrides)

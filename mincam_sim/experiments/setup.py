@@ -36,7 +36,8 @@ class Setup:
     field_m : float
         Calibrated range [m]: the paper's 50 cm boundary / field of view; error rates are % of it.
     bit_depth : int
-        ADC bits (paper: 12); the sensor is :meth:`SensorModel.paper_prototype` (48 x 48 pixels averaged).
+        ADC bits (paper: 12); the sensor is :meth:`~mincam_sim.sensor.SensorModel.paper_prototype` (48 x 48
+        pixels averaged).
     spp : int
         Plain-estimator samples per mixel per frame on the tabletop (halved in quick mode); the stratified
         estimator spends ``spp / 128`` rays per pass for the same noise (:mod:`.pipeline`).

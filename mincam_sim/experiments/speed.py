@@ -4,12 +4,13 @@
   per frame at 30 frames/s; speed in px/s; the stationary mixel's signal P(t) -> FFT peak -> v = omega_p/omega_d.
 * vehicle (its physical version): the mixel looks down from height d at a textured road plane that moves at
   v m/s under an overcast sky (the plane moves by a parameter update per frame).
+
 omega_d = omega_df d_f / d is the estimator's model (Eq. 10); the signal itself comes from rays.
 
 The mask's constant term A0 lets the road's coarse structure (patches, lane dashes) through at temporal
 frequencies below omega_d v, and on textured roads the plain periodogram peak often lands there. The
 estimator therefore takes the FFT peak of the frame-to-frame difference P(t) - P(t - dt) (a high-pass with
-|H| ~ omega at low frequencies); ``plain_fft`` reports the paper's plain windowed FFT of P(t) as well.
+``|H| ~ omega`` at low frequencies); ``plain_fft`` reports the paper's plain windowed FFT of P(t) as well.
 """
 
 from __future__ import annotations
@@ -127,8 +128,9 @@ def video_omega_d_rad_per_px(setup: Setup, params: SpeedParams) -> float:
 
 
 def check_nyquist(setup: Setup, params: SpeedParams) -> dict:
-    """Refuse (:class:`ConfigError`) speeds the sampled sinusoid cannot measure (at or above the Nyquist limit
-    ``pi f_s / omega_d``, where the FFT peak would report an aliased, wrong speed); return the limits."""
+    """Refuse (:class:`~mincam_sim.errors.ConfigError`) speeds the sampled sinusoid cannot measure (at or above
+    the Nyquist limit ``pi f_s / omega_d``, where the FFT peak would report an aliased, wrong speed); return the
+    limits."""
     video = nyquist_speed(params.video_frame_rate_hz, video_omega_d_rad_per_px(setup, params))
     vehicle_omega = float(scene_frequency(2 * np.pi / params.mask_period_m, setup.d_f_m, params.vehicle_height_m))
     vehicle = nyquist_speed(params.vehicle_rate_hz, vehicle_omega)

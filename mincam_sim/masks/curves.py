@@ -173,7 +173,7 @@ def circular_ramp(
     start_angle_deg : float
         Angle where the ramp starts (value ``values[0]``), degrees counter-clockwise from +x (right).
     sweep_deg : float
-        Angular extent, degrees; positive = counter-clockwise, negative = clockwise. |sweep| <= 360.
+        Angular extent, degrees; positive = counter-clockwise, negative = clockwise. ``|sweep| <= 360``.
     resolution, width_m, height_m
         As in :func:`curved_ramp`.
     values : (float, float)

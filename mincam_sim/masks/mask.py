@@ -241,7 +241,7 @@ def sinusoid(
     omega_rad_per_m : float
         Angular spatial frequency on the mask [rad/m] (omega_df in the paper).
     a0, a1 : float
-        Mean and amplitude; a0 - |a1| >= 0 and a0 + |a1| <= 1 keep the mask physical.
+        Mean and amplitude; ``a0 - |a1| >= 0`` and ``a0 + |a1| <= 1`` keep the mask physical.
     phase_rad : float
         Phase at the mask centre [rad].
     direction_deg : float

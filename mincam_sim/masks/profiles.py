@@ -4,7 +4,7 @@ A profile maps physical mask coordinates ``(x_m, y_m)`` [m] (centred on the mask
 seen from the detector looking out) to a transmission in [0, 1]. The same expression runs on numpy arrays (to
 sample the mask's texel array) and inside the renderer's Dr.Jit kernels (to evaluate the mask *exactly* at every
 ray, with no texture discretisation): every profile is written against a tiny array namespace ``ops``
-(:class:`NumpyOps` here; the render layer provides the Dr.Jit one), so this module stays pure numpy.
+(``NumpyOps`` here; the render layer provides the Dr.Jit one), so this module stays pure numpy.
 
 The namespace needs: ``cos``, ``sqrt``, ``atan2``, ``abs``, ``floor``, ``minimum``, ``maximum`` and
 ``where(cond, a, b)``.

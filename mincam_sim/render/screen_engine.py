@@ -2,14 +2,14 @@
 
 * ``reference``: the literal scene (mask surface, housing, detector with Mitsuba's ``irradiancemeter``,
   ``path`` integrator), one scene per mixel in millimetres around it. Slow and obviously right.
-* ``fast``: the :mod:`~mincam_sim.render.mixel_sensor` plugin, rays start on the mask apertures
+* ``fast``: the ``mincam_sim.render.mixel_sensor`` plugin, rays start on the mask apertures
   (``path`` integrator, all mixels in one render).
-* ``response map``: :func:`~.response_map.response_maps` traces, for every display texel, rays from detector
+* ``response map``: :func:`response_maps` traces, for every display texel, rays from detector
   points through the mask plane to points in the texel (with a visibility ray in the mincam's scene); any frame
   is then ``sum(W * frame)``, exact in expectation.
 
-All three run over one :class:`~.mincam_scene.MincamScene` (the other mixels' bodies occlude in every form)
-and return irradiance averaged over each detector [W/m^2] with its Monte Carlo standard error. This module
+All three run over one ``mincam_sim.render.mincam_scene.MincamScene`` (the other mixels' bodies occlude in
+every form) and return irradiance averaged over each detector [W/m^2] with its Monte Carlo standard error. This module
 keeps the documented entry points: :class:`ScreenRenderer`, :func:`response_maps`, :func:`render_frames`.
 """
 

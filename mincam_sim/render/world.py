@@ -11,11 +11,11 @@ Two estimators of ``dP`` (``measure_changes(estimator=...)``):
 * ``"plain"`` (the reference): every frame traced over the whole aperture with the background's seed; the
   background traced once.
 * ``"stratified"``: per frame and mixel, the aperture region where the frame can differ from the background
-  (:mod:`.change_region`: the moving shapes' bounds and their shadow volumes from the emitting shapes, for both
-  the frame and the background) gets most rays, the rest of the aperture a few, both strata unbiased
-  (:mod:`.stratified`). The frame and the background are traced with the same seed, counts and regions, so
+  (``mincam_sim.render.change_region``: the moving shapes' bounds and their shadow volumes from the emitting
+  shapes, for both the frame and the background) gets most rays, the rest of the aperture a few, both strata unbiased
+  (``mincam_sim.render.stratified``). The frame and the background are traced with the same seed, counts and regions, so
   their rays pair up lane by lane; inter-reflection bounces are guided toward the moving shapes
-  (:mod:`.guided_path`); the background's whole-aperture value (for ``P``) is traced once per run, on a
+  (``mincam_sim.render.guided_path``); the background's whole-aperture value (for ``P``) is traced once per run, on a
   jittered aperture grid with at least :data:`BACKGROUND_MIN_SPP` rays. Kernels are compiled once and reused
   (same code every frame and budget: per-frame bounds, guides and ray counts are array or opaque inputs); each
   frame costs one parameter update (one acceleration-structure rebuild) for the frame and one back to the
@@ -94,7 +94,7 @@ class WorldRenderer:
         Longest path of the ``path`` integrator, in segments from the mask: 2 = direct lighting only; 3 (the
         default) adds one inter-reflection (e.g. light the moving object throws onto the table).
     camera : dict, optional
-        A ground-truth camera (:func:`~.scene_dicts.pinhole_camera`) rendered by :meth:`camera_image`.
+        A ground-truth camera (``mincam_sim.render.scene_dicts.pinhole_camera``) rendered by :meth:`camera_image`.
     """
 
     def __init__(self, mincam: Mincam, elements: dict, replicates: int = 8, max_depth: int = 3,
@@ -207,7 +207,7 @@ class WorldRenderer:
         target_rel_stderr : float
             If > 0, ``spp`` is only the pilot: up to 4 frames spread over the sequence are measured with it,
             and the sample count is extrapolated (variance ~ 1/samples, x 1.5 margin, at most ``MAX_SPP``)
-            so that every significant change (|dP| > 3 sigma in the pilot) reaches this relative standard
+            so that every significant change (``|dP| > 3 sigma`` in the pilot) reaches this relative standard
             error; ``meta["spp_per_mixel_per_frame"]`` is what was used and ``meta["reached_rel_stderr"]``
             what was reached over the significant changes.
         estimator : {"plain", "stratified"}
@@ -222,7 +222,8 @@ class WorldRenderer:
             shares).
         guide_bounces : bool
             Stratified only: draw half of the inter-reflection bounces toward a sphere around the moving shapes
-            and their shadows (:mod:`.guided_path`; unbiased, the same expectation as the ``path`` integrator).
+            and their shadows (``mincam_sim.render.guided_path``; unbiased, the same expectation as the ``path``
+            integrator).
             Light the object throws onto the rest of the scene is then met by many rays with small weights
             instead of a few with large ones. Ignored at ``max_depth`` the guided path does not cover.
 
@@ -354,8 +355,8 @@ class WorldRenderer:
 
     def change_guide(self, moving: Sequence[str]) -> list[tuple[np.ndarray, float]] | None:
         """Spheres (centre, radius [m], scene coordinates) toward which guided bounces aim
-        (:mod:`.guided_path`): one per group of the named shapes, in their current place, with their shadow
-        volumes (shapes close together share one); None if a change is unbounded."""
+        (``mincam_sim.render.guided_path``): one per group of the named shapes, in their current place, with
+        their shadow volumes (shapes close together share one); None if a change is unbounded."""
         return self._change(moving)[1]
 
     def change_regions(self, moving: Sequence[str]) -> ApertureRegions:

@@ -303,9 +303,10 @@ def visible_screen_polygon_local_m(screen: Screen, mixel) -> np.ndarray:
     """The part of the screen (polygon (k, 3) [m], mixel's local frame) that some detector point sees.
 
     A point ``p`` beyond the mask plane (``z > d_f (1 + 1e-9)``) is seen by some detector point through the aperture iff
-    ``|x| <= tx z - s/2`` and ``|y| <= ty z - s/2`` (``tx, ty`` from :meth:`Mixel.half_fov_tan`, ``s`` the
-    detector side): the union of the detector points' view pyramids, whose apex lies at ``z = s / (2 tx)``
-    (slightly narrower than the pyramid of the widest rays from the origin). Mask transmission is ignored.
+    ``|x| <= tx z - s/2`` and ``|y| <= ty z - s/2`` (``tx, ty`` from
+    :meth:`~mincam_sim.optics.Mixel.half_fov_tan`, ``s`` the detector side): the union of the detector points' view
+    pyramids, whose apex lies at ``z = s / (2 tx)`` (slightly narrower than the pyramid of the widest rays from the
+    origin). Mask transmission is ignored.
     """
     poly = screen_polygon_local_m(screen, mixel)
     tx, ty = mixel.half_fov_tan()

@@ -63,7 +63,7 @@ def response_table(
     """Tabulate the mixel's wave response over its whole field of view (``|tan| <= half_fov_tan``).
 
     ``n_tan`` points per axis (default: 513 for one-axis masks, whose 1D factors are solved on 129 points and
-    interpolated, see :func:`_table_separable`; 33 for 2D masks, whose cost is one 2D propagation per point).
+    interpolated, see ``_table_separable``; 33 for 2D masks, whose cost is one 2D propagation per point).
     The renderer reads the table bilinearly: its spacing must resolve the response's angular detail (about
     ``min(detector, period) / d_f``); a 2D table is therefore only as good as its ``n_tan`` allows.
     """
