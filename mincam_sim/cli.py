@@ -419,7 +419,7 @@ def _print_details(results: dict) -> None:
             typer.echo(f"{'':<12} {group:<8} {_pct(g.get('max_error_pct'), 7)} {_pct(g.get('p95_error_pct'), 7)} "
                        f"{_pct(g.get('avg_error_pct'), 7)} {_pct(clean.get('max_error_pct'), 7)} "
                        f"{_pct(axis.get('avg_error_pct'), 8)} {g.get('n', 0):>5} {g.get('unscored_frames', 0):>9} "
-                       f"{_pct(share, 6)}%")
+                       f"{_pct(share, 6)}{'' if share is None else '%'}")
     typer.echo("# max*: the maximum without the frames read outside the calibrated range (extrapolated)")
 
 

@@ -37,6 +37,21 @@ class Located:
         return evaluated[:: max(1, evaluated.size // count)][:count]
 
 
+def _contrast(net_fraction: np.ndarray, pair_sum_dn: np.ndarray) -> dict | None:
+    """How much of a frame's change survives as net change: the ground-truth camera's sum of the change over its
+    sum of |change| (1: all brightening; near 0: brightening cancelled by shadow and dark sides), and the
+    denominator of Eq. 4 / 7, a pair's summed change [DN] (median and 5th-95th percentiles over the frames)."""
+    if net_fraction.size == 0:
+        return None
+
+    def spread(v: np.ndarray) -> list[float]:
+        v = v[np.isfinite(v)]
+        return [float(q) for q in np.percentile(v, (50, 5, 95))] if v.size else [float("nan")] * 3
+
+    return {"net_to_absolute_change_median_p5_p95": spread(net_fraction),
+            "pair_sum_dn_median_p5_p95": spread(pair_sum_dn)}
+
+
 def _finite_rows(a: np.ndarray) -> np.ndarray:
     return np.isfinite(a) if a.ndim == 1 else np.all(np.isfinite(a), axis=1)
 
@@ -106,6 +121,7 @@ def locate_in_world(world: WorldRenderer, camera: GroundTruthCamera, frames: Seq
     bg_image = world.camera_image(spp=GROUND_TRUTH_SPP, seed=setup.seed)
     shape = (len(frames),) if axis is not None else (len(frames), 2)
     truth_change, truth_object, signed = (np.full(shape, np.nan) for _ in range(3))
+    net_fraction = np.full(len(frames), np.nan)
     images = []
     pick = (lambda v: v[axis]) if axis is not None else (lambda v: v)
     threshold = GROUND_TRUTH_THRESHOLD * float(bg_image.max())
@@ -118,6 +134,9 @@ def locate_in_world(world: WorldRenderer, camera: GroundTruthCamera, frames: Seq
             centroid, mask = camera.object_centroid(objects[i], image.shape, region)
             truth_object[i] = pick(centroid) if mask.sum() >= 3 else np.nan
         signed[i] = pick(camera.signed_change_centroid(image, bg_image, region))
+        diff = (image - bg_image) if region is None else np.where(region, image - bg_image, 0.0)
+        total = np.abs(diff).sum()
+        net_fraction[i] = diff.sum() / total if total > 0 else np.nan
         images.append(image)
     world.update(background)
 
@@ -127,6 +146,7 @@ def locate_in_world(world: WorldRenderer, camera: GroundTruthCamera, frames: Seq
     extrap = (extrapolated(change, readout.threshold_dn) if extrapolated is not None
               else np.zeros(len(frames), dtype=bool))
     labels = np.asarray(groups if groups is not None else ["all"] * len(frames))
+    pair_sum_dn = change.sum(axis=1) / (change.shape[1] / 2)  # the mean denominator of Eq. 4 / 7 [DN]
 
     def rates(pred: np.ndarray, true: np.ndarray, normalisation: str = "euclidean") -> dict | None:
         both = _finite_rows(pred) & _finite_rows(true)
@@ -157,6 +177,7 @@ def locate_in_world(world: WorldRenderer, camera: GroundTruthCamera, frames: Seq
             "extrapolated_frames": int((extrap & ok).sum()) if extrapolated is not None else None,
             "without_extrapolated": rates(predicted[ok & ~extrap], true[ok & ~extrap]),
             "per_axis": rates(predicted[ok], true[ok], "per_axis"),
+            "contrast": _contrast(net_fraction[ok], pair_sum_dn[ok]),
             "_ok": ok,
         }
 
@@ -167,7 +188,7 @@ def locate_in_world(world: WorldRenderer, camera: GroundTruthCamera, frames: Seq
     if other is not None:
         other.pop("_ok")
     by_group = {}
-    for label in dict.fromkeys(labels.tolist()):
+    for label in sorted(set(labels.tolist()), key=labels.tolist().index):
         g = scoring(truth, labels == label)
         g.pop("_ok")
         by_group[label] = g
@@ -195,6 +216,7 @@ def locate_in_world(world: WorldRenderer, camera: GroundTruthCamera, frames: Seq
     arrays = {"predicted_m": predicted, "truth_m": truth, "truth_object_m": truth_object,
               "truth_change_m": truth_change, "signed_centroid_m": signed, "detected": detected,
               "evaluated": ok, "extrapolated": extrap & ok, "group": labels,
+              "net_change_fraction": net_fraction, "pair_sum_dn": pair_sum_dn,
               "predicted_noiseless_m": predicted_ideal, "predicted_sigma_m": sigma,
               "sensor_sigma_m": sigma_sensor, "change_dn": change, "dP_w_m2": dp.irradiance_w_m2,
               "dP_stderr_w_m2": dp.stderr_w_m2}
