@@ -394,7 +394,9 @@ def _print_table(results: dict) -> None:
         p = results["speed"]["paper"]
         typer.echo(f"{'(display)':<12} {_pct(v['max_error_pct'], 10)} / {_pct(v['avg_error_pct'], 10, '<')}        "
                    f"{_pct(p['max_error_pct'], 8)} / {_pct(p['avg_error_pct'], 8, '<')}        {v['n']}"
-                   f"   ({v['timing']})")
+                   f"   ({v['timing']}"
+                   + (f"; median of {v['draws']['count']} draws {v['draws']['median_max_error_pct']:.2f} / "
+                      f"{v['draws']['median_avg_error_pct']:.2f}" if "draws" in v else "") + ")")
     _print_details(results)
 
 

@@ -141,3 +141,6 @@ def test_speed_reports_the_display_timing_beside_the_ideal(run):
     d = r["display_timing"]
     assert d["n"] == r["n"] and len(d["predicted_speed_px_s"]) == len(r["true_speed_px_s"])
     assert d["refresh_rate_hz"] == 60.0 and "asynchronously" in d["timing"] and "ideal" in r["timing"]
+    draws = d["draws"]
+    assert draws["count"] == len(draws["max_error_pct"]) == 32 and draws["max_error_pct"][0] == d["max_error_pct"]
+    assert min(draws["max_error_pct"]) <= draws["median_max_error_pct"] <= max(draws["max_error_pct"])
