@@ -59,7 +59,8 @@ class TrackingParams:
         simulator's choice; 0.1 is a dark table). It sets the contrast: a bright toy's brightening on a grey
         table is largely cancelled by its shadow and dark sides.
     toy_albedos : tuple of float
-        Albedo of each toy, one per entry of ``toys``.
+        Albedo of each toy, one per entry of ``toys``; empty (the default): each kind's own
+        (:data:`~mincam_sim.objects.DEFAULT_TOY_ALBEDO`: robot 0.75, chick 0.9, frog 0.7).
     toy_height_scale : float
         Scale of the toys' heights (1: as modelled; e.g. 0.02: flat prints of their footprints, no shadow).
     light_size_m : float
@@ -79,16 +80,17 @@ class TrackingParams:
     calibration_square_m: float = 0.03
     calibration_rel_stderr: float = 1e-3
     table_albedo: float = DEFAULT_TABLE_ALBEDO
-    toy_albedos: tuple[float, ...] = tuple(objects.DEFAULT_TOY_ALBEDO[k] for k in ("robot", "chick", "frog"))
+    toy_albedos: tuple[float, ...] = ()
     toy_height_scale: float = 1.0
     light_size_m: float = DEFAULT_LIGHT_SIZE_M
     ground_truth: str = "object"
 
     def __post_init__(self) -> None:
         check_contrast(self.table_albedo, self.toy_albedos, self.light_size_m, self.ground_truth, "toy_albedos")
-        if len(self.toy_albedos) != len(self.toys):
+        if self.toy_albedos and len(self.toy_albedos) != len(self.toys):
             raise ValueError(f"toy_albedos must give one albedo per toy: toys lists {len(self.toys)}, "
-                             f"toy_albedos {len(self.toy_albedos)}; set both")
+                             f"toy_albedos {len(self.toy_albedos)}; set both, or leave toy_albedos out (each "
+                             "kind's own albedo)")
         for key in ("toy_size_m", "frame_interval_s", "toy_speed_m_s", "calibration_square_m",
                     "calibration_rel_stderr", "toy_height_scale"):
             if not getattr(self, key) > 0:
@@ -117,9 +119,8 @@ class Tracking(Experiment):
     paper_section = "4.2"
     paper = PaperNumbers(max_error_pct=6.78, avg_error_pct=2.82)
     Params = TrackingParams
-    quick_overrides = {"toys": ("robot", "chick"), "toy_albedos": (objects.DEFAULT_TOY_ALBEDO["robot"],
-                                                                   objects.DEFAULT_TOY_ALBEDO["chick"]),
-                       "frames_per_toy": 8, "calibration_grid": 9, "calibration_rel_stderr": 3e-3}
+    quick_overrides = {"toys": ("robot", "chick"), "frames_per_toy": 8, "calibration_grid": 9,
+                       "calibration_rel_stderr": 3e-3}
     seed_offset = 1
 
     def calibrate(self, setup: Setup, params: TrackingParams, rng: np.random.Generator, out_dir: Path) -> dict:
@@ -138,7 +139,7 @@ class Tracking(Experiment):
     def scene(self, setup: Setup, params: TrackingParams, rng: np.random.Generator) -> TrackingScene:
         toys = {kind: with_height_scale(objects.windup_toy(kind, size_m=params.toy_size_m, albedo=albedo),
                                         params.toy_height_scale)
-                for kind, albedo in zip(params.toys, params.toy_albedos, strict=True)}
+                for kind, albedo in zip(params.toys, params.toy_albedos or (None,) * len(params.toys), strict=True)}
         table = make_tabletop(setup, toys, rng, params.table_albedo, params.light_size_m)
         frames, sequence, meshes = [], [], []
         reach = params.reach_fraction * setup.field_m
