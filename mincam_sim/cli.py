@@ -509,6 +509,40 @@ def _print_table(results: dict) -> None:
         v = results["speed"]["vehicle"]
         typer.echo(f"{'(vehicle)':<12} {_pct(v['max_error_pct'], 10)} / {_pct(v['avg_error_pct'], 10, '<')}        "
                    f"{'-':>8} / {'-':<8}        {v['n']}")
+    if "speed" in results and "display_timing" in results["speed"]:
+        v = results["speed"]["display_timing"]
+        p = results["speed"]["paper"]
+        typer.echo(f"{'(display)':<12} {_pct(v['max_error_pct'], 10)} / {_pct(v['avg_error_pct'], 10, '<')}        "
+                   f"{_pct(p['max_error_pct'], 8)} / {_pct(p['avg_error_pct'], 8, '<')}        {v['n']}"
+                   f"   ({v['timing']}"
+                   + (f"; median of {v['draws']['count']} draws {v['draws']['median_max_error_pct']:.2f} / "
+                      f"{v['draws']['median_avg_error_pct']:.2f}" if "draws" in v else "") + ")")
+    _print_details(results)
+
+
+def _print_details(results: dict) -> None:
+    """Per toy / car: maximum, 95th percentile, mean, the maximum without extrapolated frames, the per-axis
+    mean, and the frames left unscored (missed or without a position) beside the scored ones."""
+    rows = [(name, results[name]) for name in ("intrusion", "tracking")
+            if name in results and "by_group" in results[name]]
+    if not rows:
+        return
+    typer.echo("# position errors [% of the field]: Euclidean (the table's); per-axis avg beside; ground truth "
+               "named per experiment")
+    typer.echo(f"{'experiment':<12} {'group':<8} {'max':>7} {'p95':>7} {'avg':>7} {'max*':>7} {'axis avg':>8}"
+               f" {'n':>5} {'unscored':>9} {'share':>7}")
+    for name, r in rows:
+        paper_s = " (the paper's)" if r.get("ground_truth") == "object" else ""
+        typer.echo(f"{name:<12} ground truth: {r.get('ground_truth', '?')} centroid{paper_s}")
+        for group, g in {"all": r, **r["by_group"]}.items():
+            clean = g.get("without_extrapolated") or {}
+            axis = g.get("per_axis") or {}
+            share = g.get("unscored_frames_pct")
+            typer.echo(f"{'':<12} {group:<8} {_pct(g.get('max_error_pct'), 7)} {_pct(g.get('p95_error_pct'), 7)} "
+                       f"{_pct(g.get('avg_error_pct'), 7)} {_pct(clean.get('max_error_pct'), 7)} "
+                       f"{_pct(axis.get('avg_error_pct'), 8)} {g.get('n', 0):>5} {g.get('unscored_frames', 0):>9} "
+                       f"{_pct(share, 6)}{'' if share is None else '%'}")
+    typer.echo("# max*: the maximum without the frames read outside the calibrated range (extrapolated)")
 
 
 def _print_reused(results: dict, out_dir: Path) -> None:

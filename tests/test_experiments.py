@@ -107,3 +107,40 @@ def test_frame_accounting_and_calibration_in_view(run, name):
     assert 0 <= r["extrapolated_frames"] <= r["n"]
     assert r["calibration_points_outside_view"] == (6 if name == "intrusion" else 4)
     assert np.max(r["calibration_rms_residual_m"]) < 1e-3
+
+
+@pytest.mark.parametrize("name", ["intrusion", "tracking"])
+def test_statistics_a_reader_needs(run, name):
+    """Scored against the object (the paper's ground truth), with the change centroid beside it; the 95th
+    percentile, the maximum without extrapolated frames and the per-axis mean within their bounds; the groups
+    (toys, cars in the band) partition the frames and their scored and unscored counts add up."""
+    _, results = run
+    r = results[name]
+    assert r["ground_truth"] == "object" and r["normalisation"] == "euclidean"
+    assert r["vs_change_centroid"]["n"] >= 3 and r["object_vs_change_centroid"]["n"] >= 3
+    assert r["p95_error_pct"] <= r["max_error_pct"]
+    assert r["without_extrapolated"]["max_error_pct"] <= r["max_error_pct"]
+    axis = r["per_axis"]
+    if name == "tracking":
+        assert r["avg_error_pct"] / 2 - 1e-9 <= axis["avg_error_pct"] <= r["avg_error_pct"] / np.sqrt(2) + 1e-9
+        assert set(r["by_group"]) == {"robot", "chick"}
+    else:
+        assert axis["avg_error_pct"] == pytest.approx(r["avg_error_pct"])
+        assert set(r["by_group"]) <= {"car_a", "car_b", "both", "neither"}
+    groups = r["by_group"].values()
+    for key in ("frames", "n", "unscored_frames", "ground_truth_frames", "extrapolated_frames"):
+        assert sum(g[key] for g in groups) == r[key], key
+    assert r["unscored_frames"] == r["missed_frames"] + r["no_position_frames"]
+
+
+def test_speed_reports_the_display_timing_beside_the_ideal(run):
+    """The paper-like display timing (held frames, asynchronous exposure, jitter) is scored on the same
+    speeds as the ideal reading, and named."""
+    _, results = run
+    r = results["speed"]
+    d = r["display_timing"]
+    assert d["n"] == r["n"] and len(d["predicted_speed_px_s"]) == len(r["true_speed_px_s"])
+    assert d["refresh_rate_hz"] == 60.0 and "asynchronously" in d["timing"] and "ideal" in r["timing"]
+    draws = d["draws"]
+    assert draws["count"] == len(draws["max_error_pct"]) == 32 and draws["max_error_pct"][0] == d["max_error_pct"]
+    assert min(draws["max_error_pct"]) <= draws["median_max_error_pct"] <= max(draws["max_error_pct"])

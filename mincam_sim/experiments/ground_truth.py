@@ -1,5 +1,9 @@
-"""The ground truth of the tabletop experiments, as in the paper: a pinhole camera at the mincam's centre
-looking straight down, background subtraction, binary detection and the centroid of the detected pixels."""
+"""The ground truth of the tabletop experiments: a pinhole camera at the mincam's centre looking straight down.
+
+Two definitions, both from that camera: the paper's (Sec. 4.1.1, 4.2.1), the centroid of the **object**, from
+the silhouette of the object's mesh projected into the camera (:meth:`GroundTruthCamera.object_centroid`); and
+the centroid of the **change** (background subtraction, binary detection, the centroid of the detected pixels,
+:meth:`GroundTruthCamera.change_centroid`), which also takes in the object's shadow."""
 
 from __future__ import annotations
 
@@ -77,3 +81,61 @@ class GroundTruthCamera:
         rows, cols = np.indices(image.shape)
         points = self.pixel_to_table(rows, cols, image.shape)
         return (points * change[..., None]).sum(axis=(0, 1)) / total
+
+    def project_to_table(self, points_m: np.ndarray) -> np.ndarray:
+        """Where the camera (at height ``depth_m`` over the origin) sees world points (n, 3) [m]: the table
+        point (n, 2) [m] on the same ray (a point at height z is seen ``depth / (depth - z)`` further out)."""
+        p = np.asarray(points_m, dtype=np.float64)
+        height = self.depth_m - p[:, 2]
+        if np.any(height <= 0):
+            raise ValueError("object points at or above the ground-truth camera's height cannot be projected")
+        return p[:, :2] * (self.depth_m / height)[:, None]
+
+    def object_mask(self, vertices_m: np.ndarray, faces: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+        """The pixels (boolean image of ``shape``) whose centres the object covers in this camera: every
+        triangle of the mesh (vertices (n, 3) [m] in the world, faces (m, 3)) projected, pixel centres inside
+        any projected triangle set. A closed mesh's projection is its silhouette, so this is an object-only
+        mask: no shadow, no shading, whatever the light."""
+        h, w = shape
+        pitch = 2 * self.half_extent_m / w
+        xy = self.project_to_table(vertices_m)
+        # continuous pixel coordinates: col c has its centre at x = (c + 0.5 - w/2) pitch (pixel_to_table)
+        u = xy[:, 0] / pitch + w / 2 - 0.5
+        v = h / 2 - 0.5 - xy[:, 1] / pitch
+        tri_u, tri_v = u[faces], v[faces]  # (m, 3)
+        c0 = np.clip(np.ceil(tri_u.min(1)), 0, w).astype(int)
+        c1 = np.clip(np.floor(tri_u.max(1)), -1, w - 1).astype(int)
+        r0 = np.clip(np.ceil(tri_v.min(1)), 0, h).astype(int)
+        r1 = np.clip(np.floor(tri_v.max(1)), -1, h - 1).astype(int)
+        nc, nr = np.maximum(c1 - c0 + 1, 0), np.maximum(r1 - r0 + 1, 0)
+        count = nc * nr
+        mask = np.zeros(shape, dtype=bool)
+        if count.sum() == 0:
+            return mask
+        tri = np.repeat(np.arange(len(faces)), count)
+        local = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+        cols = c0[tri] + local % nc[tri]
+        rows = r0[tri] + local // nc[tri]
+        (ua, ub, uc), (va, vb, vc) = tri_u[tri].T, tri_v[tri].T
+        # barycentric signs (either orientation): inside or on an edge of the projected triangle
+        d1 = (cols - ub) * (va - vb) - (ua - ub) * (rows - vb)
+        d2 = (cols - uc) * (vb - vc) - (ub - uc) * (rows - vc)
+        d3 = (cols - ua) * (vc - va) - (uc - ua) * (rows - va)
+        inside = ~(((d1 < 0) | (d2 < 0) | (d3 < 0)) & ((d1 > 0) | (d2 > 0) | (d3 > 0)))
+        mask[rows[inside], cols[inside]] = True
+        return mask
+
+    def object_centroid(self, meshes: list[tuple[np.ndarray, np.ndarray]], shape: tuple[int, int],
+                        region: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The paper's ground truth: the centroid of the *object* as this camera sees it (the union of the
+        silhouettes of ``meshes``, each (world vertices [m], faces), within ``region``) in table coordinates
+        [m] (NaN if it covers no pixel centre). Returns (centroid, mask)."""
+        mask = np.zeros(shape, dtype=bool)
+        for vertices, faces in meshes:
+            mask |= self.object_mask(vertices, faces, shape)
+        if region is not None:
+            mask &= region
+        if not mask.any():
+            return np.full(2, np.nan), mask
+        rows, cols = np.nonzero(mask)
+        return self.pixel_to_table(rows, cols, shape).mean(axis=0), mask

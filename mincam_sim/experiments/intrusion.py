@@ -18,7 +18,14 @@ from .layouts import intrusion_mincam
 from .pipeline import locate_in_world
 from .screen_calibration import fit_calibration_1d, screen_sweep_1d, sweep_change_dn, visible_sweep
 from .setup import Setup
-from .tabletop_world import make_tabletop, tabletop_world
+from .tabletop_world import (
+    DEFAULT_LIGHT_SIZE_M,
+    DEFAULT_TABLE_ALBEDO,
+    check_contrast,
+    make_tabletop,
+    placed_meshes,
+    tabletop_world,
+)
 
 
 @dataclass(frozen=True)
@@ -43,6 +50,17 @@ class IntrusionParams:
         The two cars' lanes [m] and speeds [m/s].
     start_distance_m, overrun_m : float
         Where the race starts before the line and how far it runs past it [m].
+    table_albedo : float
+        Mean albedo of the printed table (the paper does not describe it; 0.4 is this simulator's choice).
+    car_albedos : tuple of float
+        Albedo of the two cars.
+    car_height_m : float
+        Height of the toy cars [m] (their shadows and parallax grow with it).
+    light_size_m : float
+        Side of the square area light 1.5 m over the table [m].
+    ground_truth : {"object", "change"}
+        The headline's ground truth: the centroid of the cars' part in the band as the ground-truth camera sees
+        it (the paper's) or of the binary change there (with the shadow); both are reported.
     """
 
     boundary_x_m: float = -0.1378
@@ -55,8 +73,19 @@ class IntrusionParams:
     speeds_m_s: tuple[float, ...] = (0.12, 0.09)
     start_distance_m: float = 0.12
     overrun_m: float = 0.1
+    table_albedo: float = DEFAULT_TABLE_ALBEDO
+    car_albedos: tuple[float, ...] = (0.9, 0.75)
+    car_height_m: float = 0.035
+    light_size_m: float = DEFAULT_LIGHT_SIZE_M
+    ground_truth: str = "object"
 
     def __post_init__(self) -> None:
+        check_contrast(self.table_albedo, self.car_albedos, self.light_size_m, self.ground_truth, "car_albedos")
+        if len(self.car_albedos) != 2:
+            raise ValueError(f"car_albedos must list the two cars' albedos, got {list(self.car_albedos)}")
+        if not 0.02 < self.car_height_m <= 0.2:
+            raise ValueError(f"car_height_m must be in (0.02, 0.2] m (the wheels are 2 cm high), got "
+                             f"{self.car_height_m!r}")
         for key in ("band_m", "calibration_square_m", "calibration_rel_stderr", "frame_rate_hz"):
             if not getattr(self, key) > 0:
                 raise ValueError(f"{key} must be > 0, got {getattr(self, key)!r}")
@@ -73,6 +102,7 @@ class IntrusionScene:
     table: object
     frames: list
     background: dict
+    meshes: list  # per frame: (world vertices, faces) of both cars (the object ground truth)
 
 
 class Intrusion(Experiment):
@@ -101,15 +131,31 @@ class Intrusion(Experiment):
                 "mc_rel_stderr": reached, "points_outside_view": n_unseen}
 
     def scene(self, setup: Setup, params: IntrusionParams, rng: np.random.Generator) -> IntrusionScene:
-        cars = {"car_a": objects.toy_car(albedo=0.9), "car_b": objects.toy_car(albedo=0.75)}
-        table = make_tabletop(setup, cars, rng)
+        cars = {name: objects.toy_car(height_m=params.car_height_m, albedo=albedo)
+                for name, albedo in zip(("car_a", "car_b"), params.car_albedos, strict=True)}
+        table = make_tabletop(setup, cars, rng, params.table_albedo, params.light_size_m)
         car_a, car_b = objects.race_pair(finish_line_x_m=params.boundary_x_m, lanes_y_m=params.lanes_y_m,
                                          speeds_m_s=params.speeds_m_s, start_distance_m=params.start_distance_m,
                                          overrun_m=params.overrun_m, frame_rate_hz=params.frame_rate_hz)
-        frames = [toy_updates(table, {"car_a": (car_a.positions_m[i], car_a.headings_rad[i]),
-                                     "car_b": (car_b.positions_m[i], car_b.headings_rad[i])})
-                  for i in range(len(car_a.times_s))]
-        return IntrusionScene(table, frames, toy_updates(table, {}))
+        placements = [{"car_a": (car_a.positions_m[i], car_a.headings_rad[i]),
+                       "car_b": (car_b.positions_m[i], car_b.headings_rad[i])} for i in range(len(car_a.times_s))]
+        frames = [toy_updates(table, p) for p in placements]
+        return IntrusionScene(table, frames, toy_updates(table, {}), [placed_meshes(table, p) for p in placements])
+
+    @staticmethod
+    def cars_in_band(scene: IntrusionScene, camera: GroundTruthCamera, boundary_x_m: float,
+                     band_m: float) -> list[str]:
+        """Per frame, which car the ground-truth camera sees in the boundary band: "car_a", "car_b", "both"
+        or "neither" (from the x extent of each car's projected vertices)."""
+        labels = []
+        for meshes in scene.meshes:
+            inside = []
+            for name, (vertices, _) in zip(("car_a", "car_b"), meshes, strict=True):
+                x = camera.project_to_table(vertices)[:, 0]
+                if x.max() >= boundary_x_m - band_m / 2 and x.min() <= boundary_x_m + band_m / 2:
+                    inside.append(name)
+            labels.append("both" if len(inside) == 2 else inside[0] if inside else "neither")
+        return labels
 
     def run(self, setup: Setup, params: IntrusionParams, out_dir: Path,
             show_progress: bool = False) -> ExperimentResult:
@@ -133,7 +179,8 @@ class Intrusion(Experiment):
         band = np.abs(xy[..., 0] - params.boundary_x_m) <= params.band_m / 2
         found = locate_in_world(world, camera, scene.frames, scene.background, setup, rng["readout"], predict,
                                 setup.tabletop_spp, region=band, axis=1, show_progress=show_progress,
-                                extrapolated=outside)
+                                extrapolated=outside, objects=scene.meshes, ground_truth=params.ground_truth,
+                                groups=self.cars_in_band(scene, camera, params.boundary_x_m, params.band_m))
         a = found.arrays
         plot_calibration_1d(cal["true_m"], cal["change_dn"], cal["observed"], calibration,
                             out_dir / "intrusion_calibration.png", names=("y", "1-y"))

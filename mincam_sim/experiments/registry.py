@@ -28,7 +28,11 @@ REGISTRY: dict[str, Experiment] = {e.name: e for e in (Intrusion(), Tracking(), 
 EXPERIMENTS: tuple[str, ...] = tuple(name for name, e in REGISTRY.items() if e.in_paper)
 
 DEFINITIONS = {
-    "position_error_pct": "|predicted - ground truth| (Euclidean in 2D) / calibrated range (field_m) x 100",
+    "position_error_pct": "|predicted - ground truth| (Euclidean in 2D; per_axis: |dx|, |dy| pooled) / calibrated "
+                          "range (field_m) x 100",
+    "ground_truth": "object: centroid of the object's silhouette in the centre camera (the paper's); change: "
+                    "centroid of the binary change (object and shadow); each entry's ground_truth names the one "
+                    "its headline uses",
     "speed_error_pct": "|predicted - true speed| / true speed x 100",
 }
 

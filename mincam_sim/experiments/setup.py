@@ -30,7 +30,9 @@ class Setup:
     depth_m : float
         Distance from the mincam to the table / screen [m] (a 50 cm field of view at 0.5 m).
     spacing_m : float
-        Distance between neighbouring mixels [m] (paper: 3.3 cm).
+        Mixel spacing [m] (paper: 3.3 cm): the intrusion pair sits ``spacing_m`` apart; the tracking cross puts
+        each mixel ``spacing_m`` from the centre camera, so the two mixels of each ratio (x | 1 - x, y | 1 - y)
+        are ``2 spacing_m`` (6.6 cm) apart.
     d_f_m, detector_size_m, mask_size_m : float
         Mixel geometry [m]: mask 2 mm at 2 mm gives a ~53 deg field of view, detector 0.1 mm.
     field_m : float

@@ -19,7 +19,15 @@ from .layouts import tracking_mincam
 from .pipeline import locate_in_world
 from .screen_calibration import fit_calibration_2d, screen_sweep_2d, sweep_change_dn, visible_sweep
 from .setup import Setup
-from .tabletop_world import make_tabletop, tabletop_world
+from .tabletop_world import (
+    DEFAULT_LIGHT_SIZE_M,
+    DEFAULT_TABLE_ALBEDO,
+    check_contrast,
+    make_tabletop,
+    placed_meshes,
+    tabletop_world,
+    with_height_scale,
+)
 
 
 @dataclass(frozen=True)
@@ -46,6 +54,20 @@ class TrackingParams:
         Side of the calibration square [m].
     calibration_rel_stderr : float
         Target relative standard error of the rendered calibration sweep.
+    table_albedo : float
+        Mean albedo of the printed table (the paper does not describe its background; 0.4, mid-grey, is this
+        simulator's choice; 0.1 is a dark table). It sets the contrast: a bright toy's brightening on a grey
+        table is largely cancelled by its shadow and dark sides.
+    toy_albedos : tuple of float
+        Albedo of each toy, one per entry of ``toys``; empty (the default): each kind's own
+        (:data:`~mincam_sim.objects.DEFAULT_TOY_ALBEDO`: robot 0.75, chick 0.9, frog 0.7).
+    toy_height_scale : float
+        Scale of the toys' heights (1: as modelled; e.g. 0.02: flat prints of their footprints, no shadow).
+    light_size_m : float
+        Side of the square area light 1.5 m over the table [m] (the paper's lamp is not described).
+    ground_truth : {"object", "change"}
+        What the headline rates are scored against: the centroid of the object in the ground-truth camera (the
+        paper's definition) or the centroid of the binary change (object and shadow); both are reported.
     """
 
     toys: tuple[str, ...] = ("robot", "chick", "frog")
@@ -57,10 +79,20 @@ class TrackingParams:
     calibration_grid: int = 15
     calibration_square_m: float = 0.03
     calibration_rel_stderr: float = 1e-3
+    table_albedo: float = DEFAULT_TABLE_ALBEDO
+    toy_albedos: tuple[float, ...] = ()
+    toy_height_scale: float = 1.0
+    light_size_m: float = DEFAULT_LIGHT_SIZE_M
+    ground_truth: str = "object"
 
     def __post_init__(self) -> None:
+        check_contrast(self.table_albedo, self.toy_albedos, self.light_size_m, self.ground_truth, "toy_albedos")
+        if self.toy_albedos and len(self.toy_albedos) != len(self.toys):
+            raise ValueError(f"toy_albedos must give one albedo per toy: toys lists {len(self.toys)}, "
+                             f"toy_albedos {len(self.toy_albedos)}; set both, or leave toy_albedos out (each "
+                             "kind's own albedo)")
         for key in ("toy_size_m", "frame_interval_s", "toy_speed_m_s", "calibration_square_m",
-                    "calibration_rel_stderr"):
+                    "calibration_rel_stderr", "toy_height_scale"):
             if not getattr(self, key) > 0:
                 raise ValueError(f"{key} must be > 0, got {getattr(self, key)!r}")
         if not 0 < self.reach_fraction <= 0.5:
@@ -77,6 +109,7 @@ class TrackingScene:
     frames: list
     toy_of_frame: np.ndarray
     background: dict
+    meshes: list  # per frame: (world vertices, faces) of the placed toy (the object ground truth)
 
 
 class Tracking(Experiment):
@@ -104,18 +137,22 @@ class Tracking(Experiment):
                 "points_outside_view": n_unseen}
 
     def scene(self, setup: Setup, params: TrackingParams, rng: np.random.Generator) -> TrackingScene:
-        toys = {kind: objects.windup_toy(kind, size_m=params.toy_size_m) for kind in params.toys}
-        table = make_tabletop(setup, toys, rng)
-        frames, sequence = [], []
+        toys = {kind: with_height_scale(objects.windup_toy(kind, size_m=params.toy_size_m, albedo=albedo),
+                                        params.toy_height_scale)
+                for kind, albedo in zip(params.toys, params.toy_albedos or (None,) * len(params.toys), strict=True)}
+        table = make_tabletop(setup, toys, rng, params.table_albedo, params.light_size_m)
+        frames, sequence, meshes = [], [], []
         reach = params.reach_fraction * setup.field_m
         for k, kind in enumerate(params.toys):
             path = objects.random_smooth_path(np.random.default_rng(setup.seed + 10 + k), params.frames_per_toy,
                                               dt_s=params.frame_interval_s, bounds_m=((-reach, reach), (-reach, reach)),
                                               speed_m_s=params.toy_speed_m_s)
             for i in range(params.frames_per_toy):
-                frames.append(toy_updates(table, {kind: (path.positions_m[i], path.headings_rad[i])}))
+                placement = {kind: (path.positions_m[i], path.headings_rad[i])}
+                frames.append(toy_updates(table, placement))
+                meshes.append(placed_meshes(table, placement))
                 sequence.append(kind)
-        return TrackingScene(table, frames, np.array(sequence), toy_updates(table, {}))
+        return TrackingScene(table, frames, np.array(sequence), toy_updates(table, {}), meshes)
 
     def run(self, setup: Setup, params: TrackingParams, out_dir: Path,
             show_progress: bool = False) -> ExperimentResult:
@@ -134,7 +171,9 @@ class Tracking(Experiment):
             return calibration.outside_range(track_4(c, min_total_dn))
 
         found = locate_in_world(world, camera, scene.frames, scene.background, setup, rng["readout"], predict,
-                                setup.tabletop_spp, show_progress=show_progress, extrapolated=outside)
+                                setup.tabletop_spp, show_progress=show_progress, extrapolated=outside,
+                                objects=scene.meshes, ground_truth=params.ground_truth,
+                                groups=scene.toy_of_frame.tolist())
         a = found.arrays
         predicted, truth = a["predicted_m"], a["truth_m"]
         plot_calibration_2d(cal["true_m"], cal["observed"], calibration, out_dir / "tracking_calibration.png")
