@@ -176,8 +176,9 @@ def test_cli_refuses_an_unknown_task(tmp_path):
 
 @pytest.mark.slow
 def test_cli_design_tracking_quick(tmp_path):
-    """End to end (~1 min on 2 cores): the outputs exist, design.json has the issue's keys, the numbers are
-    those of the held-out evaluation stored beside them, and the PNG masks have the film's dot grid."""
+    """End to end (a few minutes on 2 cores): the outputs exist, design.json has the issue's keys, the numbers
+    are those of the held-out evaluation and of the suite stored beside them, and the PNG masks have the film's
+    dot grid."""
     _needs_jit()
     import json
 
@@ -203,5 +204,19 @@ def test_cli_design_tracking_quick(tmp_path):
     for name in tr.POSITIONS:
         with Image.open(out / f"mask_designed_{name}.png") as im:
             assert im.size == (dots[1], dots[0]) and round(im.info["dpi"][0]) == 600
-    for fig in ("loss.png", "masks.png", "error_vs_depth.png", "decoder.json"):
+    for fig in ("loss.png", "masks.png", "error_vs_depth.png", "suite.png", "decoder.json"):
         assert (out / fig).stat().st_size > 0
+    # the held-out suite: every case, the baseline (current layout) beside the designed masks, and the CLI table
+    from mincam_sim.design.run import BASELINE, DESIGNED
+    from mincam_sim.design.suite import case_names
+
+    su = d["suite"]
+    assert [c["name"] for c in su["cases"]] == case_names() and su["baseline"] == BASELINE
+    for c in su["cases"]:
+        assert {BASELINE, DESIGNED} <= set(c["rows"]) and c["rows"][DESIGNED]["n"] > 0
+        assert c["ratio_to_baseline"][DESIGNED] == pytest.approx(
+            c["rows"][DESIGNED]["avg_error_pct"] / c["rows"][BASELINE]["avg_error_pct"])
+        err = data[f"suite_{c['name']}_designed_error_pct"]
+        assert np.nanmean(err) == pytest.approx(c["rows"][DESIGNED]["avg_error_pct"])
+    assert "held-out suite" in r.output and "two_objects" in r.output
+    assert "cross_layout" in d["baseline"]["masks"]
