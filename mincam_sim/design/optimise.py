@@ -202,7 +202,8 @@ def build_problem(task: tr.TrackingTask, show_progress: bool = False):
         matrices=matrices, upsample_index=index, upsample_weight=weight, targets=targets,
         features=tr.FEATURES[task.decoder], n_params=task.grid**2, t_min=film.t_min, t_max=film.t_max, gamma=film.gamma,
         levels=film.levels, dn_per_w_m2=gain, noise_dn=noise_dn, background_rows=background_rows,
-        background_weights=weights)
+        background_weights=weights, fit_noiseless=task.decoder_fit == "noiseless",
+        error_cap=0.1 if task.decoder_fit == "noiseless" else None)
     return problem
 
 
@@ -240,12 +241,14 @@ def design(task: tr.TrackingTask, show_progress: bool = False) -> Design:
     printer = [par.printable_mask(par.dots_from_logits(t, index, weight, film), dots, tr.MASK_SIZE_M,
                                   f"designed_{name}", task="tracking", grid=task.grid)
                for t, name in zip(result.logits, tr.POSITIONS, strict=True)]
-    decoder = fit_decoder(problem, [film.print(m).transmission.ravel() for m in printer], task)
+    draws = 0 if task.decoder_fit == "noiseless" else 4
+    decoder = fit_decoder(problem, [film.print(m).transmission.ravel() for m in printer], task, draws)
     ramps = tr.paper_masks()
     references = {}
     for label, (swap_x, swap_y) in STARTS.items():
         order = ([1, 0] if swap_x else [0, 1]) + ([3, 2] if swap_y else [2, 3])
-        references[label] = fit_decoder(problem, [film.print(ramps[i]).transmission.ravel() for i in order], task)
+        references[label] = fit_decoder(problem, [film.print(ramps[i]).transmission.ravel() for i in order], task,
+                                        draws)
     return Design(printer, result.loss_history, float(runs["paper"].loss_history[0]),
                   scores[chosen], len(problem.targets), decoder, references, chosen,
                   {k: {"start_rms": float(r.loss_history[0]), "end_rms": scores[k]} for k, r in runs.items()},
@@ -254,13 +257,14 @@ def design(task: tr.TrackingTask, show_progress: bool = False) -> Design:
 
 def fit_decoder(problem, transmissions: list[np.ndarray], task: tr.TrackingTask, draws: int = 4) -> Decoder:
     """Least-squares polynomial decoder for printed masks (flat dot transmissions) on the training set, from
-    ``draws`` noisy read-outs of every object (NumPy, the optimiser's linear model)."""
+    ``draws`` noisy read-outs of every object, or from the noiseless read-out with ``draws=0`` (NumPy, the
+    optimiser's linear model)."""
     irr = np.array([a @ t for a, t in zip(problem.matrices, transmissions, strict=True)])
     rng = np.random.default_rng([task.seed, 23])
-    sigma = problem.sigma_dn(irr, transmissions)
+    sigma = problem.sigma_dn(irr, transmissions) if draws else 0.0 * irr
     dn = np.concatenate([problem.dn_per_w_m2 * irr + sigma * rng.standard_normal(irr.shape)
-                         for _ in range(draws)], axis=1)
-    targets = np.tile(problem.targets, (draws, 1))
+                         for _ in range(max(draws, 1))], axis=1)
+    targets = np.tile(problem.targets, (max(draws, 1), 1))
     design_matrix = poly_terms(list(tr.FEATURES[task.decoder](dn)), 3)
     ok = np.all(np.isfinite(design_matrix), axis=1)
     coef = np.stack([np.linalg.lstsq(design_matrix[ok], targets[ok, i], rcond=None)[0] for i in range(2)])

@@ -70,6 +70,11 @@ class TrackingTask:
         ``learned``: a cubic polynomial of :func:`features_learned`, fitted in the design loop on the training
         set and used as is at inference; ``eq7``: the paper's ratios with a cubic calibration on the physical
         sweep at 0.5 m (the baseline's protocol).
+    decoder_fit : {"noiseless", "noisy"}
+        ``noiseless``: the learned decoder is fitted on the noiseless read-out of the training set (as a
+        calibration is) and the masks are optimised for its error on noisy read-outs; ``noisy``: fitted on
+        noisy read-outs, which shrinks every prediction towards the centre when noisy frames (bright
+        backgrounds) are in the training set.
     object_size_range_m : (float, float)
         Training objects' side (squares) or length (bars) [m], log-uniform.
     bar_fraction : float
@@ -94,8 +99,8 @@ class TrackingTask:
     seed : int
     """
 
-    train_depths_m: tuple[float, ...] = (0.35, 0.42, 0.5, 0.6, 0.7)
-    frames_per_depth: int = 160
+    train_depths_m: tuple[float, ...] = (0.35, 0.42, 0.49, 0.56, 0.63, 0.7)
+    frames_per_depth: int = 256
     strata: int = 16
     grid: int = 12
     iterations: int = 400
@@ -109,6 +114,7 @@ class TrackingTask:
     film_t_min: float = 0.02
     film_t_max: float = 0.9
     decoder: str = "learned"
+    decoder_fit: str = "noiseless"
     object_size_range_m: tuple[float, float] = (0.01, 0.15)
     bar_fraction: float = 0.25
     bar_width_range_m: tuple[float, float] = (0.008, 0.02)
@@ -132,6 +138,8 @@ class TrackingTask:
 
         if self.decoder not in FEATURES:
             bad("decoder", f"must be one of {', '.join(FEATURES)}")
+        if self.decoder_fit not in ("noiseless", "noisy"):
+            bad("decoder_fit", "must be 'noiseless' or 'noisy'")
         for field in ("object_size_range_m", "bar_width_range_m", "contrast_range", "background_contrast_range",
                       "depth_range_m"):
             v = tuple(getattr(self, field))

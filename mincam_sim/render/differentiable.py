@@ -418,6 +418,12 @@ class DesignProblem:
         per depth) [W/m^2 per unit transmission].
     background_weights : (n_frames, n_rows) ndarray, optional
         Each frame's background as a combination of those rows: its irradiance is ``W @ (R_k @ T_k)``.
+    fit_noiseless : bool
+        Fit the decoder of each step on the noiseless read-out (as a calibration is fitted), and score it on
+        the noisy one; default: fit and score on the same noisy batch.
+    error_cap : float, optional
+        Robust loss: a frame's squared error counts at most ``error_cap**2`` (a lost frame, e.g. a change that
+        noise cancels, weighs as one error of ``error_cap`` and carries no gradient) [fraction of the field].
     """
 
     matrices: list
@@ -434,6 +440,8 @@ class DesignProblem:
     noise_dn: Callable
     background_rows: list | None = None
     background_weights: np.ndarray | None = None
+    fit_noiseless: bool = False
+    error_cap: float | None = None
 
     def background_irradiance(self, transmissions: list) -> np.ndarray | None:
         """Irradiance (n_mixels, n_frames) [W/m^2] of each frame's background through the masks ``T_k``."""
@@ -515,7 +523,8 @@ def optimise_masks(
     irradiances ``A_k @ T_k`` -> DN with Gaussian sensor noise (fresh draws from ``seed`` and the iteration)
     -> decoder features -> cubic polynomial whose coefficients are the least-squares fit on this batch (the
     calibration; by the envelope theorem the gradient with coefficients held fixed is the gradient of the
-    calibrated loss) -> mean squared position error. Returns the masks and the loss history.
+    calibrated loss), or on its noiseless read-out with ``problem.fit_noiseless`` (then the gradient holds
+    the calibration fixed) -> mean squared position error. Returns the masks and the loss history.
     """
     mi = _mi()
     import drjit as dr
@@ -540,14 +549,23 @@ def optimise_masks(
                 eps = np.random.default_rng([int(seed), it]).standard_normal(sigma.shape)
                 dn = [problem.dn_per_w_m2 * irr[k] + mi.Float(sigma[k] * eps[k]) for k in range(len(irr))]
                 terms = poly_terms(*problem.features(dn, dr))
-                design = np.stack([np.asarray(dr.detach(t), dtype=np.float64) for t in terms], axis=1)
+                if problem.fit_noiseless:  # coefficients of the noiseless read-out, scored on the noisy one
+                    clean = [problem.dn_per_w_m2 * e for e in irr_np]
+                    with np.errstate(divide="ignore", invalid="ignore"):
+                        design = np.stack(poly_terms(*problem.features(clean, np)), axis=1)
+                else:
+                    design = np.stack([np.asarray(dr.detach(t), dtype=np.float64) for t in terms], axis=1)
                 ok = np.all(np.isfinite(design), axis=1)
                 coef = np.stack([np.linalg.lstsq(design[ok], problem.targets[ok, i], rcond=None)[0]
                                  for i in range(2)])
                 c_x, c_y = (mi.Float(c) for c in coef.astype(np.float32))  # arrays, not literals: one kernel
                 px = sum(dr.gather(mi.Float, c_x, i) * t for i, t in enumerate(terms))
                 py = sum(dr.gather(mi.Float, c_y, i) * t for i, t in enumerate(terms))
-                loss = dr.mean(dr.square(px - tx) + dr.square(py - ty))
+                err2 = dr.square(px - tx) + dr.square(py - ty)
+                if problem.error_cap is not None:
+                    cap2 = float(problem.error_cap) ** 2
+                    err2 = dr.select(dr.isfinite(err2), dr.minimum(err2, cap2), cap2)
+                loss = dr.mean(err2)
                 dr.backward(loss)
                 opt.step()
                 history.append(float(np.sqrt(np.asarray(loss, dtype=np.float64).ravel()[0])))
