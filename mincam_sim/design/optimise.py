@@ -24,8 +24,8 @@ class Design:
     loss_rms : (iterations,) ndarray
         Training RMS position error per step [fraction of the field].
     initial_rms, final_rms : float
-        Training RMS error of the paper's ramps and of the result (mean of the last 20 steps) [fraction of the
-        field].
+        Training RMS error of the paper's ramps (first step) and of the kept candidate (fixed noise draws)
+        [fraction of the field].
     n_train : int
         Training objects.
     decoder : Decoder
@@ -34,8 +34,9 @@ class Design:
         The same decoder fitted for the printed paper ramps under each start's assignment (:data:`STARTS`):
         references that separate the masks' share of the gain from the decoder's.
     start : str
-        The starting assignment kept (:data:`STARTS`), ``starts`` the training RMS of every start and
-        ``histories`` their loss curves.
+        The candidate kept: an optimised start (:data:`STARTS`) or, where none beats it, an unoptimised one
+        (``"<start> (start, unoptimised)"``); ``starts`` the loss of every run, ``histories`` their curves and
+        ``candidates`` every candidate's training RMS on fixed noise draws (what chose the kept one).
     """
 
     printer_masks: list[Mask]
@@ -48,6 +49,7 @@ class Design:
     start: str
     starts: dict
     histories: dict
+    candidates: dict | None = None
 
 
 @dataclass
@@ -232,27 +234,55 @@ def design(task: tr.TrackingTask, show_progress: bool = False) -> Design:
         runs[label] = dz.optimise_masks(problem, initial_logits(task, swap_x, swap_y), iterations=task.iterations,
                                         learning_rate=task.learning_rate, seed=task.seed,
                                         show_progress=show_progress)
-    scores = {k: float(np.mean(r.loss_history[-20:])) for k, r in runs.items()}
-    chosen = min(scores, key=scores.get)
-    result = runs[chosen]
     index, weight = problem.upsample_index, problem.upsample_weight
     dots = task.dot_shape()
     film = task.film()
-    printer = [par.printable_mask(par.dots_from_logits(t, index, weight, film), dots, tr.MASK_SIZE_M,
-                                  f"designed_{name}", task="tracking", grid=task.grid)
-               for t, name in zip(result.logits, tr.POSITIONS, strict=True)]
     draws = 0 if task.decoder_fit == "noiseless" else 4
-    decoder = fit_decoder(problem, [film.print(m).transmission.ravel() for m in printer], task, draws)
     ramps = tr.paper_masks()
+    # candidates: every optimised run and every unoptimised start (the printed ramps), each scored with its
+    # own decoder on the same fixed noise draws of the training set; the lowest training RMS is kept
+    candidates = {}
+    for label, r in runs.items():
+        candidates[label] = [par.printable_mask(par.dots_from_logits(t, index, weight, film), dots, tr.MASK_SIZE_M,
+                                                f"designed_{name}", task="tracking", grid=task.grid)
+                             for t, name in zip(r.logits, tr.POSITIONS, strict=True)]
     references = {}
     for label, (swap_x, swap_y) in STARTS.items():
         order = ([1, 0] if swap_x else [0, 1]) + ([3, 2] if swap_y else [2, 3])
         references[label] = fit_decoder(problem, [film.print(ramps[i]).transmission.ravel() for i in order], task,
                                         draws)
-    return Design(printer, result.loss_history, float(runs["paper"].loss_history[0]),
-                  scores[chosen], len(problem.targets), decoder, references, chosen,
-                  {k: {"start_rms": float(r.loss_history[0]), "end_rms": scores[k]} for k, r in runs.items()},
-                  {k: r.loss_history for k, r in runs.items()})
+        candidates[f"{label} (start, unoptimised)"] = [
+            par.printable_mask(par.grid_values(ramps[i], dots[0]), dots, tr.MASK_SIZE_M, f"designed_{name}",
+                               task="tracking", grid=dots[0]) for i, name in zip(order, tr.POSITIONS, strict=True)]
+    decoders, scores = {}, {}
+    for label, masks in candidates.items():
+        t = [film.print(m).transmission.ravel() for m in masks]
+        decoders[label] = fit_decoder(problem, t, task, draws)
+        scores[label] = training_rms(problem, t, decoders[label], task)
+    chosen = min(scores, key=scores.get)
+    run = runs[chosen.split(" (start")[0]]
+    return Design(candidates[chosen], run.loss_history, float(runs["paper"].loss_history[0]),
+                  scores[chosen], len(problem.targets), decoders[chosen], references, chosen,
+                  {k: {"start_rms": float(r.loss_history[0]), "end_rms": float(np.mean(r.loss_history[-20:]))}
+                   for k, r in runs.items()},
+                  {k: r.loss_history for k, r in runs.items()}, scores)
+
+
+def training_rms(problem, transmissions: list[np.ndarray], decoder: Decoder, task: tr.TrackingTask,
+                 draws: int = 4) -> float:
+    """RMS position error [fraction of the field] of masks and their decoder on ``draws`` fixed noisy read-outs
+    of the training set, each frame's error capped at ``problem.error_cap`` as in the optimiser's loss."""
+    irr = np.array([a @ t for a, t in zip(problem.matrices, transmissions, strict=True)])
+    sigma = problem.sigma_dn(irr, transmissions)
+    rng = np.random.default_rng([task.seed, 29])
+    err2 = []
+    for _ in range(draws):
+        q = decoder(problem.dn_per_w_m2 * irr.T + (sigma * rng.standard_normal(irr.shape)).T)
+        e2 = np.sum((q - problem.targets) ** 2, axis=1)
+        if problem.error_cap is not None:
+            e2 = np.where(np.isfinite(e2), np.minimum(e2, problem.error_cap**2), problem.error_cap**2)
+        err2.append(e2)
+    return float(np.sqrt(np.nanmean(np.concatenate(err2))))
 
 
 def fit_decoder(problem, transmissions: list[np.ndarray], task: tr.TrackingTask, draws: int = 4) -> Decoder:
@@ -272,4 +302,4 @@ def fit_decoder(problem, transmissions: list[np.ndarray], task: tr.TrackingTask,
 
 
 __all__ = ["STARTS", "Design", "TrainingFrames", "build_problem", "design", "fit_decoder", "initial_logits",
-           "plane_scene", "training_set"]
+           "plane_scene", "training_rms", "training_set"]

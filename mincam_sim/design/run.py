@@ -183,6 +183,7 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
                               "held-out draw (squares 2-5 cm, black plane); the suite says where it holds"},
         "training": {"rms_error_start_pct": 100 * result.initial_rms, "rms_error_end_pct": 100 * result.final_rms,
                      "start_kept": result.start,
+                     "candidates_rms_pct": {k: 100 * v for k, v in (result.candidates or {}).items()},
                      "starts": {k: {kk: 100 * vv for kk, vv in v.items()} for k, v in result.starts.items()},
                      "objects": result.n_train, "iterations": task.iterations,
                      "loss": "mean squared position error of the centroid of the change, noisy 12-bit read-out "
