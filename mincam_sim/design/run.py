@@ -137,7 +137,7 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
     if learned is not None:
         result.decoder.to_json(out / "decoder.json")
     plot_loss(result.histories, result.start, out / "loss.png")
-    labels = [f"{p} ({n})" for p, n in zip(tr.POSITIONS, tr.NAMES, strict=True)]
+    labels = [f"{p} mixel" for p in tr.POSITIONS]
     plot_masks({"current ramps (baseline)": current, "designed": designed}, labels, out / "masks.png")
     plot_error_vs_depth({"current ramps, Eq. 7 (baseline)": baseline, "designed": ours,
                          "mirrored ramps (old layout)": references["mirrored_ramps_old_layout"]},
