@@ -127,7 +127,10 @@ def test_optimiser_lowers_the_training_loss_and_is_repeatable():
     from mincam_sim.design.optimise import build_problem, fit_decoder, initial_logits
     from mincam_sim.render.differentiable import optimise_masks
 
-    task = replace(tr.TrackingTask.quick(), train_depths_m=(0.35, 0.7), frames_per_depth=40, strata=6, grid=6)
+    # the narrow distribution of the first designs (squares 2-5 cm on black), where 30 steps visibly help
+    task = replace(tr.TrackingTask.quick(), train_depths_m=(0.35, 0.7), frames_per_depth=40, strata=6, grid=6,
+                   object_size_range_m=(0.02, 0.05), bar_fraction=0.0, two_object_fraction=0.0,
+                   background_radiances=(0.0,), contrast_range=(0.5, 1.0), decoder_fit="noisy")
     problem = build_problem(task)
     start = initial_logits(task)
     a = optimise_masks(problem, start, iterations=30, learning_rate=0.1, seed=0)
@@ -142,7 +145,7 @@ def test_optimiser_lowers_the_training_loss_and_is_repeatable():
     printed = [film.print(par.printable_mask(g, dots, tr.MASK_SIZE_M, "m")).transmission.ravel() for g in grey]
     # the optimiser's Dr.Jit masks are the NumPy twin's printed masks
     np.testing.assert_allclose(np.array(a.transmission), np.array(printed), atol=1e-6)
-    decoder = fit_decoder(problem, printed, task)
+    decoder = fit_decoder(problem, printed, task)  # noisy draws, as this optimisation fitted it
     irr = np.array([m @ t for m, t in zip(problem.matrices, printed, strict=True)]).T
     q = decoder(problem.dn_per_w_m2 * irr)
     rms = np.sqrt(np.mean(np.sum((q - problem.targets) ** 2, axis=1)))
@@ -176,8 +179,9 @@ def test_cli_refuses_an_unknown_task(tmp_path):
 
 @pytest.mark.slow
 def test_cli_design_tracking_quick(tmp_path):
-    """End to end (~1 min on 2 cores): the outputs exist, design.json has the issue's keys, the numbers are
-    those of the held-out evaluation stored beside them, and the PNG masks have the film's dot grid."""
+    """End to end (a few minutes on 2 cores): the outputs exist, design.json has the issue's keys, the numbers
+    are those of the held-out evaluation and of the suite stored beside them, and the PNG masks have the film's
+    dot grid."""
     _needs_jit()
     import json
 
@@ -203,5 +207,19 @@ def test_cli_design_tracking_quick(tmp_path):
     for name in tr.POSITIONS:
         with Image.open(out / f"mask_designed_{name}.png") as im:
             assert im.size == (dots[1], dots[0]) and round(im.info["dpi"][0]) == 600
-    for fig in ("loss.png", "masks.png", "error_vs_depth.png", "decoder.json"):
+    for fig in ("loss.png", "masks.png", "error_vs_depth.png", "suite.png", "decoder.json"):
         assert (out / fig).stat().st_size > 0
+    # the held-out suite: every case, the baseline (current layout) beside the designed masks, and the CLI table
+    from mincam_sim.design.run import BASELINE, DESIGNED
+    from mincam_sim.design.suite import case_names
+
+    su = d["suite"]
+    assert [c["name"] for c in su["cases"]] == case_names() and su["baseline"] == BASELINE
+    for c in su["cases"]:
+        assert {BASELINE, DESIGNED} <= set(c["rows"]) and c["rows"][DESIGNED]["n"] > 0
+        assert c["ratio_to_baseline"][DESIGNED] == pytest.approx(
+            c["rows"][DESIGNED]["avg_error_pct"] / c["rows"][BASELINE]["avg_error_pct"])
+        err = data[f"suite_{c['name']}_designed_error_pct"]
+        assert np.nanmean(err) == pytest.approx(c["rows"][DESIGNED]["avg_error_pct"])
+    assert "held-out suite" in r.output and "two_objects" in r.output
+    assert "cross_layout" in d["baseline"]["masks"]

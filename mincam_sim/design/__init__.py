@@ -3,10 +3,13 @@
 An upper floor beside the experiments: it imports the core (optics, masks, sensor, calibration) and the render
 layer, whose ``mincam_sim.render.differentiable`` holds the only Dr.Jit AD code.
 
-* :mod:`.tracking`: the task (four mixels 3.3 cm apart, objects at 0.35-0.7 m, 12-bit sensor).
+* :mod:`.tracking`: the task (four mixels 3.3 cm apart, objects 1-15 cm at 0.35-0.7 m on black or grey
+  planes, 12-bit sensor) and its training distribution.
 * :mod:`.parameterization`: logits on a coarse grid -> printer dots -> film transmission.
 * :mod:`.optimise`: builds the linear forward model from traced samples and optimises the masks.
-* :mod:`.evaluate`: held-out scenes in the physical simulator (response maps), paper protocol.
+* :mod:`.evaluate`: the old held-out draw (squares 2-5 cm on black) in the physical simulator (response maps).
+* :mod:`.suite`: the held-out suite of every report (sizes, shapes, backgrounds, two objects, depths, tilt,
+  contrast), the baseline (ramps of ``cross_layout``, Eq. 7, cubic calibration) beside the design.
 * :mod:`.gradcheck`: AD against central finite differences.
 * :mod:`.run`: one run and its outputs (``mincam-sim design TASK``).
 """

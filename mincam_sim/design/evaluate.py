@@ -35,7 +35,7 @@ class HeldOut:
         the whole range is covered) and objects in the working disc, from a seed of their own (disjoint from
         the training draw)."""
         rng = np.random.default_rng([task.seed, 97])
-        lo, hi = tr.DEPTH_RANGE_M
+        lo, hi = task.depth_range_m
         edges = np.linspace(lo, hi, task.eval_depths + 1)
         depths = edges[:-1] + (edges[1:] - edges[:-1]) * rng.random(task.eval_depths)
         q, s, r = zip(*(tr.random_objects(rng, task.eval_frames_per_depth) for _ in depths), strict=True)

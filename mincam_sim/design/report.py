@@ -75,4 +75,36 @@ def plot_error_vs_depth(results: dict[str, dict], path: Path) -> Path:
     return _save(fig, path)
 
 
-__all__ = ["plot_error_vs_depth", "plot_loss", "plot_masks"]
+def plot_suite(suite: dict, path: Path) -> Path:
+    """The held-out suite: average position error per case for every mincam (bars, log scale), the designed
+    masks' ratio to the baseline above each case."""
+    cases = suite["cases"]
+    labels = list(cases[0]["rows"])
+    colours = {lab: c for lab, c in zip(labels, ("tab:red", "tab:blue", "tab:orange", "tab:gray"), strict=False)}
+    fig, ax = plt.subplots(figsize=(11.0, 4.4), layout="constrained")
+    width = 0.8 / len(labels)
+    x = np.arange(len(cases))
+    for j, lab in enumerate(labels):
+        avg = [c["rows"][lab]["avg_error_pct"] for c in cases]
+        ax.bar(x + (j - (len(labels) - 1) / 2) * width, avg, width, color=colours[lab],
+               label=lab + (" (baseline)" if lab == suite["baseline"] else ""))
+    designed = suite.get("designed")
+    top = max(max(r["avg_error_pct"] for r in c["rows"].values()) for c in cases)
+    low = min(min(r["avg_error_pct"] for r in c["rows"].values()) for c in cases)
+    ax.set_yscale("log")
+    ax.set_ylim(low / 2, top * 6)
+    if designed:
+        for i, c in enumerate(cases):
+            r = c["ratio_to_baseline"][designed]
+            ax.text(i, top * 1.5, f"{r:.2f}x", ha="center", fontsize=8,
+                    color="tab:green" if r < 1 else "tab:red")
+    ax.set_xticks(x, [c["name"] for c in cases], rotation=35, ha="right", fontsize=8)
+    ax.set_ylabel("avg position error [% of field]")
+    ax.set_title("held-out suite: physical simulator, 12-bit sensor with noise "
+                 "(designed / baseline above each case)", fontsize=10)
+    ax.legend(fontsize=8, ncol=4, loc="upper left")
+    ax.grid(alpha=0.3, which="both", axis="y")
+    return _save(fig, path)
+
+
+__all__ = ["plot_error_vs_depth", "plot_loss", "plot_masks", "plot_suite"]

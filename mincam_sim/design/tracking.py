@@ -64,15 +64,43 @@ class TrackingTask:
         Squares per axis of the calibration sweep at 0.5 m (clipped to the 50 cm disc).
     dpi : float
         Printer resolution [dots per inch] of the film.
+    film_t_min, film_t_max : float
+        The film's printable transmission range (:class:`~mincam_sim.masks.PrintedFilm`).
     decoder : {"learned", "eq7"}
         ``learned``: a cubic polynomial of :func:`features_learned`, fitted in the design loop on the training
-        depths and used as is at inference; ``eq7``: the paper's ratios with a cubic calibration on the
-        physical sweep at 0.5 m (the baseline's protocol).
+        set and used as is at inference; ``eq7``: the paper's ratios with a cubic calibration on the physical
+        sweep at 0.5 m (the baseline's protocol).
+    decoder_fit : {"noiseless", "noisy"}
+        ``noiseless``: the learned decoder is fitted on the noiseless read-out of the training set (as a
+        calibration is) and the masks are optimised for its error on noisy read-outs; ``noisy``: fitted on
+        noisy read-outs, which shrinks every prediction towards the centre when noisy frames (bright
+        backgrounds) are in the training set.
+    object_size_range_m : (float, float)
+        Training objects' side (squares) or length (bars) [m], log-uniform.
+    bar_fraction : float
+        Share of training objects that are bars (``bar_width_range_m`` wide, horizontal or vertical).
+    bar_width_range_m : (float, float)
+        Bar widths [m].
+    two_object_fraction : float
+        Share of training frames with two objects on one plane (the target is the centroid of their change).
+    background_radiances : tuple of float
+        Background radiances [W m^-2 sr^-1] drawn uniformly per frame (0: a black plane). The background
+        sets the frame's exposure (the brightest reading fills ``EXPOSURE_FILL``) and adds its shot noise to
+        the change; textures are modelled by their mean.
+    contrast_range, background_contrast_range : (float, float)
+        Object radiance above a black plane, and above a grey one [W m^-2 sr^-1], uniform (capped at a
+        radiance of 1): on a background, the objects to track stand out.
+    depth_range_m : (float, float)
+        Working depths [m]: the old held-out draw (:mod:`.evaluate`) spans it.
+    spacing_m : float
+        Distance of each mixel from the centre [m].
+    d_f_m : float
+        Mask-to-detector distance [m].
     seed : int
     """
 
-    train_depths_m: tuple[float, ...] = (0.35, 0.42, 0.5, 0.6, 0.7)
-    frames_per_depth: int = 160
+    train_depths_m: tuple[float, ...] = (0.35, 0.42, 0.49, 0.56, 0.63, 0.7)
+    frames_per_depth: int = 256
     strata: int = 16
     grid: int = 12
     iterations: int = 400
@@ -83,33 +111,93 @@ class TrackingTask:
     samples_per_texel: int = 36
     calibration_grid: int = 15
     dpi: float = 600.0
+    film_t_min: float = 0.02
+    film_t_max: float = 0.9
     decoder: str = "learned"
+    decoder_fit: str = "noiseless"
+    object_size_range_m: tuple[float, float] = (0.01, 0.15)
+    bar_fraction: float = 0.25
+    bar_width_range_m: tuple[float, float] = (0.008, 0.02)
+    two_object_fraction: float = 0.3
+    background_radiances: tuple[float, ...] = (0.0, 0.0, 0.1, 0.2, 0.3, 0.45)
+    contrast_range: tuple[float, float] = (0.05, 1.0)
+    background_contrast_range: tuple[float, float] = (0.3, 1.0)
+    depth_range_m: tuple[float, float] = DEPTH_RANGE_M
+    spacing_m: float = SPACING_M
+    d_f_m: float = D_F_M
+    suite_frames: int = 60
+    suite_texels: int = 224
+    suite_samples_per_texel: int = 16
     seed: int = 0
 
     def __post_init__(self) -> None:
+        from ..errors import ConfigError
+
+        def bad(field: str, what: str) -> None:
+            raise ConfigError(f"TrackingTask.{field} {what}, got {getattr(self, field)!r}")
+
         if self.decoder not in FEATURES:
-            raise ValueError(f"TrackingTask.decoder must be one of {', '.join(FEATURES)}, got {self.decoder!r}")
+            bad("decoder", f"must be one of {', '.join(FEATURES)}")
+        if self.decoder_fit not in ("noiseless", "noisy"):
+            bad("decoder_fit", "must be 'noiseless' or 'noisy'")
+        for field in ("object_size_range_m", "bar_width_range_m", "contrast_range", "background_contrast_range",
+                      "depth_range_m"):
+            v = tuple(getattr(self, field))
+            if len(v) != 2 or not all(np.isfinite(v)) or not 0 < v[0] <= v[1]:
+                bad(field, "must be (min, max) with 0 < min <= max")
+        if self.object_size_range_m[1] > 0.3:
+            bad("object_size_range_m", "must stay <= 0.3 m (objects of the working field)")
+        if not (0.1 <= self.depth_range_m[0] and self.depth_range_m[1] <= 3.0):
+            bad("depth_range_m", "must lie within 0.1-3 m")
+        if not all(self.depth_range_m[0] - 1e-9 <= d <= self.depth_range_m[1] + 1e-9 for d in self.train_depths_m):
+            bad("train_depths_m", f"must lie in depth_range_m {self.depth_range_m}")
+        for field in ("bar_fraction", "two_object_fraction"):
+            if not 0 <= getattr(self, field) <= 1:
+                bad(field, "must be a fraction in [0, 1]")
+        bg = tuple(self.background_radiances)
+        if not bg or not all(np.isfinite(bg)) or min(bg) < 0 or max(bg) >= 1:
+            bad("background_radiances", "must be radiances in [0, 1) (0 = black plane)")
+        if not (np.isfinite(self.spacing_m) and 0.005 <= self.spacing_m <= 0.2):
+            bad("spacing_m", "must be 0.005-0.2 m")
+        if not (np.isfinite(self.d_f_m) and 2e-4 <= self.d_f_m <= 0.02):
+            bad("d_f_m", "must be 0.2-20 mm (in metres)")
+        if not (0 <= self.film_t_min < self.film_t_max <= 1):
+            bad("film_t_max", f"and film_t_min ({self.film_t_min}) must satisfy 0 <= t_min < t_max <= 1")
+        if not (np.isfinite(self.dpi) and 50 <= self.dpi <= 4800):
+            bad("dpi", "must be a printer resolution of 50 to 4800 dots per inch")
 
     @classmethod
-    def quick(cls, seed: int = 0) -> TrackingTask:
-        return cls(train_depths_m=(0.35, 0.45, 0.57, 0.7), frames_per_depth=192, strata=12, grid=10,
-                   iterations=200, eval_depths=5, eval_frames_per_depth=40, screen_texels=128,
-                   samples_per_texel=16, calibration_grid=9, seed=seed)
+    def quick(cls, seed: int = 0, **overrides) -> TrackingTask:
+        params = dict(train_depths_m=(0.35, 0.42, 0.49, 0.56, 0.63, 0.7), frames_per_depth=256, strata=12,
+                      grid=10, iterations=200, eval_depths=5, eval_frames_per_depth=40, screen_texels=128,
+                      samples_per_texel=16, calibration_grid=9, suite_frames=24, suite_texels=160, seed=seed)
+        params.update(overrides)
+        return cls(**params)
 
     def as_dict(self) -> dict:
         return asdict(self)
 
     def film(self) -> PrintedFilm:
-        return PrintedFilm(dpi=self.dpi)
+        return PrintedFilm(t_min=self.film_t_min, t_max=self.film_t_max, dpi=self.dpi)
 
     def dot_shape(self) -> tuple[int, int]:
         return self.film().grid_shape(MASK_SIZE_M, MASK_SIZE_M)
 
+    def mincam(self, masks: list[Mask]) -> Mincam:
+        """:func:`mincam` with this task's spacing and ``d_f``."""
+        return mincam(masks, self.spacing_m, self.d_f_m)
 
-def mincam(masks: list[Mask]) -> Mincam:
-    """The four mixels around the origin, looking along -z (at the plane), masks in :data:`NAMES` order."""
-    return layout(list(masks), list(OFFSETS_M), list(NAMES), center=Pose((0.0, 0.0, 0.0), (0.0, 0.0, -1.0)),
-                  d_f_m=D_F_M, detector_size_m=DETECTOR_SIZE_M)
+    def baseline_masks(self, resolution: int = 256) -> list[Mask]:
+        """:func:`current_layout_masks` at this task's spacing."""
+        return current_layout_masks(resolution, self.spacing_m)
+
+
+def mincam(masks: list[Mask], spacing_m: float = SPACING_M, d_f_m: float = D_F_M) -> Mincam:
+    """The four mixels ``spacing_m`` around the origin, looking along -z (at the plane), masks in
+    :data:`POSITIONS` order (left, right, top, bottom)."""
+    offsets = [(dx / SPACING_M * spacing_m, dy / SPACING_M * spacing_m) for dx, dy in OFFSETS_M]
+    return layout(list(masks), offsets, list(NAMES), center=Pose((0.0, 0.0, 0.0), (0.0, 0.0, -1.0)),
+                  d_f_m=d_f_m, detector_size_m=DETECTOR_SIZE_M)
 
 
 def paper_masks(resolution: int = 256) -> list[Mask]:
@@ -124,6 +212,17 @@ def paper_masks_swapped_x(resolution: int = 256) -> list[Mask]:
     y pair, each ramp is brightest on its own mixel's side, where that mixel sees objects nearest its axis
     (found by this design; :func:`~mincam_sim.optics.cross_layout` builds this layout since 2026-12)."""
     return [masks_mod.ramp(k, resolution, MASK_SIZE_M) for k in ("1-x", "x", "y", "1-y")]
+
+
+def current_layout_masks(resolution: int = 256, spacing_m: float = SPACING_M) -> list[Mask]:
+    """The ramps of the layout the package builds (:func:`~mincam_sim.optics.cross_layout` at this spacing and
+    aperture), in :data:`POSITIONS` order (taken from where ``cross_layout`` puts each mixel): the baseline."""
+    from ..optics import cross_layout
+
+    cam = cross_layout(spacing_m, resolution=resolution, mask_size_m=MASK_SIZE_M)
+    where = {(int(np.sign(round(m.pose.position_m[0], 9))), int(np.sign(round(m.pose.position_m[1], 9)))): m
+             for m in cam}
+    return [where[(int(np.sign(dx)), int(np.sign(dy)))].mask for dx, dy in OFFSETS_M]
 
 
 def to_metres(q: np.ndarray, depth_m: float) -> np.ndarray:
@@ -188,9 +287,12 @@ def sensor() -> SensorModel:
     return SensorModel.paper_prototype(bit_depth=BIT_DEPTH)
 
 
-def change_sigma_dn(s: SensorModel, irradiance_w_m2: np.ndarray, n_background_frames: int = 16) -> np.ndarray:
-    """Noise of a background-subtracted change [DN] on a black plane (background irradiance 0)."""
-    var = s.expected_std_dn(irradiance_w_m2) ** 2 + s.expected_std_dn(0.0) ** 2 / n_background_frames
+def change_sigma_dn(s: SensorModel, irradiance_w_m2: np.ndarray, n_background_frames: int = 16,
+                    background_w_m2: np.ndarray | float = 0.0) -> np.ndarray:
+    """Noise of a background-subtracted change [DN]: the frame (background plus change ``irradiance_w_m2``)
+    minus the mean of ``n_background_frames`` background readings (default: a black plane)."""
+    var = (s.expected_std_dn(np.asarray(background_w_m2) + irradiance_w_m2) ** 2
+           + s.expected_std_dn(background_w_m2) ** 2 / n_background_frames)
     return np.sqrt(var)
 
 
@@ -216,6 +318,7 @@ __all__ = [
     "mincam",
     "paper_masks",
     "paper_masks_swapped_x",
+    "current_layout_masks",
     "random_objects",
     "read_out",
     "sensor",

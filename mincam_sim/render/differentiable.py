@@ -58,12 +58,15 @@ class SquareScenes:
         Square sides [m].
     radiance : (n,) ndarray
         Square radiance [W m^-2 sr^-1]; the rest of the plane is black.
+    heights_m : (n,) ndarray, optional
+        Heights [m] of rectangles of width ``sizes_m`` (default: squares).
     """
 
     depth_m: float
     centers_m: np.ndarray
     sizes_m: np.ndarray
     radiance: np.ndarray
+    heights_m: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         c = np.asarray(self.centers_m, dtype=np.float64).reshape(-1, 2)
@@ -76,6 +79,11 @@ class SquareScenes:
             raise ValueError("SquareScenes.sizes_m must be positive sides in metres")
         if np.any(~np.isfinite(r)) or np.any(r < 0):
             raise ValueError("SquareScenes.radiance must be finite and >= 0 W m^-2 sr^-1")
+        h = s.copy() if self.heights_m is None else np.broadcast_to(
+            np.asarray(self.heights_m, dtype=np.float64), (n,)).copy()
+        if np.any(~np.isfinite(h)) or np.any(h <= 0):
+            raise ValueError("SquareScenes.heights_m must be positive heights in metres")
+        object.__setattr__(self, "heights_m", h)
         object.__setattr__(self, "centers_m", c)
         object.__setattr__(self, "sizes_m", s)
         object.__setattr__(self, "radiance", r)
@@ -178,8 +186,8 @@ def mixel_samples(
     sx = (j % strata + rnd[0]) / strata - 0.5
     sy = (j // strata + rnd[1]) / strata - 0.5
     xs = scenes.centers_m[frame, 0] + sx * scenes.sizes_m[frame]
-    ys = scenes.centers_m[frame, 1] + sy * scenes.sizes_m[frame]
-    scale = (scenes.sizes_m**2 * scenes.radiance)[frame]  # A_f L_f
+    ys = scenes.centers_m[frame, 1] + sy * scenes.heights_m[frame]
+    scale = (scenes.sizes_m * scenes.heights_m * scenes.radiance)[frame]  # A_f L_f
     det = mixel.detector_size_m
     xd_local = (rnd[2] - 0.5) * det
     yd_local = (rnd[3] - 0.5) * det
@@ -285,8 +293,8 @@ def check_inside_fov(mincam: Mincam, scenes: SquareScenes, margin: float = 0.02)
         tan_x, tan_y = mixel.half_fov_tan()
         pos = np.asarray(mixel.pose.position_m)
         d = scenes.depth_m + pos[2]
-        half = scenes.sizes_m / 2
         for axis, tan in ((0, tan_x), (1, tan_y)):
+            half = (scenes.sizes_m if axis == 0 else scenes.heights_m) / 2
             reach = np.abs(scenes.centers_m[:, axis] - pos[axis]) + half
             ok &= reach / d < tan * (1 - 2 * margin) - mixel.detector_size_m / (2 * mixel.d_f_m)
     return ok
@@ -403,7 +411,19 @@ class DesignProblem:
     dn_per_w_m2 : float
         Sensor gain for the exposure [DN per W/m^2].
     noise_dn : callable
-        ``noise_dn(irradiance (n_mixels, n_frames) ndarray) -> sigma [DN]`` of the background-subtracted change.
+        ``noise_dn(irradiance (n_mixels, n_frames) ndarray) -> sigma [DN]`` of the background-subtracted change,
+        or, with ``background_rows``, ``noise_dn(change, background)`` (both (n_mixels, n_frames) [W/m^2]).
+    background_rows : list of (n_rows, D) ndarray, optional
+        Per mixel, linear models of the backgrounds behind the frames (e.g. a uniform plane of unit radiance
+        per depth) [W/m^2 per unit transmission].
+    background_weights : (n_frames, n_rows) ndarray, optional
+        Each frame's background as a combination of those rows: its irradiance is ``W @ (R_k @ T_k)``.
+    fit_noiseless : bool
+        Fit the decoder of each step on the noiseless read-out (as a calibration is fitted), and score it on
+        the noisy one; default: fit and score on the same noisy batch.
+    error_cap : float, optional
+        Robust loss: a frame's squared error counts at most ``error_cap**2`` (a lost frame, e.g. a change that
+        noise cancels, weighs as one error of ``error_cap`` and carries no gradient) [fraction of the field].
     """
 
     matrices: list
@@ -418,6 +438,23 @@ class DesignProblem:
     levels: int | None
     dn_per_w_m2: float
     noise_dn: Callable
+    background_rows: list | None = None
+    background_weights: np.ndarray | None = None
+    fit_noiseless: bool = False
+    error_cap: float | None = None
+
+    def background_irradiance(self, transmissions: list) -> np.ndarray | None:
+        """Irradiance (n_mixels, n_frames) [W/m^2] of each frame's background through the masks ``T_k``."""
+        if self.background_rows is None:
+            return None
+        return np.array([self.background_weights @ (r @ np.asarray(t, dtype=np.float64))
+                         for r, t in zip(self.background_rows, transmissions, strict=True)])
+
+    def sigma_dn(self, irradiance: np.ndarray, transmissions: list) -> np.ndarray:
+        """Noise [DN] of each frame's change for masks ``T_k`` (see ``noise_dn``)."""
+        if self.background_rows is None:
+            return self.noise_dn(irradiance)
+        return self.noise_dn(irradiance, self.background_irradiance(transmissions))
 
 
 def poly_terms(*variables, degree: int = 3) -> list:
@@ -486,7 +523,8 @@ def optimise_masks(
     irradiances ``A_k @ T_k`` -> DN with Gaussian sensor noise (fresh draws from ``seed`` and the iteration)
     -> decoder features -> cubic polynomial whose coefficients are the least-squares fit on this batch (the
     calibration; by the envelope theorem the gradient with coefficients held fixed is the gradient of the
-    calibrated loss) -> mean squared position error. Returns the masks and the loss history.
+    calibrated loss), or on its noiseless read-out with ``problem.fit_noiseless`` (then the gradient holds
+    the calibration fixed) -> mean squared position error. Returns the masks and the loss history.
     """
     mi = _mi()
     import drjit as dr
@@ -507,18 +545,27 @@ def optimise_masks(
                 masks = masks_from_logits(problem, logits)
                 irr = [_matvec(a_flat[k], masks[k], n_frames, d) for k in range(len(masks))]
                 irr_np = np.array([np.asarray(dr.detach(e)) for e in irr], dtype=np.float64)
-                sigma = problem.noise_dn(irr_np)
+                sigma = problem.sigma_dn(irr_np, [np.asarray(dr.detach(t)) for t in masks])
                 eps = np.random.default_rng([int(seed), it]).standard_normal(sigma.shape)
                 dn = [problem.dn_per_w_m2 * irr[k] + mi.Float(sigma[k] * eps[k]) for k in range(len(irr))]
                 terms = poly_terms(*problem.features(dn, dr))
-                design = np.stack([np.asarray(dr.detach(t), dtype=np.float64) for t in terms], axis=1)
+                if problem.fit_noiseless:  # coefficients of the noiseless read-out, scored on the noisy one
+                    clean = [problem.dn_per_w_m2 * e for e in irr_np]
+                    with np.errstate(divide="ignore", invalid="ignore"):
+                        design = np.stack(poly_terms(*problem.features(clean, np)), axis=1)
+                else:
+                    design = np.stack([np.asarray(dr.detach(t), dtype=np.float64) for t in terms], axis=1)
                 ok = np.all(np.isfinite(design), axis=1)
                 coef = np.stack([np.linalg.lstsq(design[ok], problem.targets[ok, i], rcond=None)[0]
                                  for i in range(2)])
                 c_x, c_y = (mi.Float(c) for c in coef.astype(np.float32))  # arrays, not literals: one kernel
                 px = sum(dr.gather(mi.Float, c_x, i) * t for i, t in enumerate(terms))
                 py = sum(dr.gather(mi.Float, c_y, i) * t for i, t in enumerate(terms))
-                loss = dr.mean(dr.square(px - tx) + dr.square(py - ty))
+                err2 = dr.square(px - tx) + dr.square(py - ty)
+                if problem.error_cap is not None:
+                    cap2 = float(problem.error_cap) ** 2
+                    err2 = dr.select(dr.isfinite(err2), dr.minimum(err2, cap2), cap2)
+                loss = dr.mean(err2)
                 dr.backward(loss)
                 opt.step()
                 history.append(float(np.sqrt(np.asarray(loss, dtype=np.float64).ravel()[0])))
