@@ -59,7 +59,8 @@ class Run:
 
     def measure(self, sim: Simulation, frames, solver: Solver | None = None, budget: Budget | None = None,
                 name: str = "measurements") -> Measurements:
-        """:meth:`Simulation.measure`, kept in ``out_dir/name`` (resumable) and ``out_dir/name.npz``."""
+        """:meth:`~mincam_sim.render.simulation.Simulation.measure`, kept in ``out_dir/name`` (resumable) and
+        ``out_dir/name.npz``."""
         self._check_open()
         m = sim.measure(frames, solver, budget, out_dir=self.out_dir / name, overwrite=self.overwrite,
                         show_progress=self.show_progress)
@@ -69,7 +70,8 @@ class Run:
 
     def measure_changes(self, sim: Simulation, frames, background=None, solver: Solver | None = None,
                         budget: Budget | None = None, name: str = "measurements") -> Changes:
-        """:meth:`Simulation.measure_changes`, kept in ``out_dir/name`` (resumable) and ``out_dir/name.npz``."""
+        """:meth:`~mincam_sim.render.simulation.Simulation.measure_changes`, kept in ``out_dir/name`` (resumable) and
+        ``out_dir/name.npz``."""
         self._check_open()
         ch = sim.measure_changes(frames, background, solver, budget, out_dir=self.out_dir / name,
                                  overwrite=self.overwrite, show_progress=self.show_progress)

@@ -5,8 +5,8 @@ How far apart may mixels sit? The spacing study
 The paper's mixels are 3.3 cm apart, so each sees the scene from a slightly different place: a field-of-view
 offset of b / d of the field at depth d. This study calibrates the two-mixel intrusion mincam on a screen at
 0.5 m for spacings from 0 to 10 cm, then sweeps the boundary on screens at 0.5 m and 1.0 m with a noiseless
-read-out, so only geometry counts. It runs through the same registry as ``mincam-sim study spacing``, in quick
-mode (five spacings, two depths, 21 positions per sweep).
+read-out, so only geometry counts. It runs through the same registry as ``mincam-sim study run
+scenes/studies/spacing.toml``, in quick mode (five spacings, two depths, 21 positions per sweep).
 """
 
 # %%

@@ -5,7 +5,7 @@ Validating your own estimator on a world scene
 A world scene is any Mitsuba scene: here a grey table under an area light, with a 5 cm box that slides across
 the field of view of the paper's two-mixel mincam, 0.5 m above the table and looking down. The scene is built
 from Python objects (a trimesh box, a plane and a light as Mitsuba dictionaries); each frame is a
-parameter update (the box's vertices). ``WorldRenderer.measure_changes`` renders the change
+parameter update (the box's vertices). ``Simulation.measure_changes`` renders the change
 ``ΔP = P(frame) − P(background)`` of every mixel with its standard error, and an estimator (here
 the paper's Eq. 4) is checked against the ground truth the scene knows: where the box is.
 """
@@ -19,11 +19,12 @@ import matplotlib.pyplot as plt
 import numpy as np
 import trimesh
 
+import mincam_sim as ms
 from mincam_sim import Pose, pair_layout
 from mincam_sim.estimators import intrusion_position
 from mincam_sim.readout import propagate_sigma
 from mincam_sim.render import scene_dicts as sd
-from mincam_sim.render.world import WorldRenderer, vertex_update
+from mincam_sim.render.world import vertex_update
 
 HEIGHT_M = 0.5
 cam = pair_layout(
@@ -43,7 +44,7 @@ elements = {
     ),
     "box": sd.mesh_object("box", parked, box.faces, 0.9),
 }
-world = WorldRenderer(cam, elements, replicates=8)
+world = ms.Simulation(cam, world=elements)
 
 # %%
 # Frames: the box crosses the field of view
@@ -60,12 +61,9 @@ background = vertex_update("box", parked)
 # The stratified estimator spends most rays where the box and its shadow can be seen; the plain one spends
 # them over the whole aperture. Both are unbiased: they must agree within their standard errors, and the
 # stratified one is much less noisy at equal rays.
-dp_s, _ = world.measure_changes(
-    frames, background, spp=1 << 15, seed=1, estimator="stratified"
-)
-dp_p, _ = world.measure_changes(
-    frames, background, spp=1 << 15, seed=1, estimator="plain"
-)
+budget = ms.Budget(spp=1 << 15, replicates=8, seed=1)
+dp_s = world.measure_changes(frames, background, ms.StratifiedChange(), budget).dp
+dp_p = world.measure_changes(frames, background, ms.PlainChange(), budget).dp
 z = (dp_s.irradiance_w_m2 - dp_p.irradiance_w_m2) / np.hypot(
     dp_s.stderr_w_m2, dp_p.stderr_w_m2
 )

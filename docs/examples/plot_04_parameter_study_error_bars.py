@@ -3,12 +3,12 @@ A parameter study with error bars
 =================================
 
 How does the calibrated intrusion error through the 12-bit sensor grow with the sensor's read noise? A study
-is an experiment from the registry, a grid over its parameters and the metrics to keep; its result is an
-xarray ``Dataset`` (dimensions = swept parameters) in a Zarr store. One study gives one number per point,
-computed with one seed; the error bars come from **replicates**: the same study with independent seeds
-(each point's seed derives from the study's seed and the point's parameters, so the replicates are
-independent of each other and of the order the points run in). Each replicate draws new sensor noise and new
-rendering noise.
+is a target (here ``spacing``: the screen boundary sweep of the intrusion experiment, one set-up per point), a
+grid over its parameters and the metrics to keep; its result is an xarray ``Dataset`` (dimensions = swept
+parameters) in a Zarr store. One study gives one number per point, computed with one seed; the error bars come
+from **replicates**: the same study with independent seeds (each point's seed derives from the study's seed
+and the point's parameters, so the replicates are independent of each other and of the order the points run
+in). Each replicate draws new sensor noise and new rendering noise.
 
 Quick mode (15 positions per sweep, 16 samples per texel) and four replicates keep this to a few seconds; the
 command line runs the same studies on a dask cluster (``mincam-sim study run STUDY.toml --workers 2``).
@@ -35,7 +35,7 @@ def study_spec(seed: int) -> dict:
     return {
         "study": {
             "name": "read_noise",
-            "experiment": "intrusion",
+            "experiment": "spacing",
             "seed": seed,
             "out_dir": str(root / f"seed{seed}"),
         },
@@ -50,13 +50,13 @@ def study_spec(seed: int) -> dict:
 # %%
 # Run the replicates
 # ------------------
-# ``workers=0`` computes the points here, one after the other (no cluster); results go to
+# ``workers=1`` computes the points in this process, one after the other (no cluster); results go to
 # ``<out_dir>/results.zarr`` as each point finishes, so a killed study resumes.
 datasets = []
 for seed in SEEDS:
     ds, summary = run_study(
         load_study(study_spec(seed), quick=True),
-        workers=0,
+        workers=1,
         quick=True,
         show_progress=False,
     )

@@ -55,7 +55,7 @@ class Simulation:
     max_depth : int
         World scenes: longest path, in segments from the mask (2 = direct light only; 3 adds one bounce).
     camera : dict, optional
-        World scenes: a ground-truth pinhole camera (:func:`~.scene_dicts.pinhole_camera`).
+        World scenes: a ground-truth pinhole camera (``mincam_sim.render.scene_dicts.pinhole_camera``).
     """
 
     def __init__(self, mincam: Mincam, *, screen: Screen | None = None, world=None, max_depth: int = 3,

@@ -5,15 +5,15 @@ it, a :class:`~mincam_sim.budget.Budget` says *how much* work to spend. Solvers 
 (radiance images); solvers for worlds measure parameter updates (absolute ``P``) or changes against a
 background (``dP``, :class:`~mincam_sim.changes.Changes`). Adding an estimator is a new solver class here.
 
-===================  =========  ==========================================================================
-solver               scenes     what it traces
-===================  =========  ==========================================================================
-:class:`Reference`   display    the literal scene: mask surface, housing, Mitsuba's irradiance meter
-:class:`Aperture`    both       rays started on the mask aperture, weight ``A T cos^2 / r^2`` (fast form)
-:class:`ResponseMap` display    each mixel's map over the screen texels; a frame is ``sum(W * frame)``
-:class:`PlainChange` world      whole-aperture rays per frame with the background's seed (reference dP)
-:class:`StratifiedChange` world most rays where the frame's change can reach, bounces guided (fast dP)
-===================  =========  ==========================================================================
+===========================  =======  ==========================================================================
+solver                       scenes   what it traces
+===========================  =======  ==========================================================================
+:class:`Reference`           display  the literal scene: mask surface, housing, Mitsuba's irradiance meter
+:class:`Aperture`            both     rays started on the mask aperture, weight ``A T cos^2 / r^2`` (fast form)
+:class:`ResponseMap`         display  each mixel's map over the screen texels; a frame is ``sum(W * frame)``
+:class:`PlainChange`         world    whole-aperture rays per frame with the background's seed (reference dP)
+:class:`StratifiedChange`    world    most rays where the frame's change can reach, bounces guided (fast dP)
+===========================  =======  ==========================================================================
 """
 
 from __future__ import annotations

@@ -136,7 +136,7 @@ class WorldRenderer:
 
     def update(self, updates: Updates) -> None:
         """Set scene parameters (numpy arrays or Mitsuba values; positions in world coordinates [m], as
-        :attr:`params` reads them) and apply them without reloading."""
+        ``params`` reads them) and apply them without reloading."""
         if not isinstance(updates, Mapping):
             raise InputError(f"an update must be a dict 'name.parameter' -> value, got {type(updates).__name__}")
         scene_params = self.world.params
