@@ -54,7 +54,7 @@ def test_cli_and_config_reference_come_from_the_code(gen):
 
     cli = gen.cli_reference()
     for command in ("render", "config-example", "reproduce", "demo", "design", "figures", "masks export",
-                    "study run", "study spacing"):
+                    "study run"):
         assert f"## `mincam-sim {command}`" in cli
     config = gen.config_reference()
     assert EXAMPLE_TOML.strip() in config
