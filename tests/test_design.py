@@ -1,4 +1,4 @@
-"""Mask design (issue 11): the differentiable forward model against the physical response-map form, AD
+"""Mask design: the differentiable forward model against the physical response-map form, AD
 gradients against central finite differences (Mitsuba's test_ad_integrators protocol), the linear per-dot model,
 the parameterisation and the printed film, and a small end-to-end optimisation."""
 

@@ -1,4 +1,4 @@
-"""Mask design by differentiable rendering through the mincam's real geometry (issue 11).
+"""Mask design by differentiable rendering through the mincam's real geometry.
 
 An upper floor beside the experiments: it imports the core (optics, masks, sensor, calibration) and the render
 layer, whose ``mincam_sim.render.differentiable`` holds the only Dr.Jit AD code.
@@ -8,7 +8,7 @@ layer, whose ``mincam_sim.render.differentiable`` holds the only Dr.Jit AD code.
 * :mod:`.parameterization`: logits on a coarse grid -> printer dots -> film transmission.
 * :mod:`.optimise`: builds the linear forward model from traced samples and optimises the masks.
 * :mod:`.evaluate`: the old held-out draw (squares 2-5 cm on black) in the physical simulator (response maps).
-* :mod:`.suite`: the held-out suite of every report (sizes, shapes, backgrounds, two objects, depths, tilt,
+* ``suite``: the held-out suite of every report (sizes, shapes, backgrounds, two objects, depths, tilt,
   contrast), the baseline (ramps of ``cross_layout``, Eq. 7, cubic calibration) beside the design.
 * :mod:`.gradcheck`: AD against central finite differences.
 * :mod:`.run`: one run and its outputs (``mincam-sim design TASK``).

@@ -99,7 +99,7 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
         Replace a finished design of another identity (task, sizes, seed, dpi, versions) in ``out_dir``;
         without it that design is refused (StaleResultError naming what changed), as other runs are.
     overrides
-        Fields of :class:`~.tracking.TrackingTask` (training distribution, geometry, film; :func:`make_task`).
+        Fields of ``TrackingTask`` (training distribution, geometry, film; ``make_task``).
     """
     from dataclasses import asdict
 

@@ -1,9 +1,9 @@
 """The ground truth of the tabletop experiments: a pinhole camera at the mincam's centre looking straight down.
 
 Two definitions, both from that camera: the paper's (Sec. 4.1.1, 4.2.1), the centroid of the **object**, from
-the silhouette of the object's mesh projected into the camera (:meth:`GroundTruthCamera.object_centroid`); and
+the silhouette of the object's mesh projected into the camera (``GroundTruthCamera.object_centroid``); and
 the centroid of the **change** (background subtraction, binary detection, the centroid of the detected pixels,
-:meth:`GroundTruthCamera.change_centroid`), which also takes in the object's shadow."""
+``GroundTruthCamera.change_centroid``), which also takes in the object's shadow."""
 
 from __future__ import annotations
 
