@@ -25,6 +25,20 @@ _LAZY = {
     "PlainChange": "mincam_sim.render.solvers",
     "StratifiedChange": "mincam_sim.render.solvers",
     "Run": "mincam_sim.run",
+    # building a world: updates by name (world coordinates), scene pieces, the experiments' tabletop and toys
+    "vertex_update": "mincam_sim.render.world",
+    "transform_update": "mincam_sim.render.world",
+    "mesh_object": "mincam_sim.render.scene_dicts",
+    "area_light": "mincam_sim.render.scene_dicts",
+    "textured_plane": "mincam_sim.render.scene_dicts",
+    "sky": "mincam_sim.render.scene_dicts",
+    "pinhole_camera": "mincam_sim.render.scene_dicts",
+    "tabletop_elements": "mincam_sim.render.elements",
+    "toy_updates": "mincam_sim.render.elements",
+    "Tabletop": "mincam_sim.scene.tabletop",
+    "load_mesh": "mincam_sim.objects",
+    "mesh_at": "mincam_sim.objects",
+    "Trajectory": "mincam_sim.objects",
 }
 
 
@@ -37,6 +51,19 @@ def __getattr__(name: str):
 
 __all__ = [
     "Aperture",
+    "Tabletop",
+    "Trajectory",
+    "area_light",
+    "load_mesh",
+    "mesh_at",
+    "mesh_object",
+    "pinhole_camera",
+    "sky",
+    "tabletop_elements",
+    "textured_plane",
+    "toy_updates",
+    "transform_update",
+    "vertex_update",
     "Budget",
     "Changes",
     "ConfigError",

@@ -245,13 +245,13 @@ def test_every_registry_experiment_render_and_design_can_be_a_study():
 
 def test_shipped_study_files_load():
     paths = sorted((ROOT / "scenes" / "studies").glob("*.toml"))
-    assert {p.stem for p in paths} >= {"spacing", "tracking_spacing_toy", "render_d_f"}
+    assert {p.stem for p in paths} >= {"spacing", "tracking_spacing_toy", "tracking_spacing_albedo", "render_d_f"}
     for path in paths:
         for quick in (False, True):
             assert load_study(path, quick=quick).points
 
 
-@pytest.mark.parametrize("name", ["tracking_spacing_toy", "render_d_f"])
+@pytest.mark.parametrize("name", ["tracking_spacing_toy", "tracking_spacing_albedo", "render_d_f"])
 def test_shipped_studies_run_with_quick_from_the_command_line(tmp_path, name):
     from typer.testing import CliRunner
 
