@@ -257,6 +257,25 @@ CASES: list[Case] = [
     Case("config_with_utf8_bom", R, {"c.toml": b"\xef\xbb\xbf" + toml().encode()}, expect="ok"),
     Case("reproduce_bit_depth_1", ["reproduce", "intrusion", "--quick", "--bit-depth", "1"],
          keywords=("--bit-depth",)),
+    Case("reproduce_negative_car_speed", ["reproduce", "intrusion", "--quick", "--config", "r.toml"],
+         {"r.toml": "[intrusion]\nspeeds_m_s = [-0.3, 0.4]\n"}, keywords=("speeds_m_s[0]",)),
+    Case("reproduce_boundary_far_away", ["reproduce", "intrusion", "--quick", "--config", "r.toml"],
+         {"r.toml": "[intrusion]\nboundary_x_m = 5.0\n"}, keywords=("boundary_x_m",)),
+    Case("reproduce_boundary_out_of_view", ["reproduce", "intrusion", "--quick", "--config", "r.toml"],
+         {"r.toml": "[intrusion]\nboundary_x_m = 0.6\n"}, keywords=("boundary_x_m",)),
+    Case("reproduce_mask_period_too_fine", ["reproduce", "speed", "--quick", "--config", "r.toml"],
+         {"r.toml": "[speed]\nmask_period_m = 1e-7\n"}, keywords=("mask period", "mask_period_m")),
+    Case("world_config_unknown_mover", R,
+         {"c.toml": '[world]\n[[world.object]]\nid = "toy"\nmesh = "m.obj"\n[[world.mover]]\nid = "car"\n'
+                    'offsets_m = [[0, 0, 0]]\n',
+          "m.obj": "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"}, keywords=("'car' is not a shape",)),
+    Case("world_config_offsets_count", R,
+         {"c.toml": '[world]\n[[world.object]]\nid = "a"\nmesh = "m.obj"\n[[world.object]]\nid = "b"\n'
+                    'mesh = "m.obj"\n[[world.mover]]\nid = "a"\noffsets_m = [[0, 0, 0]]\n[[world.mover]]\n'
+                    'id = "b"\noffsets_m = [[0, 0, 0], [0, 0, 1]]\n',
+          "m.obj": "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"}, keywords=("frame counts differ",)),
+    Case("world_config_missing_xml", R, {"c.toml": '[world]\nscene = "room.xml"\n[[world.mover]]\nid = "a"\n'
+                                                   'offsets_m = [[0, 0, 0]]\n'}, keywords=("does not exist",)),
     Case("masks_export_levels_70000", ["masks", "export", "ramp:x", "--out", "m.png", "--levels", "70000"],
          keywords=("--levels",)),
     Case("masks_export_out_jpg", ["masks", "export", "ramp:x", "--out", "m.jpg"], keywords=(".png",)),

@@ -93,6 +93,12 @@ class IntrusionParams:
             raise ValueError(f"calibration_positions must be >= 5 (a cubic needs 4), got {self.calibration_positions}")
         if len(self.lanes_y_m) != 2 or len(self.speeds_m_s) != 2:
             raise ValueError("lanes_y_m and speeds_m_s must each list the two cars' values")
+        for k, v in enumerate(self.speeds_m_s):
+            if not (np.isfinite(v) and 0 < v <= 10):
+                raise ValueError(f"speeds_m_s[{k}] must be a car's speed in m/s, > 0 and <= 10, got {v!r}")
+        if not (np.isfinite(self.boundary_x_m) and abs(self.boundary_x_m) < 1.0):
+            raise ValueError(f"boundary_x_m must lie in the calibrated field (|x| < 1 m; the paper's is -0.1378), got "
+                             f"{self.boundary_x_m!r}")
 
 
 @dataclass

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..calibration import Calibration1D, Calibration2D
+from ..errors import ConfigError
 from ..optics import seen_whole_by_every_mixel
 from ..readout import read_out
 from ..render.screen_engine import render_frames
@@ -49,8 +50,10 @@ def visible_sweep(mincam, setup: Setup, sweep: Sweep) -> tuple[Sweep, int]:
     left out; refuses a sweep left with fewer than 10 squares."""
     keep = seen_by_every_mixel(mincam, setup, sweep)
     if keep.sum() < 10:
-        raise ValueError(f"only {int(keep.sum())} of {len(keep)} calibration squares lie inside every mixel's field "
-                         "of view: reduce the spacing, the field or the square, or move the screen further away")
+        raise ConfigError(f"only {int(keep.sum())} of {len(keep)} calibration squares lie inside every mixel's field "
+                          "of view: reduce [setup] spacing_m or field_m or the calibration square, move the screen "
+                          "further away ([setup] depth_m), or bring the sweep into view (for intrusion it runs along "
+                          "[intrusion] boundary_x_m, which must lie inside the field)")
     return Sweep(sweep.positions_m[keep], sweep.size_m, sweep.radiance), int((~keep).sum())
 
 
