@@ -91,4 +91,4 @@ __all__ = [
     "single",
     "white_square",
 ]
-__version__ = "0.1.0"
+__version__ = "0.2.0"
