@@ -22,8 +22,22 @@ def _box(size_m, at_m):
     return box.vertices + np.asarray(at_m, float), box.faces
 
 
+def _glass_mesh(name: str, vertices, faces):
+    from mincam_sim.render import backend
+
+    mi = backend.mitsuba()
+    props = mi.Properties()
+    props["bsdf"] = mi.load_dict({"type": "dielectric", "int_ior": 1.5, "ext_ior": 1.0})
+    mesh = mi.Mesh(name, len(vertices), len(faces), props=props)
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = mi.Float(np.asarray(vertices, dtype=np.float32).ravel())
+    params["faces"] = mi.UInt32(np.asarray(faces, dtype=np.uint32).ravel())
+    params.update()
+    return mesh
+
+
 def rare_scene(case: str, replicates: int = 8):
-    """(world, frames, background) for ``case`` in {"far_movers", "mirror"}."""
+    """(world, frames, background) for ``case`` in {"far_movers", "mirror", "glass"}."""
     cam = cross_layout(center=Pose((0.0, 0.0, HEIGHT_M), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)))
     elements = {
         "table": {"type": "rectangle", "to_world": sd._transform(np.diag([0.8, 0.8, 1.0, 1.0])),
@@ -46,12 +60,17 @@ def rare_scene(case: str, replicates: int = 8):
                               "bsdf": {"type": "conductor", "material": "none"}}
         places = {"mover": (0.18, 0.03, 0.0)}
         sizes = {"mover": (0.02, 0.02, 0.03)}
+    elif case == "glass":
+        # a glass block (a dielectric mesh) in view: its caustic on the table and what it refracts are found only
+        # through delta bounces, which are never guided
+        places = {"lens": (0.05, 0.03, 0.0)}
+        sizes = {"lens": (0.04, 0.04, 0.03)}
     else:
         raise KeyError(case)
     parked, placed = {}, {}
     for k, (name, at) in enumerate(places.items()):
         v, f = _box(sizes[name], PARK_M + np.array([0.0, 0.3 * k, 0.0]))
-        elements[name] = sd.mesh_object(name, v, f, 0.9)
+        elements[name] = (sd.mesh_object(name, v, f, 0.9) if case != "glass" else _glass_mesh(name, v, f))
         parked.update(vertex_update(name, v))
         foot = v.min(axis=0) * [1, 1, 0] + np.array(sizes[name]) * [0.5, 0.5, 0]  # the box's foot centre
         placed.update(vertex_update(name, v - foot + np.asarray(at)))

@@ -293,3 +293,19 @@ def test_warnings_quiet_when_nothing_falls_back():
         dp, _ = world.measure_changes([vertex_update("toy", tri + [0.01, 0, 0])], {}, spp=1 << 12,
                                       estimator="stratified")
     assert dp.meta["fallbacks"] == [] and dp.meta["guided_frames"] == 1
+
+
+@pytest.mark.xfail(strict=True, reason="known limit: light refracted by a moving glass block reaches the table "
+                   "only through unguided delta bounces; a run that draws none of those rare heavy paths reports "
+                   "a sigma ~10x too small (seed 26: |z| 11.8), which no within-run diagnostic can see")
+def test_per_run_sigma_on_a_moving_glass_block():
+    beyond, zero, z, _, _ = _tail_case("glass", 32, 1 << 14)
+    assert zero == 0
+    assert np.abs(z).max() <= 6.0, f"max |z| {np.abs(z).max():.1f} over {z.size} values"
+
+
+def test_a_moving_glass_shape_is_said():
+    world, frames, background = rare_scene("glass")
+    with pytest.warns(FallbackWarning, match="'lens' is glass or a mirror"):
+        dp, _ = world.measure_changes(frames, background, spp=1 << 12, estimator="stratified")
+    assert any("lens" in f for f in dp.meta["fallbacks"])

@@ -250,6 +250,7 @@ class WorldRenderer:
         else:
             run = _StratifiedRun(self, frames, background, spp, seed, correlated, shares,
                                  tuple(strata_expansions), bool(guide_bounces), bg)
+        run.note_delta_movers(_moving_shapes([background, *frames]))
         identity = None
         if out_dir is not None:
             identity = self._store_identity(frames, background, spp, seed, correlated, shares, options)
@@ -453,6 +454,21 @@ class _Run:
         self.r, self.background, self.spp, self.seed, self.correlated = renderer, background, spp, seed, correlated
         self.bg = bg
         self.fallbacks: dict[str, str] = {}
+
+    def note_delta_movers(self, moving) -> None:
+        """Say it when a moving shape is glass or a mirror (a delta BSDF): the light it redirects onto the rest of
+        the scene is found only by unguided delta bounces, and a run that draws none of those rare heavy paths
+        reports too small a sigma (on a glass block in view, ~10x in one run of 32), which no diagnostic inside
+        one run can see."""
+        mi = backend.mitsuba()
+        shapes = {s.id(): s for s in self.r.scene.shapes()}
+        for name in sorted(moving):
+            bsdf = shapes[name].bsdf() if name in shapes else None
+            if bsdf is not None and int(bsdf.flags()) & int(mi.BSDFFlags.Delta):
+                self.fallbacks[f"delta:{name}"] = (
+                    f"'{name}' is glass or a mirror and moves: the light it refracts or reflects onto the scene is "
+                    "found only by unguided delta bounces, so one run's sigma can be too small when it draws none "
+                    "of those rare paths; raise the replicates or compare a few seeds")
 
     def rows(self, frames, todo, show_progress: bool):
         """(frame index, values, stderr, info) per frame of ``todo``: dP then P per mixel; then heavy-tailed and
