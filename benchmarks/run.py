@@ -273,16 +273,14 @@ def _cost_point(n_mixels: int = 4, table_triangles: int = 2, n_movers: int = 1, 
     (extrapolated with sigma ~ rays^-1/2 and time ~ rays from the measured run)."""
     import trimesh
 
+    from mincam_sim import cross_layout
     from mincam_sim.geometry import Pose
     from mincam_sim.render import scene_dicts as sd
     from mincam_sim.render.world import WorldRenderer, vertex_update
 
     height = 0.5
-    cam = _grid_mincam(n_mixels, height) if n_mixels != 4 else None
-    if cam is None:
-        from mincam_sim import cross_layout
-
-        cam = cross_layout(center=Pose((0.0, 0.0, height), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)))
+    cam = (cross_layout(center=Pose((0.0, 0.0, height), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0))) if n_mixels == 4
+           else _grid_mincam(n_mixels, height))
     cells = max(1, int(round(np.sqrt(table_triangles / 2))))
     grid = np.linspace(-0.5, 0.5, cells + 1)
     gx, gy = np.meshgrid(grid, grid)

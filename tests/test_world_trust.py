@@ -221,11 +221,6 @@ def test_heavy_tail_flag_has_its_false_alarm_rate_and_catches_one_dominant_repli
     assert 0.8 < dominance_threshold(8) < 0.875
 
 
-def _tail_case(case: str, n_seeds: int, spp: int):
-    beyond, zero, z, values, sigmas = tail_counts(case, range(n_seeds), spp)
-    return beyond, zero, z, values, sigmas
-
-
 # Per value, |z| > 4.5 happens with probability ~0.003 when the reported sigma is honest (t distribution with 7
 # degrees of freedom from 8 replicates, and a little more from the leave-one-out mean); with 4 mixels x n seeds
 # values the bound below is the Poisson 99.9 % quantile of that expectation.
@@ -242,7 +237,7 @@ def test_per_run_sigma_is_honest_on_rare_light_paths(case, n_seeds):
     than honest Gaussian replicates allow, and never 0 +/- 0 for a change the others resolve. Far-apart movers
     out of view: one guide sphere around both held the whole view and guiding switched itself off (2 of 64
     values beyond 4.5 sigma, one 0 +/- 0, max |z| 28.8 at 16 seeds before); per-mover spheres fix it."""
-    beyond, zero, z, values, sigmas = _tail_case(case, n_seeds, 1 << 14)
+    beyond, zero, z, values, sigmas = tail_counts(case, range(n_seeds), 1 << 14)
     mean = values.mean(0)
     resolved = np.abs(mean) > Z * values.std(0, ddof=1) / np.sqrt(n_seeds)
     assert resolved.mean() > 0.5, "the scene's change must be resolved for the test to mean anything"
@@ -257,7 +252,7 @@ def test_per_run_sigma_is_honest_on_rare_light_paths(case, n_seeds):
 @pytest.mark.slow
 @pytest.mark.parametrize("case", ["far_movers", "mirror"])
 def test_per_run_sigma_is_honest_on_rare_light_paths_many_seeds(case):
-    beyond, zero, z, _, _ = _tail_case(case, 96, 1 << 14)
+    beyond, zero, z, _, _ = tail_counts(case, range(96), 1 << 14)
     assert zero == 0
     assert beyond <= _allowed_beyond(z.size), f"{beyond} of {z.size} beyond 4.5 sigma (max |z| {np.abs(z).max():.1f})"
 
@@ -299,7 +294,7 @@ def test_warnings_quiet_when_nothing_falls_back():
                    "only through unguided delta bounces; a run that draws none of those rare heavy paths reports "
                    "a sigma ~10x too small (seed 26: |z| 11.8), which no within-run diagnostic can see")
 def test_per_run_sigma_on_a_moving_glass_block():
-    beyond, zero, z, _, _ = _tail_case("glass", 32, 1 << 14)
+    beyond, zero, z, _, _ = tail_counts("glass", range(32), 1 << 14)
     assert zero == 0
     assert np.abs(z).max() <= 6.0, f"max |z| {np.abs(z).max():.1f} over {z.size} values"
 

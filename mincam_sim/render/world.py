@@ -435,6 +435,11 @@ class WorldParameters(Mapping):
         return sum(1 for _ in self)
 
 
+def _unseen(diff: np.ndarray, changes: np.ndarray) -> np.ndarray:
+    """(n_mixels,) True where a frame changes a shape but every replicate of its dP is the same (no ray met it)."""
+    return changes & np.all(diff == diff[:1], axis=0)
+
+
 def _unknown_parameter(key: str, known, own: bool) -> str:
     if own:
         return (f"{key!r} belongs to the mincam's own body or sensor; move the mixels through the Mincam, not the "
@@ -477,12 +482,11 @@ class _Run:
         for i in progress(todo, desc="frames", disable=not show_progress):
             i = int(i)
             diff, frame_v, frame_e, changes, info = self.frame(frames, i, self.r.replicates, "")
-            flagged = heavy_tailed(diff) | (changes & np.all(diff == diff[:1], axis=0))
-            retried = bool(flagged.any())
+            retried = bool((heavy_tailed(diff) | _unseen(diff, changes)).any())
+            heavy = unseen = np.zeros(n, dtype=bool)
             if retried:
                 diff, frame_v, frame_e, changes, _ = self.frame(frames, i, RETRY_FACTOR * self.r.replicates, "retry")
-            heavy = heavy_tailed(diff) if retried else np.zeros(n, dtype=bool)
-            unseen = (changes & np.all(diff == diff[:1], axis=0)) if retried else np.zeros(n, dtype=bool)
+                heavy, unseen = heavy_tailed(diff), _unseen(diff, changes)
             reps = diff.shape[0]
             row_v = np.concatenate([diff.mean(0), frame_v])
             row_e = np.concatenate([diff.std(0, ddof=1) / np.sqrt(reps), frame_e])
@@ -521,12 +525,9 @@ class _PlainRun(_Run):
         if purpose:
             frame_seed = derive_seed(frame_seed, purpose, i)
         spp = self.spp * replicates // r.replicates
-        if replicates == r.replicates and not purpose:
-            bg = self.bg
-        else:
-            r.update(self.background)
-            bg = r.world.fast_estimates(spp, replicates, frame_seed)
         r.update(self.background)
+        bg = self.bg if replicates == r.replicates and not purpose else r.world.fast_estimates(spp, replicates,
+                                                                                             frame_seed)
         r.update(frames[i])
         est = r.world.fast_estimates(spp, replicates, frame_seed)
         changes = np.full(len(r.mincam), bool(_changed_shapes(frames[i], self.background)))
@@ -619,17 +620,12 @@ class _DeltaSurfaces:
 
     def images(self, points: np.ndarray, exclude: str = "") -> list[np.ndarray]:
         """Point sets to add to a change's region: its mirror images in each planar delta surface, and the
-        boxes of the curved ones."""
-        out = []
-        for name, (normal, offset) in self.planes.items():
-            if name != exclude:
-                out.append(points - 2.0 * (points @ normal - offset)[:, None] * normal)
-        out += [box for name, box in self.boxes.items() if name != exclude]
-        return out
+        boxes of the curved ones (``exclude``: the moving shape itself)."""
+        return self.reflect(points, exclude) + [box for name, box in self.boxes.items() if name != exclude]
 
-    def reflect(self, points: np.ndarray) -> list[np.ndarray]:
-        """``points`` (m, 3) mirrored in each planar delta surface's plane."""
-        return [points - 2.0 * (points @ n - c)[:, None] * n for n, c in self.planes.values()]
+    def reflect(self, points: np.ndarray, exclude: str = "") -> list[np.ndarray]:
+        """``points`` (m, 3) mirrored in each planar delta surface's plane but ``exclude``'s."""
+        return [points - 2.0 * (points @ n - c)[:, None] * n for name, (n, c) in self.planes.items() if name != exclude]
 
     def with_images(self, boxes: list, directions: list) -> tuple[list, list]:
         """Light boxes and directions plus their images in each planar delta surface (first-order reflections):
@@ -651,9 +647,8 @@ class _DeltaSurfaces:
 
 
 def _delta_surfaces(scene) -> _DeltaSurfaces:
+    """The scene's delta surfaces, planar or not, from 64 points sampled on each."""
     mi = backend.mitsuba()
-    import drjit as dr
-
     planes, boxes = {}, {}
     for shape in scene.shapes():
         bsdf = shape.bsdf()
@@ -674,7 +669,6 @@ def _delta_surfaces(scene) -> _DeltaSurfaces:
             planes[shape.id()] = (normal, float(p[0] @ normal))
         else:
             boxes[shape.id()] = box_corners(lo, hi)
-        dr.eval()
     return _DeltaSurfaces(planes, boxes)
 
 

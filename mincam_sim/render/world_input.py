@@ -100,7 +100,9 @@ def check_update(key: str, current, value) -> None:
             raise InputError(f"{key}: the transform is singular (zero scale along some axis); fix the matrix")
         return
     if key.endswith(".vertex_positions"):
-        expected = int(np.asarray(current).size)
+        import drjit as dr
+
+        expected = int(dr.width(current))  # a flat Float: no copy of the mesh per update
         if value.size != expected:
             raise InputError(f"{key}: the mesh has {expected // 3} vertices ({expected} values), the update has "
                              f"{value.size} values; an update moves the vertices of the same mesh (same count and "
