@@ -122,9 +122,7 @@ def guided_radiance(scene, sampler, ray, max_depth: int, guide, share: float = G
     si_prev = dr.zeros(mi.SurfaceInteraction3f)
     pdf_prev = mi.Float(1.0)
     delta_prev = mi.Bool(True)
-    # opaque: a new frame's guide must not change the kernel's code (no recompilation per frame)
-    spheres = [(mi.Point3f(*(dr.opaque(mi.Float, float(c)) for c in centre)), dr.opaque(mi.Float, float(radius)))
-               for centre, radius in (spheres_of(guide) if share > 0 else [])]
+    spheres = opaque_spheres(guide) if share > 0 else []
     for depth in range(int(max_depth)):
         si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=depth == 0, active=active)
         bsdf = si.bsdf(ray)
@@ -186,6 +184,18 @@ def spheres_of(guide) -> list[tuple[np.ndarray, float]]:
         hi = np.max([c + r for c, r in spheres], axis=0)
         spheres = [(0.5 * (lo + hi), float(0.5 * np.linalg.norm(hi - lo)))]
     return spheres
+
+
+def opaque_spheres(guide) -> list:
+    """The guide's spheres as Dr.Jit values, ``[(mi.Point3f centre, mi.Float radius)]`` (opaque: a new frame's
+    guide changes no kernel code); a list already in that form is returned as it is."""
+    mi = backend.mitsuba()
+    import drjit as dr
+
+    if isinstance(guide, list) and guide and dr.is_jit_v(guide[0][1]):
+        return guide
+    return [(mi.Point3f(*(dr.opaque(mi.Float, float(c)) for c in centre)), dr.opaque(mi.Float, float(radius)))
+            for centre, radius in spheres_of(guide)]
 
 
 class _Cone:

@@ -44,6 +44,7 @@ def _make_class():
             super().__init__(props)
             self.m_needs_sample_3 = True
             self._n = 0
+            self.version = 0  # bumped whenever the mixels change: a frozen launch records again
 
         def set_mixels(self, mixels: Sequence[Mixel]) -> None:
             mixels = list(mixels)
@@ -53,9 +54,11 @@ def _make_class():
                 (m.d_f_m, m.detector_size_m, m.mask.width_m, m.mask.height_m) for m in mixels
             ]
             self._masks = [RayWeight(m) for m in mixels]
+            self.version += 1
 
         def update_pose(self, index: int, matrix: np.ndarray) -> None:
             self._matrices[index] = mi.Transform4f(np.asarray(matrix).tolist())
+            self.version += 1
 
         def sample_ray(self, time, sample1, sample2, sample3, active=True):
             n = self._n

@@ -27,15 +27,19 @@ moving shapes; same expectation).
 
 from __future__ import annotations
 
+import gc
 import math
+from collections import OrderedDict
 from collections.abc import Sequence
+from contextlib import contextmanager
+from typing import NamedTuple
 
 import numpy as np
 
 from ..optics import Mincam
 from . import backend, guided_path
 from .change_region import ApertureRegions
-from .tracing import MAX_LANES, seeded_sampler
+from .tracing import MAX_LANES, launch_seed
 
 DETECTOR_SHRINK = 1 - 2e-6  # as mixel_sensor.mixel_position_sample: keeps x strictly inside the mixel's film cell
 
@@ -58,7 +62,7 @@ def check_strata(counts: Sequence[int], expansions: Sequence[float]) -> None:
 def stratified_estimates(scene, sensor, mincam: Mincam, regions: ApertureRegions, replicates: int,
                          counts: Sequence[int], seed: int, expansions: Sequence[float] = (1.0,),
                          by_stratum: bool = False, jitter: bool = True, guide=None,
-                         max_depth: int | None = None) -> np.ndarray:
+                         max_depth: int | None = None, freeze: tuple | None = None) -> np.ndarray:
     """(replicates, n_mixels) independent stratified estimates of each mixel's irradiance [W/m^2].
 
     Parameters
@@ -86,6 +90,10 @@ def stratified_estimates(scene, sensor, mincam: Mincam, regions: ApertureRegions
         Sphere toward which inter-reflection bounces are guided (:mod:`.guided_path`; the same for both passes of
         a pair). Needs ``max_depth`` (the scene integrator's); without a guide, or at a depth the guided path does
         not reproduce, the scene's own integrator traces the rays.
+    freeze : tuple, optional
+        Replay each launch from a recording (``dr.freeze``: no Python tracing per call) made with this key,
+        :func:`buffers_key` of every object whose parameters changed since the scene was loaded (None:
+        trace every launch). Same numbers bit for bit either way.
     """
     counts = [int(c) for c in counts]
     check_strata(counts, expansions)
@@ -95,50 +103,153 @@ def stratified_estimates(scene, sensor, mincam: Mincam, regions: ApertureRegions
     n = len(mincam)
     per = sum(counts)
     n_strata = len(counts)
-    edges = np.cumsum(counts)
     n_groups = n * int(replicates)
     packed = np.concatenate([regions.packed(), 2.0 * regions.detector_half_m[:, None]], axis=1)  # (n, 9)
     coeffs = mi.Float(np.ascontiguousarray(packed.ravel(), dtype=np.float32))
-    integrator = scene.integrator()
     guided = guide is not None and max_depth is not None and guided_path.supports(max_depth)
-    rays = [dr.opaque(mi.Float, float(count)) for count in counts]
+    spheres = guided_path.opaque_spheres(guide) if guided else []
     totals = np.zeros((n_groups, n_strata), dtype=np.float64)
     groups_per_launch = max(1, MAX_LANES // per)
+    trace = _launch if freeze is None else _frozen_launch(scene)
     for launch, g0 in enumerate(range(0, n_groups, groups_per_launch)):
         ng = min(groups_per_launch, n_groups - g0)
-        sampler = seeded_sampler(seed, launch, ng * per)
-        # counts enter as opaque values, not literals: other budgets reuse the compiled kernel
-        lane = dr.arange(mi.UInt32, ng * per)
-        per_o = dr.opaque(mi.UInt32, per)
-        group = lane // per_o + dr.opaque(mi.UInt32, g0)
-        j = lane % per_o
-        stratum = mi.UInt32(0)
-        for edge in edges[:-1]:
-            stratum += mi.UInt32(j >= dr.opaque(mi.UInt32, int(edge)))
-        k = group // dr.opaque(mi.UInt32, int(replicates))
-        c = [dr.gather(mi.Float, coeffs, k * 9 + i) for i in range(9)]
-        u = sampler.next_2d()
-        v = sampler.next_2d()
-        if jitter:
-            v = _jittered_region(dr, mi, v, j, counts[0])
-        pick = sampler.next_1d()
-        wavelength = sampler.next_1d()
-        position = mi.Point2f((mi.Float(k) + 0.5 + (u.x - 0.5) * DETECTOR_SHRINK) / n, u.y)
-        x_d = (u.x - 0.5) * DETECTOR_SHRINK * c[8]
-        y_d = (u.y - 0.5) * c[8]
-        aperture, scale = _stratum_sample(dr, mi, c, x_d, y_d, v, pick, stratum, list(expansions), rays)
-        ray, weight = sensor.sample_ray_differential(0.0, wavelength, position, aperture)
-        if guided:
-            radiance = guided_path.guided_radiance(scene, sampler, ray, int(max_depth), guide)
-        else:
-            radiance, _, _ = integrator.sample(scene, sampler, ray, None, True)
-        value = np.asarray(scale * weight * radiance, dtype=np.float64).reshape(ng, per)
+        shape = _LaunchShape(ng * per, tuple(counts), int(replicates), n, tuple(float(e) for e in expansions),
+                             bool(jitter), int(max_depth) if guided else 0, getattr(sensor, "version", 0))
+        with _no_cyclic_gc():
+            value = trace(scene, sensor, coeffs, dr.opaque(mi.UInt32, launch_seed(seed, launch)),
+                          dr.opaque(mi.UInt32, g0), spheres, shape, freeze)
+        value = np.asarray(value, dtype=np.float64).reshape(ng, per)
         start = 0
         for s, count in enumerate(counts):
             totals[g0:g0 + ng, s] = value[:, start:start + count].sum(axis=1) / count
             start += count
     parts = totals.reshape(n, int(replicates), n_strata).transpose(1, 0, 2)
     return parts if by_stratum else parts.sum(axis=2)
+
+
+class _LaunchShape(NamedTuple):
+    """What fixes a launch's kernel code (plain Python values: a frozen launch records again when one
+    changes): lanes, rays per stratum, replicates, mixels, expansions, jitter, guided depth (0 = the scene's
+    integrator), the sensor's configuration version."""
+
+    lanes: int
+    counts: tuple[int, ...]
+    replicates: int
+    n_mixels: int
+    expansions: tuple[float, ...]
+    jitter: bool
+    guided_depth: int
+    sensor_version: int
+
+
+def _launch(scene, sensor, coeffs, seed, g0, spheres, shape: _LaunchShape, buffers: tuple | None = None):
+    """``scale x weight x L`` of every lane of one launch (an ``mi.Float``): group ``g0 + lane // per``, lane
+    ``lane % per`` of its group. Everything that varies from frame to frame comes in as a Dr.Jit value
+    (``seed``, ``g0``, the region coefficients, the guide spheres) so that a frozen launch replays it."""
+    mi = backend.mitsuba()
+    import drjit as dr
+
+    counts = shape.counts
+    per = sum(counts)
+    sampler = mi.load_dict({"type": "independent"})
+    sampler.seed(seed, shape.lanes)
+    lane = dr.arange(mi.UInt32, shape.lanes)
+    per_o = dr.opaque(mi.UInt32, per)
+    group = lane // per_o + g0
+    j = lane % per_o
+    stratum = mi.UInt32(0)
+    for edge in np.cumsum(counts)[:-1]:
+        stratum += mi.UInt32(j >= dr.opaque(mi.UInt32, int(edge)))
+    k = group // dr.opaque(mi.UInt32, shape.replicates)
+    c = [dr.gather(mi.Float, coeffs, k * 9 + i) for i in range(9)]
+    u = sampler.next_2d()
+    v = sampler.next_2d()
+    if shape.jitter:
+        v = _jittered_region(dr, mi, v, j, counts[0])
+    pick = sampler.next_1d()
+    wavelength = sampler.next_1d()
+    position = mi.Point2f((mi.Float(k) + 0.5 + (u.x - 0.5) * DETECTOR_SHRINK) / shape.n_mixels, u.y)
+    x_d = (u.x - 0.5) * DETECTOR_SHRINK * c[8]
+    y_d = (u.y - 0.5) * c[8]
+    rays = [dr.opaque(mi.Float, float(count)) for count in counts]
+    aperture, scale = _stratum_sample(dr, mi, c, x_d, y_d, v, pick, stratum, list(shape.expansions), rays)
+    ray, weight = sensor.sample_ray_differential(0.0, wavelength, position, aperture)
+    if shape.guided_depth:
+        radiance = guided_path.guided_radiance(scene, sampler, ray, shape.guided_depth, spheres)
+    else:
+        radiance, _, _ = scene.integrator().sample(scene, sampler, ray, None, True)
+    return scale * weight * radiance
+
+
+def buffers_key(objects) -> tuple:
+    """Where the parameters of Mitsuba ``objects`` (the shapes a run moves, or the whole scene) live now: the
+    address and width of every evaluated array (vertex positions and normals, textures, ...) and the value of
+    every scalar. A frozen launch replays only with the key it was recorded with.
+
+    Dr.Jit 1.5 / Mitsuba 3.9 replay a recording with the *addresses* its kernel read the shapes' arrays from
+    when it was recorded (the shapes are reached through virtual calls, not through the frozen function's
+    inputs). After a vertex update Dr.Jit's allocator hands out one of two addresses in turn, so a replay
+    keyed on the launch alone read the previous frame's vertices every other frame. Keyed on the addresses
+    as well, a moving mesh makes a recording per address, each replayed only while its address holds the
+    current values."""
+    import drjit as dr
+
+    mi = backend.mitsuba()
+    parts = []
+    for obj in objects:
+        params = mi.traverse(obj)
+        for key in params.keys():
+            value = params[key]
+            if dr.is_jit_v(value) and dr.depth_v(value) == 1 and dr.width(value) > 1:
+                dr.eval(value)
+                parts.append((key, int(np.from_dlpack(value).__array_interface__["data"][0]), dr.width(value)))
+            elif dr.is_jit_v(value):
+                parts.append((key, np.asarray(value).tobytes()))
+            else:
+                parts.append((key, repr(value)))
+    return tuple(parts)
+
+
+_FROZEN: OrderedDict[int, tuple] = OrderedDict()
+FROZEN_SCENES = 4  # scenes whose frozen launches are kept (each holds its recordings)
+FROZEN_RECORDINGS = 16  # recordings kept per scene (launch shapes x buffer addresses), least recently used dropped
+
+
+@contextmanager
+def _no_cyclic_gc():
+    """Python's cyclic garbage collector paused: collecting another scene (its Embree structure, its arrays)
+    while a frozen launch is being recorded aborts Dr.Jit."""
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
+
+
+def frozen_recordings(scene) -> int:
+    """How many times this scene's frozen launch has been recorded (0 if it never ran frozen)."""
+    entry = _FROZEN.get(id(scene))
+    return 0 if entry is None else int(entry[1].n_recordings)
+
+
+def _frozen_launch(scene):
+    """:func:`_launch` frozen (``dr.freeze``) for this scene: traced once per launch shape, then replayed.
+
+    One frozen function per scene object (kept while it is among the :data:`FROZEN_SCENES` last used), so a
+    recording is never replayed on another scene; the scene is an input, so its geometry and parameters as
+    updated before the call (acceleration structure rebuilt outside) are what the replay traces."""
+    import drjit as dr
+
+    key = id(scene)
+    if key in _FROZEN:
+        _FROZEN.move_to_end(key)
+    else:
+        _FROZEN[key] = (scene, dr.freeze(_launch, limit=FROZEN_RECORDINGS, warn_after=4 * FROZEN_RECORDINGS))
+        while len(_FROZEN) > FROZEN_SCENES:
+            _FROZEN.popitem(last=False)
+    return _FROZEN[key][1]
 
 
 def _jittered_region(dr, mi, v, j, n_region: int):

@@ -54,7 +54,7 @@ from .guided_path import supports as guided_path_supports
 from .mask_eval import mask_model_meta
 from .mincam_scene import CAMERA_KEY, SENSOR_KEY, MincamScene, geometry_meta
 from .scene_dicts import mincam_body_shapes
-from .stratified import check_strata, stratified_estimates, whole_aperture_estimates
+from .stratified import buffers_key, check_strata, stratified_estimates, whole_aperture_estimates
 from .world_input import check_frames, check_radiant_params, check_update, expand_elements
 
 MAX_SPP = 1 << 26  # cap of the target-noise budget, samples per mixel per frame
@@ -106,6 +106,7 @@ class WorldRenderer:
         backend.require_jit("The fast mixel sensor (a Python Mitsuba plugin)")
         self.mi = backend.mitsuba()
         self.mincam, self.replicates = mincam, int(replicates)
+        self.freeze_launches = True  # replay the stratified launches (dr.freeze) instead of tracing them per frame
         elements = expand_elements(elements)
         # The scene is built around the mincam: Mitsuba offsets every secondary ray by ~1e-4 x (1 + max|p|)
         # scene units, so a table 50 m (1 km) from the origin lost 1.2 % (3.7 %) of a toy's dP to shadow rays
@@ -162,6 +163,14 @@ class WorldRenderer:
     def _remember_as_built(self, key: str) -> None:
         if key not in self._as_built and key in self.params:
             self._as_built[key] = self.params[key]
+
+    def buffers_key(self) -> tuple:
+        """:func:`.stratified.buffers_key` of every shape whose parameters were updated (the whole scene if an
+        updated parameter belongs to something else: a shared BSDF, an environment emitter)."""
+        names = {key.split(".", 1)[0] for key in self._as_built}
+        shapes = {shape.id(): shape for shape in self.scene.shapes()}
+        objects = [shapes[name] for name in sorted(names) if name in shapes]
+        return buffers_key(objects if len(objects) == len(names) else [self.scene])
 
     def world_value(self, key: str):
         """Parameter ``key`` as :meth:`update` takes it back, in world coordinates: positions (``to_world``
@@ -555,6 +564,7 @@ class _StratifiedRun(_Run):
             for reason in why:
                 self.note_fallback(name, reason)
         self.can_guide = guided and guided_path_supports(renderer.world.max_depth)
+        self.freeze = renderer.freeze_launches and not _emitters_among(renderer.scene, self.moving)
         if guided and not self.can_guide:
             self.fallbacks["depth"] = (f"bounces are not guided at max_depth {renderer.world.max_depth} (the guided "
                                        "path covers 1 .. 5): rays follow Mitsuba's path")
@@ -579,8 +589,10 @@ class _StratifiedRun(_Run):
         if purpose:
             frame_seed = derive_seed(frame_seed, purpose, i)
         kw = {"expansions": self.expansions, "guide": guide, "max_depth": r.world.max_depth}
-        est = stratified_estimates(r.scene, r.sensor, r.mincam, regions, replicates, self.counts, frame_seed, **kw)
+        est = stratified_estimates(r.scene, r.sensor, r.mincam, regions, replicates, self.counts, frame_seed,
+                                   freeze=r.buffers_key() if self.freeze else None, **kw)
         r.update(self.background)
+        kw["freeze"] = r.buffers_key() if self.freeze else None
         bg_seed = frame_seed if self.correlated else derive_seed(self.seed, "stratified-background", i, purpose)
         bg_est = stratified_estimates(r.scene, r.sensor, r.mincam, regions, replicates, self.counts, bg_seed, **kw)
         diff = est - bg_est
@@ -726,6 +738,12 @@ def _param_value(value):
     if isinstance(value, (bool, int, float)):
         return value
     return type(value)(np.array(value))
+
+
+def _emitters_among(scene, names) -> bool:
+    """True if one of the named shapes emits light (its sampling tables are rebuilt when it moves, at
+    addresses a frozen launch cannot see: such runs are traced unfrozen)."""
+    return any(s.id() in names and s.emitter() is not None for s in scene.shapes())
 
 
 def _moving_shapes(updates: Sequence[Updates]) -> set[str]:

@@ -1,0 +1,132 @@
+"""Frozen launches of the stratified world estimator (``dr.freeze``): every replayed frame equals the traced
+one bit for bit on moving geometry (vertex updates and transforms, frame and background passes as
+``measure_changes`` runs them), a new budget or a new scene records afresh instead of replaying a stale kernel,
+and a moving light is traced unfrozen."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from mincam_sim import Pose, cross_layout
+from mincam_sim.render import backend
+from mincam_sim.render import scene_dicts as sd
+from mincam_sim.render import stratified as st
+from mincam_sim.render.elements import transform_update
+from mincam_sim.render.world import STRATA_EXPANSIONS, WorldRenderer, _changed_shapes, vertex_update
+
+pytestmark = pytest.mark.skipif(not backend.is_jit(), reason="needs a JIT variant (LLVM or CUDA)")
+
+TOY = trimesh.creation.box((0.04, 0.02, 0.02))
+TOY.apply_translation((0, 0, 0.01))
+
+
+def _sphere_matrix(x_m: float, y_m: float) -> np.ndarray:
+    m = np.diag([0.012, 0.012, 0.012, 1.0])
+    m[:3, 3] = (x_m, y_m, 0.012)
+    return m
+
+
+def _world(extra: bool = False, moving_light: bool = False, ball: bool = True):
+    """A textured table under an area light, a box moved by its vertices and (``ball``) a sphere moved by its
+    transform (``extra``: one more static shape, so the scene has another shape count)."""
+    cam = cross_layout(center=Pose((0.0, 0.0, 0.5), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)))
+    table = np.clip(0.4 + 0.1 * np.random.default_rng(0).standard_normal((32, 32)), 0, 1)
+    elements = {
+        "table": sd.textured_plane(table, 1.0, 1.0, Pose((0, 0, 0), (0, 0, 1)).matrix()),
+        "light": sd.area_light(0.4, 0.4, Pose((0, 0, 1.2), (0, 0, -1)).matrix(), 10.0),
+        "toy": sd.mesh_object("toy", TOY.vertices + [5.0, 5.0, 0.0], TOY.faces, 0.9),
+        "ball": {"type": "sphere", "to_world": backend.mitsuba().ScalarTransform4f(_sphere_matrix(5.0, -5.0).tolist()),
+                 "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.7}}},
+    }
+    if extra:
+        elements["post"] = sd.mesh_object("post", TOY.vertices * 0.5 + [0.3, 0.3, 0.0], TOY.faces, 0.5)
+    world = WorldRenderer(cam, elements, replicates=8)
+    xs = np.linspace(-0.1, 0.1, 5)
+    frames = [{**vertex_update("toy", TOY.vertices + [x, 0.02 * np.sin(20 * x), 0.0]),
+               **(transform_update("ball", _sphere_matrix(-x, 0.08)) if ball else {})} for x in xs]
+    background = {**vertex_update("toy", TOY.vertices + [5.0, 5.0, 0.0]),
+                  **(transform_update("ball", _sphere_matrix(5.0, -5.0)) if ball else {})}
+    if moving_light:
+        for k, f in enumerate(frames):
+            f.update(transform_update("light", Pose((0.01 * k, 0, 1.2), (0, 0, -1)).matrix()
+                                      @ np.diag([0.2, 0.2, 1.0, 1.0])))
+    return world, frames, background
+
+
+def _passes(world, frames, background, counts, freeze: bool) -> list[np.ndarray]:
+    """Frame and background passes of every frame, in the order measure_changes traces them."""
+    out = []
+    background = world.complete_background(frames, background)
+    for i, frame in enumerate(frames):
+        world.update({**background, **frame})
+        regions, guide, _ = world._change(_changed_shapes(frame, background))
+        kw = {"expansions": STRATA_EXPANSIONS, "guide": guide, "max_depth": 3}
+        for _ in range(2):
+            out.append(st.stratified_estimates(world.scene, world.sensor, world.mincam, regions, 8, counts, 11 + i,
+                                               freeze=world.buffers_key() if freeze else None, **kw))
+            world.update(background)
+    return out
+
+
+@pytest.mark.parametrize("ball", [False, True], ids=["vertices", "vertices and a transform"])
+def test_every_frozen_pass_equals_the_traced_one_bit_for_bit_on_moving_geometry(ball):
+    """Frame and background passes of five frames, twice frozen: the same numbers as traced. A moved mesh
+    (its vertex buffer at one of a few addresses) replays; a transform moved to a new value records again
+    (keyed on its value), and the background passes replay."""
+    world, frames, background = _world(ball=ball)
+    counts = [40, 8, 8, 8, 8]
+    traced = _passes(world, frames, background, counts, freeze=False)
+    frozen = _passes(world, frames, background, counts, freeze=True)
+    again = _passes(world, frames, background, counts, freeze=True)
+    for a, b, c in zip(traced, frozen, again, strict=True):
+        assert np.array_equal(a, b) and np.array_equal(a, c)
+    recorded = st.frozen_recordings(world.scene)
+    most = 2 * len(frames) + 4 if ball else 4
+    assert 1 <= recorded <= most, f"{recorded} recordings for {2 * len(frozen)} passes: the launch must replay"
+    assert len({tuple(np.round(p.mean(0), 12)) for p in traced[::2]}) == len(frames), "the frames must differ"
+
+
+def test_measure_changes_frozen_equals_traced_values_and_sigmas():
+    world, frames, background = _world()
+    runs = {}
+    for freeze in (False, True, True):
+        world.freeze_launches = freeze
+        dp, p = world.measure_changes(frames, background, spp=4096, seed=3, estimator="stratified")
+        runs.setdefault(freeze, []).append((dp, p))
+    (dp0, p0), = runs[False]
+    for dp, p in runs[True]:
+        for a, b in ((dp0, dp), (p0, p)):
+            assert np.array_equal(a.irradiance_w_m2, b.irradiance_w_m2)
+            assert np.array_equal(a.stderr_w_m2, b.stderr_w_m2)
+    assert np.all(np.abs(dp0.irradiance_w_m2) > 4 * dp0.stderr_w_m2), "the test needs changes it can see"
+
+
+def test_a_new_budget_and_a_new_scene_record_instead_of_replaying_a_stale_kernel():
+    world, frames, background = _world()
+    _passes(world, frames[:2], background, [40, 8, 8, 8, 8], freeze=True)
+    before = st.frozen_recordings(world.scene)
+    traced = _passes(world, frames[:2], background, [24, 4, 4, 4, 4], freeze=False)
+    frozen = _passes(world, frames[:2], background, [24, 4, 4, 4, 4], freeze=True)
+    assert st.frozen_recordings(world.scene) > before
+    assert all(np.array_equal(a, b) for a, b in zip(traced, frozen, strict=True))
+
+    other, frames2, background2 = _world(extra=True)
+    assert len(other.scene.shapes()) == len(world.scene.shapes()) + 1
+    assert st.frozen_recordings(other.scene) == 0
+    traced = _passes(other, frames2[:2], background2, [40, 8, 8, 8, 8], freeze=False)
+    frozen = _passes(other, frames2[:2], background2, [40, 8, 8, 8, 8], freeze=True)
+    assert st.frozen_recordings(other.scene) >= 1
+    assert all(np.array_equal(a, b) for a, b in zip(traced, frozen, strict=True))
+
+
+@pytest.mark.filterwarnings("ignore::mincam_sim.render.world.FallbackWarning")
+@pytest.mark.filterwarnings("ignore::mincam_sim.render.world.HeavyTailWarning")
+def test_a_moving_light_is_traced_unfrozen():
+    world, frames, background = _world(moving_light=True)
+    dp, _ = world.measure_changes(frames[:2], background, spp=320, seed=1, estimator="stratified")
+    assert st.frozen_recordings(world.scene) == 0
+    world.freeze_launches = False
+    dp2, _ = world.measure_changes(frames[:2], background, spp=320, seed=1, estimator="stratified")
+    assert np.array_equal(dp.irradiance_w_m2, dp2.irradiance_w_m2)
