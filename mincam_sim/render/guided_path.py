@@ -107,6 +107,14 @@ def guided_radiance(scene, sampler, ray, max_depth: int, guide, share: float = G
     share : float
         Probability (0 .. 1, exclusive of 1) that a guided bounce is drawn in a guide's cone.
     """
+    return guided_radiance_watched(scene, sampler, ray, max_depth, guide, [], share)[0]
+
+
+def guided_radiance_watched(scene, sampler, ray, max_depth: int, guide, boxes, share: float = GUIDE_SHARE):
+    """:func:`guided_radiance` and, per lane, whether the path crossed one of ``boxes`` (a list of
+    ``(lo, hi)`` ``mi.Point3f`` corners, scene coordinates): a ray segment up to its hit (or escaping), or a
+    shadow ray up to the light's sample, passing through a box. A path that crosses no box meets the same
+    surfaces whatever lies inside the boxes."""
     if not supports(max_depth):
         raise ValueError(f"max_depth must be 1 .. {MAX_GUIDED_DEPTH} for the guided path, got {max_depth!r}")
     if not 0.0 <= share < 1.0:
@@ -123,8 +131,12 @@ def guided_radiance(scene, sampler, ray, max_depth: int, guide, share: float = G
     pdf_prev = mi.Float(1.0)
     delta_prev = mi.Bool(True)
     spheres = opaque_spheres(guide) if share > 0 else []
+    watched = [mi.BoundingBox3f(lo, hi) for lo, hi in boxes]
+    met = dr.zeros(mi.Bool, dr.width(ray.o))
     for depth in range(int(max_depth)):
         si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=depth == 0, active=active)
+        if watched:
+            met |= active & _crosses(mi, dr, watched, ray.o, ray.d, dr.select(si.is_valid(), si.t, dr.inf))
         bsdf = si.bsdf(ray)
         ds = mi.DirectionSample3f(scene, si=si, ref=si_prev)
         mis = mis_weight(dr, pdf_prev, scene.pdf_emitter_direction(si_prev, ds, ~delta_prev))
@@ -139,6 +151,8 @@ def guided_radiance(scene, sampler, ray, max_depth: int, guide, share: float = G
 
         active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
         ds, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), True, active_em)
+        if watched:
+            met |= active_em & _crosses(mi, dr, watched, si.p, ds.d, ds.dist)
         active_em &= ds.pdf != 0.0
         value_em, pdf_em = bsdf.eval_pdf(ctx, si, si.to_local(ds.d), active_em)
         if guided:
@@ -168,7 +182,17 @@ def guided_radiance(scene, sampler, ray, max_depth: int, guide, share: float = G
         ray = si.spawn_ray(direction)
         si_prev = si
         active = active_next & (dr.max(mi.unpolarized_spectrum(beta)) != 0.0)
-    return radiance
+    return radiance, met
+
+
+def _crosses(mi, dr, boxes, origin, direction, length):
+    """Whether the segment ``origin + t direction``, ``0 <= t <= length``, meets one of ``boxes``."""
+    ray = mi.Ray3f(origin, direction)
+    met = mi.Bool(False)
+    for box in boxes:
+        hit, near, far = box.ray_intersect(ray)
+        met |= hit & (far >= 0.0) & (near <= length)
+    return met
 
 
 def spheres_of(guide) -> list[tuple[np.ndarray, float]]:

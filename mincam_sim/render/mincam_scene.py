@@ -16,6 +16,7 @@ come back as ``(replicates, n_mixels)`` arrays of independent estimates [W/m^2];
 
 from __future__ import annotations
 
+import ctypes
 from collections.abc import Mapping
 from dataclasses import replace
 
@@ -159,7 +160,8 @@ class MincamScene:
         for key, value in updates.items():
             if key not in params:
                 raise KeyError(f"unknown scene parameter {key!r}; see the scene's params.keys()")
-            params[key] = _as_param(self.mi, params[key], value, key)
+            if not _write_in_place(params, key, value):
+                params[key] = _as_param(self.mi, params[key], value, key)
         params.update()
 
     # ------------------------------------------------------------------------------------------ solvers
@@ -218,6 +220,28 @@ def geometry_meta(mincam: Mincam, screen: Screen | None = None) -> dict:
             "up": list(screen.pose.up),
         }
     return meta
+
+
+def _write_in_place(params, key: str, value) -> bool:
+    """Write new vertex positions into the mesh's own buffer (LLVM: host memory) and mark them changed; False
+    (nothing written) where that does not apply. The buffer keeps its address, so a frozen launch that read the
+    vertices from there replays with the new ones (Dr.Jit replays a recording with the addresses it was
+    recorded with); Mitsuba's update then refits the mesh and rebuilds the acceleration structure as usual."""
+    import drjit as dr
+
+    if not (key.endswith(".vertex_positions") and isinstance(value, np.ndarray)
+            and dr.backend_v(params[key]) == dr.JitBackend.LLVM):
+        return False
+    current = params[key]
+    flat = np.asarray(value, dtype=np.float32).ravel()
+    if dr.depth_v(current) != 1 or dr.width(current) != flat.size:
+        return False
+    dr.eval(current)
+    dr.sync_thread()  # no queued kernel may still read the old vertices
+    address = np.from_dlpack(current).__array_interface__["data"][0]  # Dr.Jit's view is read-only
+    np.ctypeslib.as_array((ctypes.c_float * flat.size).from_address(address))[:] = flat
+    params.set_dirty(key)
+    return True
 
 
 def _as_param(mi, current, value, key: str = "parameter"):

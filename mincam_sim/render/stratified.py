@@ -39,7 +39,7 @@ import numpy as np
 from ..optics import Mincam
 from . import backend, guided_path
 from .change_region import ApertureRegions
-from .tracing import MAX_LANES, launch_seed
+from .tracing import MAX_LANES, lane_sampler, launch_seed
 
 DETECTOR_SHRINK = 1 - 2e-6  # as mixel_sensor.mixel_position_sample: keeps x strictly inside the mixel's film cell
 
@@ -95,6 +95,55 @@ def stratified_estimates(scene, sensor, mincam: Mincam, regions: ApertureRegions
         :func:`buffers_key` of every object whose parameters changed since the scene was loaded (None:
         trace every launch). Same numbers bit for bit either way.
     """
+    return stratified_lanes(scene, sensor, mincam, regions, replicates, counts, seed, expansions, jitter, guide,
+                            max_depth, freeze).estimates(by_stratum)
+
+
+class LaneValues:
+    """Every lane's ``scale x weight x L`` of one stratified pass (per launch, float64) and, where the pass
+    watched boxes, which lanes' paths met one (an ``mi.Bool`` per launch: a segment, shadow rays included,
+    crossing a box); ``traced`` lanes were traced (the others were taken from the pass it was paired with)."""
+
+    def __init__(self, n_mixels: int, replicates: int, counts: list[int], values: list[np.ndarray],
+                 touched: list | None, traced: int) -> None:
+        self.n_mixels, self.replicates, self.counts = n_mixels, replicates, counts
+        self.values, self.touched, self.traced = values, touched, traced
+
+    def estimates(self, by_stratum: bool = False) -> np.ndarray:
+        """(replicates, n_mixels) estimates [W/m^2], or (replicates, n_mixels, n_strata) their parts; lanes
+        summed in float64 in a fixed order."""
+        per = sum(self.counts)
+        rows = []
+        for value in self.values:
+            value = value.reshape(-1, per)
+            start, part = 0, []
+            for count in self.counts:
+                part.append(value[:, start:start + count].sum(axis=1) / count)
+                start += count
+            rows.append(np.stack(part, axis=1))
+        parts = np.concatenate(rows).reshape(self.n_mixels, self.replicates, len(self.counts)).transpose(1, 0, 2)
+        return parts if by_stratum else parts.sum(axis=2)
+
+
+def stratified_lanes(scene, sensor, mincam: Mincam, regions: ApertureRegions, replicates: int,
+                     counts: Sequence[int], seed: int, expansions: Sequence[float] = (1.0,), jitter: bool = True,
+                     guide=None, max_depth: int | None = None, freeze: tuple | None = None,
+                     watch: Sequence[tuple[np.ndarray, np.ndarray]] | None = None,
+                     pair: LaneValues | None = None) -> LaneValues:
+    """The lanes of :func:`stratified_estimates` (same parameters), with two more for a frame and its
+    background traced as a pair.
+
+    Parameters
+    ----------
+    watch : sequence of (lo (3,), hi (3,)) [m], optional
+        Boxes (scene coordinates) holding every shape that differs between the two passes, in both places:
+        the pass records which lanes' paths cross one. Needs the guided path (a guide and a depth it covers).
+    pair : LaneValues, optional
+        The other pass of the pair, traced with the same seed, counts, regions and guide, with ``watch``: only
+        its lanes that met a box are traced here, and every other lane takes its value. A path that crosses
+        none of the boxes meets the same surfaces, draws the same random numbers and casts the same shadow
+        rays in both scenes, so its value is the same: the result equals a full pass bit for bit.
+    """
     counts = [int(c) for c in counts]
     check_strata(counts, expansions)
     mi = backend.mitsuba()
@@ -102,35 +151,52 @@ def stratified_estimates(scene, sensor, mincam: Mincam, regions: ApertureRegions
 
     n = len(mincam)
     per = sum(counts)
-    n_strata = len(counts)
     n_groups = n * int(replicates)
     packed = np.concatenate([regions.packed(), 2.0 * regions.detector_half_m[:, None]], axis=1)  # (n, 9)
     coeffs = mi.Float(np.ascontiguousarray(packed.ravel(), dtype=np.float32))
     guided = guide is not None and max_depth is not None and guided_path.supports(max_depth)
+    if (watch is not None or pair is not None) and not guided:
+        raise ValueError("watch and pair need the guided path: a guide and a max_depth of 1 .. 5")
     spheres = guided_path.opaque_spheres(guide) if guided else []
-    totals = np.zeros((n_groups, n_strata), dtype=np.float64)
+    boxes = [tuple(mi.Point3f(*(dr.opaque(mi.Float, float(x)) for x in corner)) for corner in box)
+             for box in (watch or [])]
     groups_per_launch = max(1, MAX_LANES // per)
     trace = _launch if freeze is None else _frozen_launch(scene)
+    values, touched, traced = [], ([] if watch is not None else None), 0
     for launch, g0 in enumerate(range(0, n_groups, groups_per_launch)):
         ng = min(groups_per_launch, n_groups - g0)
-        shape = _LaunchShape(ng * per, tuple(counts), int(replicates), n, tuple(float(e) for e in expansions),
-                             bool(jitter), int(max_depth) if guided else 0, getattr(sensor, "version", 0))
-        with _no_cyclic_gc():
-            value = trace(scene, sensor, coeffs, dr.opaque(mi.UInt32, launch_seed(seed, launch)),
-                          dr.opaque(mi.UInt32, g0), spheres, shape, freeze)
-        value = np.asarray(value, dtype=np.float64).reshape(ng, per)
-        start = 0
-        for s, count in enumerate(counts):
-            totals[g0:g0 + ng, s] = value[:, start:start + count].sum(axis=1) / count
-            start += count
-    parts = totals.reshape(n, int(replicates), n_strata).transpose(1, 0, 2)
-    return parts if by_stratum else parts.sum(axis=2)
+        value = None if pair is None else pair.values[launch].copy()
+        # lane indices made by Dr.Jit, not mapped from numpy (whose alignment would make a frozen launch record)
+        if pair is None or pair.touched is None:
+            lanes = dr.arange(mi.UInt32, ng * per)
+        else:
+            lanes = dr.compress(pair.touched[launch])
+        dr.make_opaque(lanes)
+        shape = _LaunchShape(0 if guided else ng * per, tuple(counts), int(replicates), n,
+                             tuple(float(e) for e in expansions), bool(jitter), int(max_depth) if guided else 0,
+                             getattr(sensor, "version", 0))
+        met = dr.zeros(mi.Bool, ng * per)
+        if dr.width(lanes):
+            with _no_cyclic_gc():
+                out, met = trace(scene, sensor, coeffs, dr.opaque(mi.UInt32, launch_seed(seed, launch)),
+                                 dr.opaque(mi.UInt32, g0), lanes, spheres, boxes, shape, freeze)
+            out = np.asarray(out, dtype=np.float64).reshape(-1)
+            traced += dr.width(lanes)
+            if value is None:
+                value = out
+            else:
+                value[np.asarray(lanes, dtype=np.int64)] = out
+        if touched is not None:
+            dr.eval(met)
+            touched.append(met)
+        values.append(value)
+    return LaneValues(n, int(replicates), counts, values, touched, traced)
 
 
 class _LaunchShape(NamedTuple):
     """What fixes a launch's kernel code (plain Python values: a frozen launch records again when one
-    changes): lanes, rays per stratum, replicates, mixels, expansions, jitter, guided depth (0 = the scene's
-    integrator), the sensor's configuration version."""
+    changes): lanes (0 on the guided path, whose lanes come as an array), rays per stratum, replicates,
+    mixels, expansions, jitter, guided depth (0 = the scene's integrator), the sensor's configuration version."""
 
     lanes: int
     counts: tuple[int, ...]
@@ -142,21 +208,26 @@ class _LaunchShape(NamedTuple):
     sensor_version: int
 
 
-def _launch(scene, sensor, coeffs, seed, g0, spheres, shape: _LaunchShape, buffers: tuple | None = None):
-    """``scale x weight x L`` of every lane of one launch (an ``mi.Float``): group ``g0 + lane // per``, lane
-    ``lane % per`` of its group. Everything that varies from frame to frame comes in as a Dr.Jit value
-    (``seed``, ``g0``, the region coefficients, the guide spheres) so that a frozen launch replays it."""
+def _launch(scene, sensor, coeffs, seed, g0, lanes, spheres, boxes, shape: _LaunchShape,
+            buffers: tuple | None = None):
+    """``scale x weight x L`` of the given lanes of one launch (an ``mi.Float``) and whether each one's path
+    crossed one of ``boxes`` (an ``mi.Bool``; False without boxes): lane ``l`` is ray ``l % per`` of group
+    ``g0 + l // per``. Everything that varies from frame to frame comes in as a Dr.Jit value (``seed``,
+    ``g0``, ``lanes``, the region coefficients, the guide spheres, the boxes), so that a frozen launch replays
+    it; ``buffers`` only keys the recording (:func:`buffers_key`)."""
     mi = backend.mitsuba()
     import drjit as dr
 
     counts = shape.counts
     per = sum(counts)
-    sampler = mi.load_dict({"type": "independent"})
-    sampler.seed(seed, shape.lanes)
-    lane = dr.arange(mi.UInt32, shape.lanes)
+    if shape.guided_depth:
+        sampler = lane_sampler(seed, lanes)  # any subset of lanes draws what a full launch draws there
+    else:
+        sampler = mi.load_dict({"type": "independent"})
+        sampler.seed(seed, shape.lanes)
     per_o = dr.opaque(mi.UInt32, per)
-    group = lane // per_o + g0
-    j = lane % per_o
+    group = lanes // per_o + g0
+    j = lanes % per_o
     stratum = mi.UInt32(0)
     for edge in np.cumsum(counts)[:-1]:
         stratum += mi.UInt32(j >= dr.opaque(mi.UInt32, int(edge)))
@@ -175,10 +246,12 @@ def _launch(scene, sensor, coeffs, seed, g0, spheres, shape: _LaunchShape, buffe
     aperture, scale = _stratum_sample(dr, mi, c, x_d, y_d, v, pick, stratum, list(shape.expansions), rays)
     ray, weight = sensor.sample_ray_differential(0.0, wavelength, position, aperture)
     if shape.guided_depth:
-        radiance = guided_path.guided_radiance(scene, sampler, ray, shape.guided_depth, spheres)
+        radiance, met = guided_path.guided_radiance_watched(scene, sampler, ray, shape.guided_depth, spheres,
+                                                            boxes)
     else:
         radiance, _, _ = scene.integrator().sample(scene, sampler, ray, None, True)
-    return scale * weight * radiance
+        met = dr.zeros(mi.Bool, dr.width(radiance))
+    return scale * weight * radiance, met
 
 
 def buffers_key(objects) -> tuple:

@@ -30,6 +30,36 @@ def seeded_sampler(seed: int, launch: int, lanes: int):
     return sampler
 
 
+class LaneSampler:
+    """Mitsuba's ``independent`` sampler for any set of lanes of a launch: lane ``l`` draws exactly what lane
+    ``l`` of ``independent`` seeded ``seed`` over the whole launch draws (PCG32 streams from the Tiny Encryption
+    Algorithm of seed and lane, as Mitsuba seeds them), so a subset of lanes can be traced again alone.
+    Unmasked: every lane advances on every draw (as the guided path draws)."""
+
+    def __init__(self, seed, lanes) -> None:
+        mi = backend.mitsuba()
+        v0, v1 = mi.sample_tea_32(seed, lanes)
+        self._rng = mi.PCG32()
+        self._rng.seed(mi.UInt64(v0), mi.UInt64(v1))
+        self._mi = mi
+
+    def next_1d(self, active=True):
+        """One uniform float in [0, 1) per lane."""
+        return self._rng.next_float32()
+
+    def next_2d(self, active=True):
+        """A uniform point in [0, 1)^2 per lane (x drawn first, as Mitsuba's)."""
+        x = self._rng.next_float32()
+        y = self._rng.next_float32()
+        return self._mi.Point2f(x, y)
+
+
+def lane_sampler(seed, lanes) -> LaneSampler:
+    """A :class:`LaneSampler` for launch seed ``seed`` (a ``UInt32``: :func:`launch_seed`) and lane indices
+    ``lanes`` (a ``UInt32`` array)."""
+    return LaneSampler(seed, lanes)
+
+
 def trace_groups(
     scene,
     sensor,

@@ -54,7 +54,13 @@ from .guided_path import supports as guided_path_supports
 from .mask_eval import mask_model_meta
 from .mincam_scene import CAMERA_KEY, SENSOR_KEY, MincamScene, geometry_meta
 from .scene_dicts import mincam_body_shapes
-from .stratified import buffers_key, check_strata, stratified_estimates, whole_aperture_estimates
+from .stratified import (
+    buffers_key,
+    check_strata,
+    frozen_recordings,
+    stratified_lanes,
+    whole_aperture_estimates,
+)
 from .world_input import check_frames, check_radiant_params, check_update, expand_elements
 
 MAX_SPP = 1 << 26  # cap of the target-noise budget, samples per mixel per frame
@@ -63,6 +69,7 @@ STRATA_EXPANSIONS = (1.0, 2.0, 4.0, 8.0)  # nested rectangles: the change region
 STRATA_SHARES = (0.6, 0.1, 0.1, 0.1, 0.1)  # rays per stratum (region, rings, rest): near Neyman, guided, bench scene
 BACKGROUND_MIN_SPP = 1 << 16  # stratified: rays per mixel (at least) for the background's whole-aperture value
 RETRY_FACTOR = 4  # a frame whose replicates are heavy-tailed is measured again with this many times the replicates
+FREEZE_ALLOWANCE = 6  # recordings of a run's frozen launch (passes x buffer addresses) before it must replay
 INFO_COLUMNS = ("retried", "guided", "guide_spheres", "region_area_fraction")  # per frame, kept with the results
 Updates = Mapping[str, np.ndarray]
 __all__ = ["CAMERA_KEY", "SENSOR_KEY", "FallbackWarning", "HeavyTailWarning", "WorldParameters", "WorldRenderer",
@@ -107,6 +114,7 @@ class WorldRenderer:
         self.mi = backend.mitsuba()
         self.mincam, self.replicates = mincam, int(replicates)
         self.freeze_launches = True  # replay the stratified launches (dr.freeze) instead of tracing them per frame
+        self.pair_lanes = True  # background pass: trace again only the lanes whose frame paths met a moving shape
         elements = expand_elements(elements)
         # The scene is built around the mincam: Mitsuba offsets every secondary ray by ~1e-4 x (1 + max|p|)
         # scene units, so a table 50 m (1 km) from the origin lost 1.2 % (3.7 %) of a toy's dP to shadow rays
@@ -134,6 +142,7 @@ class WorldRenderer:
         self._content_key: str | None = None
         self._content_key = self.content_fingerprint()  # before any update: the scene as built
         self._as_built: dict[str, object] = {}  # each updated parameter's value (world coordinates) before updates
+        self._last_set: dict[str, np.ndarray] = {}  # the last numpy value each parameter was set to
 
     def update(self, updates: Updates) -> None:
         """Set scene parameters (numpy arrays or Mitsuba values; positions in world coordinates [m], as
@@ -147,10 +156,27 @@ class WorldRenderer:
             check_update(key, scene_params[key], value)
         for key in updates:
             self._remember_as_built(key)
+        updates = self._new_values(updates)
         self.world.update({key: _shift(key, value, -self.scene_origin_m) if key in self._shifted else value
                            for key, value in updates.items()})
         if any(key.split(".", 1)[0] in self._mirrors for key in updates):
             self._mirrors = _delta_surfaces(self.scene)
+
+    def _new_values(self, updates: Updates) -> dict:
+        """The updates that change something: a numpy value equal to the one this renderer set last is left
+        out, so a frame that re-parks every idle toy moves only the toy that moves (its shapes keep their
+        buffers, and a frozen launch keeps its recordings)."""
+        out = {}
+        for key, value in updates.items():
+            if isinstance(value, np.ndarray):
+                last = self._last_set.get(key)
+                if last is not None and last.dtype == value.dtype and np.array_equal(last, value):
+                    continue
+                self._last_set[key] = value.copy()
+            else:
+                self._last_set.pop(key, None)
+            out[key] = value
+        return out
 
     def complete_background(self, frames: Sequence[Updates], background: Updates) -> dict:
         """``background`` plus, for every parameter the frames set and it leaves out, that parameter's value in the
@@ -564,7 +590,17 @@ class _StratifiedRun(_Run):
             for reason in why:
                 self.note_fallback(name, reason)
         self.can_guide = guided and guided_path_supports(renderer.world.max_depth)
-        self.freeze = renderer.freeze_launches and not _emitters_among(renderer.scene, self.moving)
+        self.shapes = {shape.id(): shape for shape in renderer.scene.shapes()}
+        self.bg_boxes = {name: _watch_box(self.shapes[name]) for name in self.moving if name in self.shapes}
+        lights_move = _emitters_among(renderer.scene, self.moving)
+        # a path that crosses no moving shape's box (in either place) is the same path in both passes
+        self.pairs = (renderer.pair_lanes and correlated and self.can_guide and not lights_move
+                      and set(self.bg_boxes) == self.moving)
+        self.freeze = renderer.freeze_launches and not lights_move
+        self.launches = ("frozen" if self.freeze else
+                         "traced" + (": a moving shape emits light" if renderer.freeze_launches else ""))
+        self.recordings_at_start = frozen_recordings(renderer.scene)
+        self.frames_traced, self.lanes_traced = 0, np.zeros(2)
         if guided and not self.can_guide:
             self.fallbacks["depth"] = (f"bounces are not guided at max_depth {renderer.world.max_depth} (the guided "
                                        "path covers 1 .. 5): rays follow Mitsuba's path")
@@ -589,13 +625,21 @@ class _StratifiedRun(_Run):
         if purpose:
             frame_seed = derive_seed(frame_seed, purpose, i)
         kw = {"expansions": self.expansions, "guide": guide, "max_depth": r.world.max_depth}
-        est = stratified_estimates(r.scene, r.sensor, r.mincam, regions, replicates, self.counts, frame_seed,
-                                   freeze=r.buffers_key() if self.freeze else None, **kw)
+        watch = None
+        if self.pairs and guide is not None:
+            watch = [_watch_box(self.shapes[name]) for name in sorted(changed)]
+            watch += [self.bg_boxes[name] for name in sorted(changed)]
+        lanes = stratified_lanes(r.scene, r.sensor, r.mincam, regions, replicates, self.counts, frame_seed,
+                                 freeze=self._freeze_key(), watch=watch, **kw)
         r.update(self.background)
-        kw["freeze"] = r.buffers_key() if self.freeze else None
         bg_seed = frame_seed if self.correlated else derive_seed(self.seed, "stratified-background", i, purpose)
-        bg_est = stratified_estimates(r.scene, r.sensor, r.mincam, regions, replicates, self.counts, bg_seed, **kw)
-        diff = est - bg_est
+        bg_lanes = stratified_lanes(r.scene, r.sensor, r.mincam, regions, replicates, self.counts, bg_seed,
+                                    freeze=self._freeze_key(), pair=lanes if watch is not None else None, **kw)
+        diff = lanes.estimates() - bg_lanes.estimates()
+        if not purpose:
+            self.frames_traced += 1
+            self.lanes_traced += (lanes.traced, bg_lanes.traced)
+            self._check_recordings()
         info = (float(guide is not None), 0.0 if guide is None else float(len(guide)),
                 float(np.mean(regions.area_fraction())))
         if replicates == self.bg.shape[0]:
@@ -608,11 +652,31 @@ class _StratifiedRun(_Run):
         changes = np.full(len(r.mincam), bool(changed))
         return diff, frame_v, frame_e, changes, info
 
+    def _freeze_key(self) -> tuple | None:
+        return self.r.buffers_key() if self.freeze else None
+
+    def _check_recordings(self) -> None:
+        """Trace instead of replaying once the frozen launch keeps recording (the moving meshes' buffers land at
+        new addresses every frame, as large meshes' do): recording costs what tracing does, and replays
+        would never come."""
+        if not self.freeze:
+            return
+        recorded = frozen_recordings(self.r.scene) - self.recordings_at_start
+        if recorded > FREEZE_ALLOWANCE + self.frames_traced // 4:
+            self.freeze = False
+            self.launches = (f"traced from frame {self.frames_traced}: the frozen launch recorded {recorded} times "
+                             "(the moving shapes' buffers move in memory every frame)")
+
     def meta(self, info: np.ndarray) -> dict:
         counts, n = self.counts, len(self.r.mincam)
         rest = info[np.all(np.isfinite(info), axis=1), 2 * n:]
+        full = self.r.replicates * sum(counts)
+        frame_rays, bg_rays = (self.lanes_traced / (self.frames_traced * n) if self.frames_traced
+                               else np.array([full, full]))
         return {**super().meta(info), "strata_expansions": list(self.expansions), "strata_rays_per_replicate": counts,
-                "rays_per_mixel_per_frame": 2 * self.r.replicates * sum(counts),
+                "rays_per_mixel_per_frame": int(round(frame_rays + bg_rays)),
+                "background_rays_share": float(bg_rays / frame_rays),
+                "paired_lanes_reused": bool(self.pairs), "launches": self.launches,
                 "moving_shapes": sorted(self.moving), "guide_bounces": bool(self.guided),
                 "guided_frames": int(rest[:, 1].sum()),
                 "guide_spheres_per_frame": rest[:, 2].astype(int).tolist(),
@@ -738,6 +802,15 @@ def _param_value(value):
     if isinstance(value, (bool, int, float)):
         return value
     return type(value)(np.array(value))
+
+
+def _watch_box(shape) -> tuple[np.ndarray, np.ndarray]:
+    """The shape's bounding box (scene coordinates [m]) grown by a margin past Mitsuba's ray offsets: a path that
+    stays out of it cannot meet the shape."""
+    box = shape.bbox()
+    lo, hi = np.array(box.min, dtype=float).ravel(), np.array(box.max, dtype=float).ravel()
+    margin = 1e-3 * (1.0 + float(np.max(np.abs(np.concatenate([lo, hi])))))
+    return lo - margin, hi + margin
 
 
 def _emitters_among(scene, names) -> bool:
