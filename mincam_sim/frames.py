@@ -11,7 +11,9 @@ built with :func:`mincam_sim.identity.build_identity`); the table says which fra
   refused when the identity differs); :class:`mincam_sim.run.Run` hands one to the solver, under the run's one
   lock.
 
-The solvers (``mincam_sim.render``) know only this module: they never open a store or take a lock.
+The solvers (``mincam_sim.render``) reach persistence only through this module (and content caches they are
+handed): they never open a store or take a lock (``tests/test_layering.py`` checks it). The deprecated ``out_dir=``
+of the old entry points is :func:`resolve_sink`'s one call into :mod:`mincam_sim.store`.
 """
 
 from __future__ import annotations

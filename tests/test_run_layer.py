@@ -392,3 +392,9 @@ def test_the_deprecated_out_dir_still_keeps_resumable_results(tmp_path):
     np.testing.assert_array_equal(a.irradiance_w_m2, b.irradiance_w_m2)
     with ms.Run(tmp_path / "r") as run, pytest.raises(ms.InputError, match="not both"):
         se.render_frames(ms.pair_layout(), SCREEN, frames, out_dir=tmp_path, sink=run.sink("x"))
+    sim = ms.Simulation(ms.pair_layout(), screen=SCREEN)
+    with pytest.warns(DeprecationWarning, match=r"Simulation.measure\(out_dir=...\)") as said:
+        c = sim.measure(frames, ms.ResponseMap(), ms.Budget(samples_per_texel=16), out_dir=tmp_path / "s")
+    assert said[0].filename == __file__  # said at the caller's line
+    np.testing.assert_array_equal(c.irradiance_w_m2, a.irradiance_w_m2)
+    assert sorted(p.name for p in (tmp_path / "s").glob(".mincam.lock")) == [".mincam.lock"]

@@ -329,9 +329,12 @@ class WorldRenderer:
         columns = ([f"dP_{m}" for m in names] + [f"P_{m}" for m in names]
                    + [f"heavy_tailed_{m}" for m in names] + [f"unseen_{m}" for m in names] + list(INFO_COLUMNS))
         table = sink.open(identity, len(frames), columns)
-        rows = ((np.array([i]), np.concatenate([row_v, info])[None], np.concatenate([row_e, np.zeros_like(info)])[None])
-                for i, row_v, row_e, info in run.rows(frames, table.pending(), show_progress))
-        return collect(rows, table)
+
+        def rows():  # one row per frame: dP and P, then the flags and info (no standard error of their own)
+            for i, row_v, row_e, info in run.rows(frames, table.pending(), show_progress):
+                yield [i], np.concatenate([row_v, info])[None], np.concatenate([row_e, np.zeros_like(info)])[None]
+
+        return collect(rows(), table)
 
     def _changes(self, values, errors, meta: dict, run: _Run, target: float) -> tuple[Measurements, Measurements]:
         """(dP, P) with the reached noise in their meta, and the run's warnings said."""
