@@ -255,6 +255,93 @@ def library_versions() -> dict[str, str]:
     return versions
 
 
+@dataclasses.dataclass(frozen=True)
+class IdentityKind:
+    """The content parts an identity of one kind holds (besides ``versions``, and ``variant`` where recorded).
+
+    Attributes
+    ----------
+    parts : frozenset of str
+        Parts every identity of the kind has.
+    optional : frozenset of str
+        Parts some have (e.g. the stratified estimator's options).
+    variant : bool
+        Whether the Mitsuba variant that computed the numbers is recorded (CUDA and LLVM differ in the last bits).
+    """
+
+    parts: frozenset[str]
+    optional: frozenset[str] = frozenset()
+    variant: bool = True
+
+
+#: Every kind of stored identity and its parts. An identity's content is its parts, ``variant`` and ``versions``
+#: only (the kind itself is not stored, so that output directories written before this table existed still
+#: resume). Changing a kind's parts changes its identities: results stored before are then refused, never reused.
+IDENTITY_KINDS: dict[str, IdentityKind] = {
+    # per-frame store of render_frames (display scenes)
+    "display_frames": IdentityKind(frozenset({"form", "seed", "budget", "mincam", "screen", "frames"})),
+    # per-frame store of WorldRenderer.measure_changes (world scenes)
+    "world_changes": IdentityKind(
+        frozenset({"spp", "seed", "correlated", "replicates", "n_frames", "frames", "background", "mincam", "scene",
+                   "retry_factor"}),
+        frozenset({"estimator", "strata_shares", "strata_expansions", "guide_bounces"})),
+    # identity.json of a render config's output directory (render_job)
+    "render_config": IdentityKind(frozenset({"form", "seed", "budget", "mincam", "mixels", "masks", "screen",
+                                             "frames"})),
+    # identity.json of a world config's output directory (world_job)
+    "world_config": IdentityKind(frozenset({"config", "files"})),
+    # design_identity.json (design.run)
+    "design": IdentityKind(frozenset({"task", "quick", "seed", "setup"}), variant=False),
+    # the identity of a study's store (studies.runner)
+    "study": IdentityKind(frozenset({"experiment", "dims", "points", "metrics", "seed", "replicates",
+                                     "common_random_numbers", "quick"}), variant=False),
+    # reproduce_identity.json (experiments.registry)
+    "reproduce": IdentityKind(frozenset({"setup"})),
+}
+
+_NO_VARIANT = object()
+
+
+def build_identity(kind: str, parts: Mapping[str, Any], variant: Any = _NO_VARIANT) -> dict:
+    """The identity of a stored result: what determines its numbers. Every identity is built here.
+
+    Parameters
+    ----------
+    kind : str
+        One of :data:`IDENTITY_KINDS`; ``parts`` must hold exactly its parts (and any of its optional ones).
+    parts : mapping
+        Content fingerprints and numbers (anything :func:`canonical` accepts).
+    variant : str, optional
+        The Mitsuba variant, for kinds that record it (required for them, refused for the others).
+
+    Returns
+    -------
+    dict
+        ``parts``, then ``variant`` (where recorded) and ``versions`` (:func:`library_versions`).
+
+    Raises
+    ------
+    ValueError
+        An unknown kind, missing or unknown parts, or a variant given (or missing) against the kind.
+    """
+    spec = IDENTITY_KINDS.get(kind)
+    if spec is None:
+        raise ValueError(f"unknown identity kind {kind!r}; declare it in IDENTITY_KINDS: {', '.join(IDENTITY_KINDS)}")
+    missing = sorted(spec.parts - set(parts))
+    unknown = sorted(set(parts) - spec.parts - spec.optional)
+    if missing or unknown:
+        raise ValueError(f"a {kind!r} identity holds {sorted(spec.parts)} (optional {sorted(spec.optional)}); "
+                         f"missing {missing}, unknown {unknown}")
+    if spec.variant == (variant is _NO_VARIANT):
+        need = "needs the Mitsuba variant (variant=...)" if spec.variant else "records no variant"
+        raise ValueError(f"a {kind!r} identity {need}")
+    identity = dict(parts)
+    if spec.variant:
+        identity["variant"] = variant
+    identity["versions"] = library_versions()
+    return identity
+
+
 def _leaf(value: Any) -> str:
     text = json.dumps(value, sort_keys=True)
     return text if len(text) <= 24 else text[:21] + "..."
@@ -297,8 +384,11 @@ def _digest_like(value: Any) -> bool:
 
 __all__ = [
     "FINGERPRINT_CHARS",
+    "IDENTITY_KINDS",
+    "IdentityKind",
     "StreamingHash",
     "array_digest",
+    "build_identity",
     "canonical",
     "canonical_json",
     "diff_identities",

@@ -14,12 +14,12 @@ import numpy as np
 from .atomic import atomic_path
 from .config import RenderConfig, traced_samples
 from .errors import ConfigError
-from .identity import fingerprint, frames_fingerprint, library_versions, run_key
+from .identity import build_identity, fingerprint, frames_fingerprint, run_key
 from .measurements import Measurements
 from .render import backend
 from .render.response_map import ResponseMaps
 from .render.screen_engine import render_frames
-from .store import check_identity, clear_store, lock_out_dir
+from .run import Run
 
 
 def config_identity(cfg: RenderConfig, variant: str | None = None) -> dict:
@@ -55,10 +55,10 @@ def config_identity(cfg: RenderConfig, variant: str | None = None) -> dict:
                                  "shape": list(cfg.frames.shape), **recipe})
     else:
         frames_fp = frames_fingerprint(iter(cfg.frames))
-    return {"form": run.form, "seed": run.seed, "budget": budget, "mincam": fingerprint(cfg.mincam),
-            "mixels": cfg.mincam.names, "masks": [fingerprint(m.mask) for m in cfg.mincam],
-            "screen": fingerprint(cfg.screen), "frames": frames_fp, "variant": variant or "automatic",
-            "versions": library_versions()}
+    return build_identity("render_config", {
+        "form": run.form, "seed": run.seed, "budget": budget, "mincam": fingerprint(cfg.mincam),
+        "mixels": cfg.mincam.names, "masks": [fingerprint(m.mask) for m in cfg.mincam],
+        "screen": fingerprint(cfg.screen), "frames": frames_fp}, variant=variant or "automatic")
 
 
 def _finished_results(out: Path, key: str, n_frames: int) -> Any:
@@ -81,7 +81,8 @@ def run_render_config(
 ) -> tuple[Measurements, ResponseMaps | None]:
     """Render a validated :class:`~mincam_sim.config.RenderConfig`; write outputs; return (measurements, maps).
 
-    The output directory is locked while this runs. ``identity.json`` there records the content fingerprints
+    The output directory is locked while this runs (one lock, :class:`~mincam_sim.run.Run`, for the identity
+    record and the per-frame store ``run/`` alike). ``identity.json`` there records the content fingerprints
     of everything the numbers depend on (:func:`config_identity`); a rerun with different content is refused
     (StaleResultError naming what changed) unless ``overwrite``, which first removes the previous run's store
     and maps. With ``reuse``, a finished run with the same identity is not rendered again: its
@@ -93,13 +94,13 @@ def run_render_config(
     run_dir = out / "run"
     identity = config_identity(cfg, backend.variant())  # the variant in use: CUDA and LLVM differ in the last bits
     key = run_key(identity)
-    with lock_out_dir(out):
+    with Run(out, overwrite=overwrite) as job:
         finished = not overwrite and reuse and _finished_results(out, key, len(cfg.frames)) is not None
         if time_limit_s is not None and not finished:  # before anything is written: a refusal claims nothing
             check_budget(cfg, backend.variant(), time_limit_s)
         if overwrite:
-            clear_store(run_dir, extra=("response_maps.npz",))
-        same = check_identity(out, identity, overwrite=overwrite)
+            job.clear("run", extra=("response_maps.npz",))
+        same = job.record_identity(identity)
         if same and reuse:
             done = _finished_results(out, key, len(cfg.frames))
             if done is not None:
@@ -112,8 +113,8 @@ def run_render_config(
             say(f"mincam-sim: {rounding}")  # on a fresh start only: a resumed run said it when it started
         m, maps = render_frames(
             cfg.mincam, cfg.screen, cfg.frames, cfg.run.form, cfg.run.spp, cfg.run.samples_per_texel,
-            cfg.run.target_rel_stderr, cfg.run.seed, cfg.run.replicates, out_dir=run_dir,
-            show_progress=show_progress, overwrite=overwrite,
+            cfg.run.target_rel_stderr, cfg.run.seed, cfg.run.replicates, show_progress=show_progress,
+            sink=job.sink("run"),
         )
         m.meta["config"] = cfg.raw
         m.meta["identity_key"] = key

@@ -63,7 +63,9 @@ class DirLock:
     :meth:`release`, when the object is garbage-collected, or by the operating system when the process ends
     (even if killed). Within one process a newer lock on the same directory takes over from an older one, which
     is marked ``superseded`` (its owner's writes then fail instead of interleaving): an interrupted run
-    whose objects are still referenced (say, by a traceback) does not block its own rerun.
+    whose objects are still referenced (say, by a traceback) does not block its own rerun. A run holds one lock,
+    on its top directory, for every store inside it; so a directory inside one that another process holds
+    locked is refused as well.
 
     Parameters
     ----------
@@ -94,6 +96,7 @@ class DirLock:
                 previous._fd = None
                 previous.superseded = True
             else:
+                self._check_ancestors(what)
                 fd = self._acquire(what)
             self._fd, self._pid = fd, os.getpid()
             self._finalizer = weakref.finalize(self, _close_quietly, fd)
@@ -101,6 +104,31 @@ class DirLock:
         with contextlib.suppress(OSError):
             os.ftruncate(fd, 0)
             os.pwrite(fd, f"{os.getpid()} {socket.gethostname()}\n".encode(), 0)
+
+    def _check_ancestors(self, what: str) -> None:
+        """Refuse a directory inside one that another process holds locked (a run's one lock covers its stores);
+        folders above that this process holds are fine."""
+        try:
+            import fcntl
+        except ImportError:  # pragma: no cover - not POSIX: no locking
+            return
+        for parent in Path(self._real).parents:
+            path = parent / LOCK_NAME
+            held = _held.get(str(parent))
+            if (held is not None and held._fd is not None and held._pid == os.getpid()) or not path.is_file():
+                continue
+            try:
+                fd = os.open(path, os.O_RDONLY)
+            except OSError:
+                continue
+            try:
+                fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)  # free unless another process holds it
+            except OSError:
+                raise OutDirLockedError(
+                    f"{what} {self.directory} is inside {parent}, in use by another run ({_read_holder(fd)}); wait "
+                    "for it to finish, stop it, or choose another output directory") from None
+            finally:
+                os.close(fd)
 
     def _acquire(self, what: str) -> int:
         try:
@@ -258,8 +286,10 @@ class ResultStore:
         anything :func:`~mincam_sim.identity.canonical` accepts. Stored in ``run.json`` in canonical form.
     overwrite : bool
         Delete the store files already there (of any run) and start afresh.
-    lock : bool
-        Lock the directory against other processes while the store is open.
+    lock : bool or DirLock
+        True: lock the directory against other processes while the store is open. A held :class:`DirLock` on
+        the directory or a folder above it: the caller's lock (a run's), which the store checks, uses and leaves
+        held (no second lock file). False: no lock.
 
     Attributes
     ----------
@@ -287,7 +317,7 @@ class ResultStore:
         columns: Sequence[str],
         identity: Any,
         overwrite: bool = False,
-        lock: bool = True,
+        lock: bool | DirLock = True,
     ) -> None:
         self.directory = Path(directory)
         self.columns = [str(c) for c in columns]
@@ -296,9 +326,13 @@ class ResultStore:
         self.key = run_key({"identity": self.identity, "n_frames": self.shape[0], "columns": self.columns})
         self.resumed = False
         self._lock: DirLock | None = None
+        self._own_lock = False
+        if isinstance(lock, DirLock):
+            _check_covers(lock, self.directory)
+            self._lock = lock
         _ensure_directory(self.directory)
-        if lock:
-            self._lock = DirLock(self.directory)
+        if lock is True:
+            self._lock, self._own_lock = DirLock(self.directory), True
         try:
             if overwrite:
                 clear_store(self.directory)
@@ -380,7 +414,7 @@ class ResultStore:
                 with contextlib.suppress(ValueError, OSError):
                     arr.flush()
         self._closed = True
-        if self._lock is not None:
+        if self._lock is not None and self._own_lock:
             self._lock.release()
 
     def __enter__(self) -> ResultStore:
@@ -388,6 +422,56 @@ class ResultStore:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _check_covers(lock: DirLock, directory: Path) -> None:
+    """Refuse a lock that is not held, or that is on neither ``directory`` nor a folder above it."""
+    if not lock.held:
+        raise StoreError(f"the lock on {lock.directory} is not held (released or superseded); open the store "
+                         "inside the run that holds it")
+    real = Path(os.path.realpath(directory))
+    if real != Path(lock._real) and Path(lock._real) not in real.parents:
+        raise StoreError(f"the lock on {lock.directory} does not cover {directory}; keep the store inside the "
+                         "locked directory")
+
+
+class StoreSink:
+    """Per-frame results kept in a directory: the :class:`~mincam_sim.frames.FrameSink` that a run gives a solver.
+
+    The solver opens it once it knows its identity; the :class:`ResultStore` there then resumes a killed run
+    with the same identity or refuses a different one (naming what changed) unless ``overwrite``. Response maps
+    and other content-addressed intermediates go to ``directory/cache``.
+
+    Parameters
+    ----------
+    directory : str or Path
+        The store's directory (created when opened).
+    overwrite : bool
+        Replace the results of a different run.
+    lock : DirLock, optional
+        The caller's held lock on ``directory`` or a folder above it (:class:`mincam_sim.run.Run` passes its
+        own): the store takes no lock of its own. None: the store locks ``directory`` while it is open.
+
+    Raises
+    ------
+    StoreError
+        ``lock`` is not held or does not cover ``directory``.
+    """
+
+    persistent = True
+
+    def __init__(self, directory: str | Path, overwrite: bool = False, lock: DirLock | None = None) -> None:
+        self.directory = Path(directory)
+        self.overwrite = bool(overwrite)
+        if lock is not None:
+            _check_covers(lock, self.directory)
+        self.lock = lock
+        self.cache = ContentCache(self.directory / "cache")
+
+    def open(self, identity: Any, n_frames: int, columns: Sequence[str]) -> ResultStore:
+        """The :class:`ResultStore` of a run with this identity (its pending frames are what is left to do)."""
+        return ResultStore(self.directory, n_frames, columns, identity, overwrite=self.overwrite,
+                           lock=True if self.lock is None else self.lock)
 
 
 def clear_store(directory: str | Path, extra: Sequence[str] = ()) -> list[Path]:
@@ -466,11 +550,11 @@ def check_identity(directory: str | Path, identity: Any, overwrite: bool = False
     return False
 
 
-def lock_out_dir(directory: str | Path) -> DirLock:
+def lock_out_dir(directory: str | Path, what: str = "output directory") -> DirLock:
     """Create ``directory`` if needed and lock it for this process (:class:`DirLock`)."""
     directory = Path(directory)
     _ensure_directory(directory)
-    return DirLock(directory)
+    return DirLock(directory, what)
 
 
 # ---------------------------------------------------------------------------------------- content cache
@@ -594,6 +678,7 @@ __all__ = [
     "ContentCache",
     "DirLock",
     "ResultStore",
+    "StoreSink",
     "check_identity",
     "clear_store",
     "default_cache_dir",

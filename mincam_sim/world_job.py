@@ -19,13 +19,13 @@ import numpy as np
 
 from .atomic import atomic_path, atomic_save_npz
 from .changes import Changes
-from .identity import library_versions, run_key
+from .identity import build_identity, run_key
 from .render import backend
 from .render import scene_dicts as sd
 from .render.scene_files import load_scene_file, read_mesh
 from .render.simulation import Simulation
 from .render.solvers import PlainChange, StratifiedChange
-from .store import check_identity, clear_store, lock_out_dir
+from .run import Run
 from .world_config import CameraSpec, WorldConfig
 
 Y_UP_TO_Z_UP = np.array([[1.0, 0, 0, 0], [0, 0, -1.0, 0], [0, 1.0, 0, 0], [0, 0, 0, 1.0]])  # +y -> +z, +z -> -y
@@ -153,7 +153,7 @@ def world_identity(cfg: WorldConfig, variant: str) -> dict:
         files[str(path)] = hashlib.sha256(path.read_bytes()).hexdigest()
     raw = {k: v for k, v in cfg.raw.items()}
     raw["run"] = {k: v for k, v in raw.get("run", {}).items() if k != "out_dir"}
-    return {"config": raw, "files": files, "variant": variant, "versions": library_versions()}
+    return build_identity("world_config", {"config": raw, "files": files}, variant=variant)
 
 
 def run_world_config(cfg: WorldConfig, show_progress: bool = False, overwrite: bool = False,
@@ -162,10 +162,10 @@ def run_world_config(cfg: WorldConfig, show_progress: bool = False, overwrite: b
     out = Path(cfg.run.out_dir)
     identity = world_identity(cfg, backend.variant())
     key = run_key(identity)
-    with lock_out_dir(out):
+    with Run(out, overwrite=overwrite) as job:  # one lock for the identity record and the store run/
         if overwrite:
-            clear_store(out / "run")
-        same = check_identity(out, identity, overwrite=overwrite)
+            job.clear("run")
+        same = job.record_identity(identity)
         if same and (out / "measurements.npz").is_file():
             try:
                 done = Changes.load_npz(out / "measurements.npz")
@@ -184,7 +184,7 @@ def run_world_config(cfg: WorldConfig, show_progress: bool = False, overwrite: b
         solver = StratifiedChange() if cfg.run.estimator == "stratified" else PlainChange()
         budget = Budget(spp=cfg.run.spp, target_rel_stderr=cfg.run.target_rel_stderr,
                         replicates=cfg.run.replicates, seed=cfg.run.seed)
-        ch = sim.measure_changes(frames, background, solver, budget, out_dir=out / "run", overwrite=overwrite,
+        ch = sim.measure_changes(frames, background, solver, budget, sink=job.sink("run"),
                                  show_progress=show_progress)
         ch.dp.meta["identity_key"] = key
         columns = {"time_s": np.arange(cfg.n_frames) / cfg.frame_rate_hz}

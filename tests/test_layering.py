@@ -2,11 +2,12 @@
 
 Floors, bottom to top: the pure core (numpy physics, sensor, estimators, calibration, masks, scene
 descriptions, config, stores, budgets and typed results) -> ``render`` (the only Mitsuba / Dr.Jit user: the
-simulation and its solvers) -> ``run`` (output directories: lock, identity, resume; the solvers never import
-it) -> ``render_job`` and ``world_job`` (the config services) -> ``experiments`` and ``design`` -> ``studies``
--> ``cli``. ``plots`` draws results and sits beside the core. The package root is the public facade: it
-exposes upper floors lazily and nothing inside the package imports it. Lower floors never import upper ones,
-and no modules import each other in a loop.
+simulation and its solvers, which hand their rows to a sink of ``mincam_sim.frames`` and never open a store or
+take a lock) -> ``run`` (output directories: lock, identity, stores, resume; the solvers never import it) ->
+``render_job`` and ``world_job`` (the config services) -> ``experiments`` and ``design`` -> ``studies`` ->
+``cli``. ``plots`` draws results and sits beside the core. The package root is the public facade: it exposes
+upper floors lazily and nothing inside the package imports it. Lower floors never import upper ones, and no
+modules import each other in a loop.
 """
 
 from __future__ import annotations
@@ -88,6 +89,49 @@ def test_only_the_render_layer_imports_mitsuba_or_drjit():
 ])
 def test_lower_floors_never_import_upper_ones(source, forbidden):
     assert _offenders(source, forbidden) == []
+
+
+#: What opens a store, takes a lock or writes an identity record: the run layer's business, never the solvers'.
+STORE_OPENERS = frozenset({"ResultStore", "StoreSink", "DirLock", "lock_out_dir", "check_identity", "clear_store"})
+#: What render/ may take from mincam_sim.store: content-addressed caches (no lock, no run identity).
+RENDER_FROM_STORE = frozenset({"ContentCache"})
+
+
+def _store_uses(name: str, path: Path) -> list[str]:
+    """How module ``name`` reaches store-opening code: imports from mincam_sim.store beyond
+    :data:`RENDER_FROM_STORE`, the store module itself, or any name of :data:`STORE_OPENERS`."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            target = _resolve(node.module or "", node.level, name, path.name == "__init__.py")
+            for alias in node.names:
+                if (target == "mincam_sim.store" and alias.name not in RENDER_FROM_STORE) or \
+                        (target == "mincam_sim" and alias.name == "store"):
+                    found.append(f"from {target} import {alias.name}")
+        elif isinstance(node, ast.Import):
+            found += [f"import {a.name}" for a in node.names if a.name.startswith("mincam_sim.store")]
+        elif isinstance(node, ast.Name) and node.id in STORE_OPENERS:
+            found.append(node.id)
+        elif isinstance(node, ast.Attribute) and node.attr in STORE_OPENERS:
+            found.append(f".{node.attr}")
+    return found
+
+
+def test_render_never_opens_a_store_or_takes_a_lock():
+    """The solvers write rows to the sink they are given (``mincam_sim.frames``); from ``mincam_sim.store`` they
+    take content caches only. (The deprecated ``out_dir=`` of the old entry points reaches a store through
+    ``mincam_sim.frames.resolve_sink``, the one store-opening helper outside the run layer.)"""
+    offenders = sorted(f"{name}: {use}" for name, path in MODULES.items() if _floor(name) == "render"
+                       for use in _store_uses(name, path))
+    assert offenders == []
+
+
+def test_the_sink_protocol_loads_without_the_store():
+    tree = ast.parse(MODULES["mincam_sim.frames"].read_text())
+    top = {_resolve(n.module or "", n.level, "mincam_sim.frames", False) for n in tree.body
+           if isinstance(n, ast.ImportFrom)}
+    assert "mincam_sim.store" not in top and "mincam_sim.store" in GRAPH["mincam_sim.frames"]  # lazily, in the shim
 
 
 def test_nothing_inside_the_package_imports_its_facade():

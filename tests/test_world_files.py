@@ -96,6 +96,7 @@ def test_the_shipped_room_renders_and_the_eq4_ratio_rises_as_the_car_crosses(tmp
     out = tmp_path / "out"
     for name in ("measurements.npz", "measurements.csv", "dP.png", "camera.npz", "identity.json"):
         assert (out / name).is_file(), name
+    assert sorted(out.rglob(".mincam.lock")) == [out / ".mincam.lock"]  # one lock for the record and the store
     with np.load(out / "measurements.npz") as data:
         assert data["delta_irradiance_w_m2"].shape == data["irradiance_w_m2"].shape == (cfg.n_frames, 2)
     header = (out / "measurements.csv").read_text().splitlines()[1].split(",")

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..atomic import atomic_path, atomic_save_npz, atomic_write_json
 from ..errors import StaleResultError
-from ..identity import library_versions
+from ..identity import build_identity
 from ..masks import export_print_png
 from ..masks.sheet import write_print_sheet
 from ..store import check_identity
@@ -29,8 +29,8 @@ IDENTITY_FILE = "design_identity.json"
 
 def design_identity(task_name: str, task: tr.TrackingTask, quick: bool, seed: int) -> dict:
     """Everything a design's outputs depend on: task, its sizes (dpi included), seed and library versions."""
-    return {"task": task_name, "quick": bool(quick), "seed": int(seed), "setup": task.as_dict(),
-            "versions": library_versions()}
+    return build_identity("design", {"task": task_name, "quick": bool(quick), "seed": int(seed),
+                                     "setup": task.as_dict()})
 
 
 BASELINE = "current ramps, Eq. 7"

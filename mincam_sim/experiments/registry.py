@@ -13,7 +13,7 @@ from typing import Any
 from ..atomic import atomic_write_text
 from ..config import dataclass_from_section, read_sections
 from ..errors import ConfigError, StaleResultError, StoreError
-from ..identity import fingerprint, library_versions
+from ..identity import build_identity, fingerprint
 from ..render import backend
 from ..store import check_identity
 from .base import Experiment, ExperimentResult
@@ -85,7 +85,7 @@ def reproduce(names, setup: Setup, out_dir: str | Path, show_progress: bool = Fa
         raise StaleResultError(f"{results_path} has no record of the set-up it was made with (an older "
                                "mincam_sim); rerun with --overwrite (overwrite=True) to replace it, or choose "
                                "another output directory")
-    identity = {"setup": setup.as_dict(), "versions": library_versions(), "variant": backend.variant()}
+    identity = build_identity("reproduce", {"setup": setup.as_dict()}, variant=backend.variant())
     same = check_identity(out_dir, identity, overwrite=overwrite, name=IDENTITY_NAME)
     if same:
         results = _read_results(results_path)

@@ -15,17 +15,19 @@ keeps the documented entry points: :class:`ScreenRenderer`, :func:`response_maps
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ..identity import StreamingHash, fingerprint, library_versions, run_key
+from ..frames import FrameSink, collect, resolve_sink
+from ..identity import StreamingHash, build_identity, fingerprint, run_key
 from ..measurements import Measurements
 from ..optics import Mincam
 from ..progress import progress
 from ..scene.display import FrameSource, Screen, as_frame_source
-from ..store import ContentCache, ResultStore
+from ..store import ContentCache
 from . import backend
 from .estimation import (
     UnseenWarning,
@@ -238,6 +240,22 @@ def frames_identity(frames: FrameSource, screen: Screen) -> dict:
     return {"n": len(frames), "content_sha256": digest.hexdigest()}
 
 
+@dataclass
+class _FramePlan:
+    """What a render of frames does, its budget resolved: how a batch of frames is measured, and what the result
+    says about itself."""
+
+    form: str
+    frames: FrameSource
+    measure: Callable[[np.ndarray], Measurements]
+    budget: dict
+    provenance: dict
+    meta: dict
+    maps: ResponseMaps | None
+    used: int  # samples per texel (maps) or per mixel per frame (rays) traced
+    cap: int
+
+
 def render_frames(
     mincam: Mincam,
     screen: Screen,
@@ -252,6 +270,7 @@ def render_frames(
     show_progress: bool = False,
     chunk: int = 64,
     overwrite: bool = False,
+    sink: FrameSink | None = None,
 ) -> tuple[Measurements, ResponseMaps | None]:
     """Measure a stack (or a stream) of frames with any form, optionally to a target noise, resumably.
 
@@ -271,16 +290,37 @@ def render_frames(
     replicates : int, optional
         Independent estimates whose spread gives the standard error: rays split into ``replicates`` groups
         (fast, reference; default 8), or blocks of samples per texel (response maps; default 4).
-    out_dir : path, optional
-        Per-frame results are written as they are computed (``out_dir/values.npy`` ..., locked while running)
-        and response maps are cached by content in ``out_dir/cache``: an interrupted run resumes there, a
-        rerun of the same run reuses everything, a different run (any mask, frame, geometry, budget, seed,
-        form or library version changed) is refused with what changed, unless ``overwrite``.
+    sink : FrameSink, optional
+        Takes each frame's row as it is measured (:class:`mincam_sim.frames.FrameSink`; default: in memory).
+        :meth:`mincam_sim.run.Run.sink` keeps rows on disk under the run's lock and caches response maps by
+        content: an interrupted run resumes there, a rerun of the same run reuses everything, a different run
+        (any mask, frame, geometry, budget, seed, form or library version changed) is refused with what changed.
+    out_dir, overwrite : path, bool
+        Deprecated (one release): a store in ``out_dir`` (locked while written), ``overwrite`` replacing a
+        different run's. Use :class:`mincam_sim.run.Run`.
 
     Returns
     -------
     (Measurements, ResponseMaps or None)
     """
+    sink = resolve_sink(sink, out_dir, overwrite, "render_frames")
+    frames, replicates = _checked_frames(screen, frames, form, target_rel_stderr, replicates)
+    frames_id = frames_identity(frames, screen) if sink.persistent else None  # identity: only for a store
+    if form == "response_map":
+        plan = _plan_maps(mincam, screen, frames, samples_per_texel, target_rel_stderr, seed, replicates,
+                          sink.cache, show_progress)
+    else:
+        plan = _plan_rays(mincam, screen, frames, form, spp, target_rel_stderr, seed, replicates)
+    identity = _run_identity(plan, mincam, screen, seed, frames_id)
+    table = sink.open(identity, len(frames), mincam.names)
+    values, errors = collect(_frame_rows(plan, table.pending(), chunk, show_progress), table)
+    return _measurements(plan, mincam, values, errors, frames_id, identity, target_rel_stderr), plan.maps
+
+
+def _checked_frames(screen: Screen, frames, form: str, target_rel_stderr: float,
+                    replicates: int | None) -> tuple[FrameSource, int]:
+    """The frames as a source of the screen's shape and the replicates (default per form); bad arguments
+    refused in one line each."""
     if form not in ("response_map", "fast", "reference"):
         raise ValueError(f"form must be 'response_map', 'fast' or 'reference', got {form!r}")
     if not (np.isfinite(target_rel_stderr) and target_rel_stderr >= 0):
@@ -291,77 +331,79 @@ def render_frames(
     if tuple(frames.frame_shape) != tuple(screen.shape):
         raise ValueError(f"frames have shape {frames.frame_shape} but this screen's frames are {screen.shape} "
                          "(rows, cols)")
-    frames_id = frames_identity(frames, screen) if out_dir is not None else None  # identity: only for a store
-    cache = ContentCache(Path(out_dir) / "cache") if out_dir is not None else None
-    budget: dict = {"target_rel_stderr": target_rel_stderr}
+    return frames, replicates
+
+
+def _plan_maps(mincam: Mincam, screen: Screen, frames: FrameSource, samples_per_texel: int,
+               target_rel_stderr: float, seed: int, replicates: int, cache: ContentCache | None,
+               show_progress: bool) -> _FramePlan:
+    """Response maps (to the target noise, or at ``samples_per_texel``); frames are then products with them."""
     provenance: dict = {}
-    maps = None
-    if form == "response_map":
-        if target_rel_stderr > 0:
-            maps, trail = response_maps_to_target(mincam, screen, frames, target_rel_stderr, seed,
-                                                  max_samples_per_texel=MAX_SAMPLES_PER_TEXEL, cache=cache,
-                                                  show_progress=show_progress, replicates=replicates)
-            provenance["budget_trail"] = trail
-        else:
-            maps = response_maps(mincam, screen, samples_per_texel, seed, cache=cache, show_progress=show_progress,
-                                 replicates=replicates)
-        budget["samples_per_texel"] = int(maps.meta["samples_per_texel"])
-        budget["replicates"] = int(replicates)  # 4 x 8^2 and 16 x 4^2 samples per texel are different maps
-        meta = dict(maps.meta)
-
-        def measure(idx):
-            return measure_stream(maps, frames, idx)
+    if target_rel_stderr > 0:
+        maps, trail = response_maps_to_target(mincam, screen, frames, target_rel_stderr, seed,
+                                              max_samples_per_texel=MAX_SAMPLES_PER_TEXEL, cache=cache,
+                                              show_progress=show_progress, replicates=replicates)
+        provenance["budget_trail"] = trail
     else:
-        renderer = ScreenRenderer(mincam, screen, form, replicates)
-        if target_rel_stderr > 0:  # the budget rule of every ray solver (estimation.pilot_to_target)
-            pilot_spp = replicates * 2048
-            pilot_idx = np.unique(np.linspace(0, len(frames) - 1, min(4, len(frames))).astype(int))
-            pilot_frames = frames[pilot_idx]
+        maps = response_maps(mincam, screen, samples_per_texel, seed, cache=cache, show_progress=show_progress,
+                             replicates=replicates)
+    used = int(maps.meta["samples_per_texel"])
+    # 4 x 8^2 and 16 x 4^2 samples per texel are different maps: the replicates are part of the budget
+    budget = {"target_rel_stderr": target_rel_stderr, "samples_per_texel": used, "replicates": int(replicates)}
+    return _FramePlan("response_map", frames, lambda idx: measure_stream(maps, frames, idx), budget, provenance,
+                      dict(maps.meta), maps, used, MAX_SAMPLES_PER_TEXEL)
 
-            def pilot(samples: int):
-                m = renderer.render(pilot_frames, spp=samples, seed=derive_seed(seed, "pilot"))
-                return m.irradiance_w_m2, m.stderr_w_m2
 
-            spp, trail = pilot_to_target(pilot, pilot_spp, target_rel_stderr, MAX_SPP, significance=0.0)
-            provenance.update(pilot_spp=pilot_spp, pilot_trail=trail)
-        budget["spp"] = int(spp)
-        budget["replicates"] = int(replicates)
+def _plan_rays(mincam: Mincam, screen: Screen, frames: FrameSource, form: str, spp: int,
+               target_rel_stderr: float, seed: int, replicates: int) -> _FramePlan:
+    """A ray renderer (fast or reference) at ``spp``, or at the count its pilots extrapolate to the target
+    (the budget rule of every ray solver, :func:`.estimation.pilot_to_target`)."""
+    renderer = ScreenRenderer(mincam, screen, form, replicates)
+    provenance: dict = {}
+    if target_rel_stderr > 0:
+        pilot_spp = replicates * 2048
+        pilot_idx = np.unique(np.linspace(0, len(frames) - 1, min(4, len(frames))).astype(int))
+        pilot_frames = frames[pilot_idx]
 
-        def measure(idx):
-            return renderer.render(frames[idx], spp=spp, seed=seed)
+        def pilot(samples: int):
+            m = renderer.render(pilot_frames, spp=samples, seed=derive_seed(seed, "pilot"))
+            return m.irradiance_w_m2, m.stderr_w_m2
 
-        meta = {"form": form, "seed": seed, "replicates": replicates, **backend.describe(),
-                **geometry_meta(mincam, screen)}
-    identity = {"form": form, "seed": int(seed), "budget": budget, "mincam": fingerprint(mincam),
-                "screen": fingerprint(screen), "frames": frames_id, "variant": backend.variant(),
-                "versions": library_versions()}
-    values = np.full((len(frames), len(mincam)), np.nan)
-    errors = np.full_like(values, np.nan)
-    store = None
-    todo = np.arange(len(frames))
-    if out_dir is not None:
-        store = ResultStore(out_dir, len(frames), mincam.names, identity, overwrite=overwrite)
-        values[:], errors[:] = store.values, store.stderr
-        todo = store.pending()
-    try:
-        step = max(1, min(chunk, frames.chunk_size(FRAME_CHUNK_BYTES))) if form == "response_map" else 1
-        batches = [todo[i : i + step] for i in range(0, len(todo), step)]
-        for idx in progress(batches, desc=f"{form}: frames", disable=not show_progress, total=len(batches),
-                            unit="chunk" if step > 1 else "frame"):
-            m = measure(idx)
-            values[idx], errors[idx] = m.irradiance_w_m2, m.stderr_w_m2
-            if store is not None:
-                store.write(idx, m.irradiance_w_m2, m.stderr_w_m2)
-    finally:
-        if store is not None:
-            store.close()
-    result = Measurements(values, errors, mincam.names, {**meta, **budget, **provenance,
-                                                           "frames": frames_id, "identity_key": run_key(identity)})
+        spp, trail = pilot_to_target(pilot, pilot_spp, target_rel_stderr, MAX_SPP, significance=0.0)
+        provenance.update(pilot_spp=pilot_spp, pilot_trail=trail)
+    budget = {"target_rel_stderr": target_rel_stderr, "spp": int(spp), "replicates": int(replicates)}
+    meta = {"form": form, "seed": seed, "replicates": replicates, **backend.describe(),
+            **geometry_meta(mincam, screen)}
+    return _FramePlan(form, frames, lambda idx: renderer.render(frames[idx], spp=spp, seed=seed), budget,
+                      provenance, meta, None, int(spp), MAX_SPP)
+
+
+def _run_identity(plan: _FramePlan, mincam: Mincam, screen: Screen, seed: int, frames_id: dict | None) -> dict:
+    """What determines a render's numbers (:func:`mincam_sim.identity.build_identity`, kind
+    ``"display_frames"``): form, seed, resolved budget, mincam, screen and frames content, variant, versions."""
+    return build_identity("display_frames", {"form": plan.form, "seed": int(seed), "budget": plan.budget,
+                                             "mincam": fingerprint(mincam), "screen": fingerprint(screen),
+                                             "frames": frames_id}, variant=backend.variant())
+
+
+def _frame_rows(plan: _FramePlan, todo: np.ndarray, chunk: int,
+                show_progress: bool) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """(frame indices, values, stderr) of ``todo``, a chunk at a time (maps) or a frame at a time (rays)."""
+    step = max(1, min(chunk, plan.frames.chunk_size(FRAME_CHUNK_BYTES))) if plan.form == "response_map" else 1
+    batches = [todo[i : i + step] for i in range(0, len(todo), step)]
+    for idx in progress(batches, desc=f"{plan.form}: frames", disable=not show_progress, total=len(batches),
+                        unit="chunk" if step > 1 else "frame"):
+        m = plan.measure(idx)
+        yield idx, m.irradiance_w_m2, m.stderr_w_m2
+
+
+def _measurements(plan: _FramePlan, mincam: Mincam, values: np.ndarray, errors: np.ndarray,
+                  frames_id: dict | None, identity: dict, target_rel_stderr: float) -> Measurements:
+    """The result with what it says about itself (budget, provenance, identity key, reached noise), and the
+    warnings of a missed target or an unseen measurement."""
+    result = Measurements(values, errors, mincam.names, {**plan.meta, **plan.budget, **plan.provenance,
+                                                         "frames": frames_id, "identity_key": run_key(identity)})
     result.meta["reached_rel_stderr"] = worst_relative_stderr(result)
-    if form == "response_map":
-        used, cap = int(maps.meta["samples_per_texel"]), MAX_SAMPLES_PER_TEXEL
-    else:
-        used, cap = int(spp), MAX_SPP
-    warn_target_missed(result.meta["reached_rel_stderr"], target_rel_stderr, used, cap)
+    warn_target_missed(result.meta["reached_rel_stderr"], target_rel_stderr, plan.used, plan.cap)
     warn_unreached(result)
-    return result, maps
+    return result

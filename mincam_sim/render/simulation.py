@@ -29,6 +29,7 @@ import numpy as np
 from ..budget import DEFAULT_SAMPLES_PER_TEXEL, Budget
 from ..changes import Changes, RunInfo
 from ..errors import InputError
+from ..frames import FrameSink, resolve_sink
 from ..measurements import Measurements
 from ..optics import Mincam
 from ..scene.display import Screen
@@ -128,27 +129,29 @@ class Simulation:
         return budget
 
     def measure(self, frames, solver: Solver | None = None, budget: Budget | None = None, *,
-                out_dir: str | Path | None = None, overwrite: bool = False,
+                sink: FrameSink | None = None, out_dir: str | Path | None = None, overwrite: bool = False,
                 show_progress: bool = False) -> Measurements:
         """What each mixel measures in each frame, with its standard error [W/m^2], (n_frames, n_mixels).
 
         Display scenes: ``frames`` are radiance images (an array (n, rows, cols), a list, or a FrameSource);
         default solver :class:`~.solvers.ResponseMap`. World scenes: ``frames`` are parameter updates, each
-        applied to the scene as built; solver :class:`~.solvers.Aperture`. ``out_dir`` (displays) keeps
-        per-frame results there and resumes (prefer :class:`mincam_sim.run.Run`).
+        applied to the scene as built; solver :class:`~.solvers.Aperture`. ``sink`` (displays;
+        :class:`mincam_sim.frames.FrameSink`) takes the per-frame rows: :meth:`mincam_sim.run.Run.sink` keeps them
+        on disk and resumes. ``out_dir`` (deprecated, one release): a store there, locked while it is written.
         """
         budget = self._budget(budget)
         if self.kind == "display":
             solver = self._solver(solver, ResponseMap(), "measure")
+            sink = resolve_sink(sink, out_dir, overwrite, "Simulation.measure")
             m, _ = render_frames(self.mincam, self.screen, frames, solver.form, budget.rays(),
                                  budget.samples_per_texel or DEFAULT_SAMPLES_PER_TEXEL, budget.target_rel_stderr,
-                                 budget.seed, budget.replicates, out_dir=out_dir, show_progress=show_progress,
-                                 overwrite=overwrite)
+                                 budget.seed, budget.replicates, show_progress=show_progress, sink=sink)
             m.meta["solver"] = solver.name
             return m
         solver = self._solver(solver, Aperture(), "measure")
-        if out_dir is not None:
-            raise InputError("world frames measured absolutely are not stored; use measure_changes(..., out_dir=...)")
+        if out_dir is not None or sink is not None:
+            raise InputError("world frames measured absolutely are not stored; use Run.measure_changes(...) or "
+                             "measure_changes(..., sink=run.sink(name))")
         return self._measure_world_frames(frames, budget)
 
     def _measure_world_frames(self, frames, budget: Budget) -> Measurements:
@@ -181,7 +184,8 @@ class Simulation:
                              budget.seed, show_progress=show_progress, replicates=budget.replicates_or(4))
 
     def measure_changes(self, frames, background: Mapping | None = None, solver: Solver | None = None,
-                        budget: Budget | None = None, *, out_dir: str | Path | None = None, overwrite: bool = False,
+                        budget: Budget | None = None, *, sink: FrameSink | None = None,
+                        out_dir: str | Path | None = None, overwrite: bool = False,
                         show_progress: bool = False) -> Changes:
         """Each frame's change from the background, ``dP = P(frame) - P(background)``, and ``P`` (world scenes).
 
@@ -195,15 +199,18 @@ class Simulation:
         solver : StratifiedChange (default) or PlainChange
         budget : Budget
             ``spp`` rays per mixel per frame and pass (or a target), replicates (default 8), seed.
+        sink : FrameSink, optional
+            Takes the per-frame rows (:meth:`mincam_sim.run.Run.sink`: on disk; a rerun of the same run resumes,
+            another one is refused). Default: in memory.
         out_dir : path, optional
-            Per-frame results kept there; a rerun of the same run resumes, another one is refused (prefer
-            :class:`mincam_sim.run.Run`).
+            Deprecated (one release): a store there, locked while it is written; use :class:`mincam_sim.run.Run`.
         """
         solver = self._solver(solver, StratifiedChange(), "measure_changes")
         if not isinstance(solver, (PlainChange, StratifiedChange)):
             raise InputError(f"measure_changes needs a change solver (StratifiedChange or PlainChange), got "
                              f"{solver.name}")
         budget = self._budget(budget)
+        sink = resolve_sink(sink, out_dir, overwrite, "Simulation.measure_changes")
         world = self.renderer
         world.replicates = budget.replicates_or(DEFAULT_WORLD_REPLICATES)
         kw = {}
@@ -211,8 +218,8 @@ class Simulation:
             kw = {"strata_shares": solver.strata_shares, "strata_expansions": solver.strata_expansions,
                   "guide_bounces": solver.guide_bounces}
         dp, p = world.measure_changes(frames, {} if background is None else background, spp=budget.rays(),
-                                      seed=budget.seed, out_dir=out_dir, show_progress=show_progress,
-                                      target_rel_stderr=budget.target_rel_stderr, overwrite=overwrite,
-                                      estimator=solver.form, **kw)
+                                      seed=budget.seed, show_progress=show_progress,
+                                      target_rel_stderr=budget.target_rel_stderr, estimator=solver.form, sink=sink,
+                                      **kw)
         dp.meta["target_rel_stderr"] = budget.target_rel_stderr
         return Changes(dp, p, RunInfo.from_meta(dp.meta))

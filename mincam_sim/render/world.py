@@ -32,11 +32,11 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..identity import fingerprint, library_versions
+from ..frames import FrameSink, collect, resolve_sink
+from ..identity import build_identity, fingerprint
 from ..measurements import Measurements
 from ..optics import Mincam
 from ..progress import progress
-from ..store import ResultStore
 from . import backend
 from .change_region import ApertureRegions, box_corners, change_points, mixel_regions
 from .elements import transform_update, vertex_update
@@ -224,6 +224,7 @@ class WorldRenderer:
         strata_shares: Sequence[float] = STRATA_SHARES,
         strata_expansions: Sequence[float] = STRATA_EXPANSIONS,
         guide_bounces: bool = True,
+        sink: FrameSink | None = None,
     ) -> tuple[Measurements, Measurements]:
         """Measure each frame's change from the background: ``dP = P(frame) - P(background)``.
 
@@ -236,9 +237,12 @@ class WorldRenderer:
             set that it leaves out is restored to its value in the scene as built (``{}`` = the scene as built).
         correlated : bool
             True: each frame uses the background's seed (noise cancels in dP). False: independent seeds.
-        out_dir : path, optional
-            Write results per frame as they come; a rerun of the same run (scene content, mincam, frames,
-            budget, seed, versions) resumes there, a different one is refused unless ``overwrite``.
+        sink : FrameSink, optional
+            Takes each frame's row as it comes (:class:`mincam_sim.frames.FrameSink`; default: in memory).
+            :meth:`mincam_sim.run.Run.sink` keeps them on disk: a rerun of the same run (scene content, mincam,
+            frames, budget, seed, versions) resumes there, a different one is refused unless the run overwrites.
+        out_dir, overwrite : path, bool
+            Deprecated (one release): a store in ``out_dir``, locked while written; use :class:`mincam_sim.run.Run`.
         target_rel_stderr : float
             If > 0, ``spp`` is only the pilot: up to 4 frames spread over the sequence are measured with it,
             and the sample count is extrapolated (variance ~ 1/samples, x 1.5 margin, at most ``MAX_SPP``)
@@ -267,6 +271,7 @@ class WorldRenderer:
         (dP, P) : Measurements
             Changes and absolute frame measurements, each (n_frames, n_mixels) with standard errors.
         """
+        sink = resolve_sink(sink, out_dir, overwrite, "WorldRenderer.measure_changes")
         shares = self._check_change_args(frames, background, spp, target_rel_stderr, estimator, strata_shares)
         background = self.complete_background(frames, background)
         options = {"estimator": estimator, "strata_shares": strata_shares, "strata_expansions": strata_expansions,
@@ -287,9 +292,9 @@ class WorldRenderer:
                                  tuple(strata_expansions), bool(guide_bounces), bg)
         run.note_delta_movers(_moving_shapes([background, *frames]))
         identity = None
-        if out_dir is not None:
+        if sink.persistent:
             identity = self._store_identity(frames, background, spp, seed, correlated, shares, options)
-        values, errors = self._run_frames(run, frames, out_dir, identity, overwrite, show_progress)
+        values, errors = self._run_frames(run, frames, sink, identity, show_progress)
         self.update(background)
         meta = {"form": "fast_world", "estimator": estimator, **run.meta(values[:, 2 * len(self.mincam):]),
                 "spp_per_mixel_per_frame": spp, "background_spp_per_mixel": int(bg_spp), "seed": seed,
@@ -341,41 +346,30 @@ class WorldRenderer:
                                "pilot_trail": trail, "target_rel_stderr": target}
 
     def _store_identity(self, frames, background, spp, seed, correlated, shares, options) -> dict:
-        """Everything that determines a run's numbers, for its store."""
-        identity = {"spp": int(spp), "seed": int(seed), "correlated": correlated, "replicates": self.replicates,
-                    "n_frames": len(frames), "frames": _fingerprint(frames),
-                    "background": _fingerprint([background]), "mincam": fingerprint(self.mincam),
-                    "scene": self.content_fingerprint(), "variant": backend.variant(),
-                    "versions": library_versions(), "retry_factor": RETRY_FACTOR}
+        """Everything that determines a run's numbers, for its store (:func:`mincam_sim.identity.build_identity`,
+        kind ``"world_changes"``)."""
+        parts = {"spp": int(spp), "seed": int(seed), "correlated": correlated, "replicates": self.replicates,
+                 "n_frames": len(frames), "frames": _fingerprint(frames), "background": _fingerprint([background]),
+                 "mincam": fingerprint(self.mincam), "scene": self.content_fingerprint(), "retry_factor": RETRY_FACTOR}
         if options["estimator"] != "plain":
-            identity.update(estimator=options["estimator"], strata_shares=shares.tolist(),
-                            strata_expansions=[float(e) for e in options["strata_expansions"]],
-                            guide_bounces=bool(options["guide_bounces"]))
-        return identity
+            parts.update(estimator=options["estimator"], strata_shares=shares.tolist(),
+                         strata_expansions=[float(e) for e in options["strata_expansions"]],
+                         guide_bounces=bool(options["guide_bounces"]))
+        return build_identity("world_changes", parts, variant=backend.variant())
 
-    def _run_frames(self, run: _Run, frames, out_dir, identity, overwrite: bool, show_progress: bool):
+    def _run_frames(self, run: _Run, frames, sink: FrameSink, identity, show_progress: bool):
         """Values and errors (n_frames, columns: dP, P, heavy-tailed and unseen flags per mixel, run info) of
-        every frame, from the store where a run with this identity has already measured them."""
+        every frame, from the sink's table where a run with this identity has already measured them."""
         names = self.mincam.names
         columns = ([f"dP_{m}" for m in names] + [f"P_{m}" for m in names]
                    + [f"heavy_tailed_{m}" for m in names] + [f"unseen_{m}" for m in names] + list(INFO_COLUMNS))
-        values = np.full((len(frames), len(columns)), np.nan)
-        errors = np.full_like(values, np.nan)
-        store, todo = None, np.arange(len(frames))
-        if out_dir is not None:
-            store = ResultStore(out_dir, len(frames), columns, identity, overwrite=overwrite)
-            values[:], errors[:] = store.values, store.stderr
-            todo = store.pending()
-        try:
-            for i, row_v, row_e, info in run.rows(frames, todo, show_progress):
-                values[i] = np.concatenate([row_v, info])
-                errors[i] = np.concatenate([row_e, np.zeros_like(info)])
-                if store is not None:
-                    store.write([i], values[i][None], errors[i][None])
-        finally:
-            if store is not None:
-                store.close()
-        return values, errors
+        table = sink.open(identity, len(frames), columns)
+
+        def rows():  # one row per frame: dP and P, then the flags and info (no standard error of their own)
+            for i, row_v, row_e, info in run.rows(frames, table.pending(), show_progress):
+                yield [i], np.concatenate([row_v, info])[None], np.concatenate([row_e, np.zeros_like(info)])[None]
+
+        return collect(rows(), table)
 
     def _changes(self, values, errors, meta: dict, run: _Run, target: float) -> tuple[Measurements, Measurements]:
         """(dP, P) with the reached noise in their meta, and the run's warnings said."""

@@ -34,7 +34,7 @@ import numpy as np
 
 from ..atomic import atomic_write_json, atomic_write_text
 from ..errors import ConfigError, OutDirLockedError, StaleResultError, StoreError
-from ..identity import canonical, diff_identities, fingerprint, library_versions
+from ..identity import build_identity, canonical, diff_identities, fingerprint
 from ..progress import progress
 from ..store import lock_out_dir
 from .points import study_target, unit_of
@@ -97,10 +97,10 @@ def study_identity(spec: StudySpec, quick: bool) -> dict:
     target = dict(spec.experiment.ref)
     if "config" in target:  # a render config: its content, not its path
         target = {"name": target["name"], "config": fingerprint(Path(target["config"]).read_text(encoding="utf-8"))}
-    return canonical({"experiment": target, "dims": spec.dims, "points": spec.points, "metrics": list(spec.metrics),
-                      "seed": spec.seed, "replicates": spec.replicates,
-                      "common_random_numbers": spec.common_random_numbers, "quick": bool(quick),
-                      "versions": library_versions()})
+    return canonical(build_identity("study", {
+        "experiment": target, "dims": spec.dims, "points": spec.points, "metrics": list(spec.metrics),
+        "seed": spec.seed, "replicates": spec.replicates, "common_random_numbers": spec.common_random_numbers,
+        "quick": bool(quick)}))
 
 
 def _label(spec: StudySpec, index: tuple[int, ...]) -> str:
