@@ -231,8 +231,26 @@ def _moving_object_stratified(world, frames, background, plain) -> dict:
         worst = max(worst, float(np.max(np.abs(dp.stderr_w_m2 / dp.irradiance_w_m2))))
         z = (dp.irradiance_w_m2 - plain.irradiance_w_m2) / np.hypot(dp.stderr_w_m2, plain.stderr_w_m2)
         z_max = max(z_max, float(np.max(np.abs(z))))
+    # the same runs traced every frame with full background passes (the estimator before frozen launches and
+    # paired lanes): the same numbers bit for bit, timed in this run beside the frozen, paired ones
+    world.freeze_launches = world.pair_lanes = False
+    world.measure_changes(frames[:2], background, spp=spp, seed=21, estimator="stratified")  # warm-up
+    traced_seconds, identical = 0.0, True
+    for seed in range(runs):
+        t = time.perf_counter()
+        traced, _ = world.measure_changes(frames, background, spp=spp, seed=30 + seed, estimator="stratified")
+        traced_seconds += time.perf_counter() - t
+    world.freeze_launches = world.pair_lanes = True
+    identical = bool(np.array_equal(traced.irradiance_w_m2, dp.irradiance_w_m2)
+                     and np.array_equal(traced.stderr_w_m2, dp.stderr_w_m2))
     return {
         "frames_per_second": runs * len(frames) / seconds,
+        "fps_traced_full_background_same_run": runs * len(frames) / traced_seconds,
+        "fps_speedup_frozen_paired_vs_traced": traced_seconds / seconds,
+        "fps_frozen_paired_equals_traced_bit_for_bit": identical,
+        "fps_traced_rays_per_mixel_per_frame": int(traced.meta["rays_per_mixel_per_frame"]),
+        "fps_background_rays_share": dp.meta["background_rays_share"],
+        "fps_launches": dp.meta["launches"],
         "fps_seconds_timed": seconds,
         "fps_worst_rel_stderr_dP": worst,
         "fast_vs_plain_max_abs_z": z_max,

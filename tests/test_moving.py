@@ -399,7 +399,7 @@ def test_stratified_run_killed_midway_resumes_to_the_same_numbers(tmp_path, monk
     world, frames, bg = _world({}, (0.04, 0.02, 0.02))
     fr = frames([(0.03, 0.02, 0.0), (-0.05, 0.0, 0.0), (0.0, -0.04, 0.0), (0.06, 0.05, 0.0)])
     whole, _ = world.measure_changes(fr, bg, spp=1 << 12, seed=7, estimator="stratified")
-    real, calls = world_module.stratified_estimates, []
+    real, calls = world_module.stratified_lanes, []
 
     def dies_on_the_fifth_pass(*args, **kwargs):  # two passes per frame: frames 0 and 1 finish
         calls.append(1)
@@ -407,10 +407,10 @@ def test_stratified_run_killed_midway_resumes_to_the_same_numbers(tmp_path, monk
             raise KeyboardInterrupt
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(world_module, "stratified_estimates", dies_on_the_fifth_pass)
+    monkeypatch.setattr(world_module, "stratified_lanes", dies_on_the_fifth_pass)
     with pytest.raises(KeyboardInterrupt):
         world.measure_changes(fr, bg, spp=1 << 12, seed=7, estimator="stratified", out_dir=tmp_path)
-    monkeypatch.setattr(world_module, "stratified_estimates", lambda *a, **k: calls.append(1) or real(*a, **k))
+    monkeypatch.setattr(world_module, "stratified_lanes", lambda *a, **k: calls.append(1) or real(*a, **k))
     calls.clear()
     resumed, _ = world.measure_changes(fr, bg, spp=1 << 12, seed=7, estimator="stratified", out_dir=tmp_path)
     assert len(calls) == 4, f"the resumed run traced {len(calls) // 2} frames, not the 2 left"

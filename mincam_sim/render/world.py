@@ -70,7 +70,8 @@ STRATA_SHARES = (0.6, 0.1, 0.1, 0.1, 0.1)  # rays per stratum (region, rings, re
 BACKGROUND_MIN_SPP = 1 << 16  # stratified: rays per mixel (at least) for the background's whole-aperture value
 RETRY_FACTOR = 4  # a frame whose replicates are heavy-tailed is measured again with this many times the replicates
 FREEZE_ALLOWANCE = 6  # recordings of a run's frozen launch (passes x buffer addresses) before it must replay
-INFO_COLUMNS = ("retried", "guided", "guide_spheres", "region_area_fraction")  # per frame, kept with the results
+# per frame, kept with the results
+INFO_COLUMNS = ("retried", "guided", "guide_spheres", "region_area_fraction", "rays_per_mixel")
 Updates = Mapping[str, np.ndarray]
 __all__ = ["CAMERA_KEY", "SENSOR_KEY", "FallbackWarning", "HeavyTailWarning", "WorldParameters", "WorldRenderer",
            "transform_update", "vertex_update"]
@@ -560,7 +561,7 @@ class _PlainRun(_Run):
         r.update(frames[i])
         est = r.world.fast_estimates(spp, replicates, frame_seed)
         changes = np.full(len(r.mincam), bool(_changed_shapes(frames[i], self.background)))
-        info = (0.0, 0.0, 1.0)  # not guided, no guide sphere, the whole aperture
+        info = (0.0, 0.0, 1.0, float(self.spp))  # not guided, no guide sphere, the whole aperture, its rays
         return est - bg, est.mean(0), est.std(0, ddof=1) / np.sqrt(replicates), changes, info
 
     def meta(self, info: np.ndarray) -> dict:
@@ -594,7 +595,7 @@ class _StratifiedRun(_Run):
         self.launches = ("frozen" if self.freeze else
                          "traced" + (": a moving shape emits light" if renderer.freeze_launches else ""))
         self.recordings_at_start = frozen_recordings(renderer.scene)
-        self.frames_traced, self.lanes_traced = 0, np.zeros(2)
+        self.frames_traced = 0
         if guided and not self.can_guide:
             self.fallbacks["depth"] = (f"bounces are not guided at max_depth {renderer.world.max_depth} (the guided "
                                        "path covers 1 .. 5): rays follow Mitsuba's path")
@@ -632,10 +633,9 @@ class _StratifiedRun(_Run):
         diff = lanes.estimates() - bg_lanes.estimates()
         if not purpose:
             self.frames_traced += 1
-            self.lanes_traced += (lanes.traced, bg_lanes.traced)
             self._check_recordings()
         info = (float(guide is not None), 0.0 if guide is None else float(len(guide)),
-                float(np.mean(regions.area_fraction())))
+                float(np.mean(regions.area_fraction())), (lanes.traced + bg_lanes.traced) / len(r.mincam))
         if replicates == self.bg.shape[0]:
             frame = self.bg + diff  # P(frame): the background traced once over the whole aperture, plus the change
             frame_v, frame_e = frame.mean(0), frame.std(0, ddof=1) / np.sqrt(replicates)
@@ -664,12 +664,11 @@ class _StratifiedRun(_Run):
     def meta(self, info: np.ndarray) -> dict:
         counts, n = self.counts, len(self.r.mincam)
         rest = info[np.all(np.isfinite(info), axis=1), 2 * n:]
-        full = self.r.replicates * sum(counts)
-        frame_rays, bg_rays = (self.lanes_traced / (self.frames_traced * n) if self.frames_traced
-                               else np.array([full, full]))
+        full = self.r.replicates * sum(counts)  # the frame pass's rays per mixel; the background traces <= these
+        rays = float(rest[:, 4].mean()) if len(rest) else 2.0 * full
         return {**super().meta(info), "strata_expansions": list(self.expansions), "strata_rays_per_replicate": counts,
-                "rays_per_mixel_per_frame": int(round(frame_rays + bg_rays)),
-                "background_rays_share": float(bg_rays / frame_rays),
+                "rays_per_mixel_per_frame": int(round(rays)),
+                "background_rays_share": (rays - full) / full,
                 "paired_lanes_reused": bool(self.pairs), "launches": self.launches,
                 "moving_shapes": sorted(self.moving), "guide_bounces": bool(self.guided),
                 "guided_frames": int(rest[:, 1].sum()),
