@@ -118,7 +118,9 @@ class SensorModel:
         if isinstance(self.bit_depth, bool) or not isinstance(self.bit_depth, int | np.integer):
             raise ValueError(f"SensorModel.bit_depth must be an integer, got {self.bit_depth!r}")
         if not 1 <= self.bit_depth <= 32:
-            raise ValueError(f"SensorModel.bit_depth must be in 1..32, got {self.bit_depth} (the paper: 12)")
+            raise ValueError(
+                f"SensorModel.bit_depth must be in 1..32, got {self.bit_depth} (the paper: {paper.ADC_BITS})"
+            )
         if isinstance(self.pixels_averaged, bool) or not isinstance(self.pixels_averaged, int | np.integer):
             raise ValueError(f"SensorModel.pixels_averaged must be an integer, got {self.pixels_averaged!r}")
         if self.pixels_averaged < 1:

@@ -98,8 +98,8 @@ class IntrusionParams:
             if not (np.isfinite(v) and 0 < v <= 10):
                 raise ValueError(f"speeds_m_s[{k}] must be a car's speed in m/s, > 0 and <= 10, got {v!r}")
         if not (np.isfinite(self.boundary_x_m) and abs(self.boundary_x_m) < 1.0):
-            raise ValueError(f"boundary_x_m must lie in the calibrated field (|x| < 1 m; the paper's is -0.1378), got "
-                             f"{self.boundary_x_m!r}")
+            raise ValueError(f"boundary_x_m must lie in the calibrated field (|x| < 1 m; the paper's is "
+                             f"{INTRUSION_BOUNDARY_X_M}), got {self.boundary_x_m!r}")
 
 
 @dataclass

@@ -30,7 +30,7 @@ from ..calibration import Calibration1D
 from ..estimators import intrusion_position
 from ..geometry import Pose
 from ..metrics import error_rates
-from ..paper import CALIBRATION_SQUARE_M
+from ..paper import CALIBRATION_SQUARE_M, SPACING_M
 from ..plots import plot_spacing
 from ..progress import progress
 from ..readout import read_out
@@ -112,7 +112,7 @@ class Spacing(Experiment):
     paper_section = "- (extends 4.1: the paper's mixels are 3.3 cm apart)"
     in_paper = False
     Params = SpacingParams
-    quick_overrides = {"spacings_m": (0.0, 0.02, 0.033, 0.06, 0.1), "depths_m": (0.5, 1.0), "positions": 21,
+    quick_overrides = {"spacings_m": (0.0, 0.02, SPACING_M, 0.06, 0.1), "depths_m": (0.5, 1.0), "positions": 21,
                        "samples_per_texel": 16}
     #: A study point's sweep: these fields of ``Params`` in quick mode (full mode: the defaults).
     study_quick_overrides = {"positions": 15, "samples_per_texel": 16, "screen_texels": 96}
