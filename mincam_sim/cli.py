@@ -19,6 +19,7 @@ import numpy as np
 import typer
 from typer.core import TyperGroup
 
+from . import paper
 from .config import EXAMPLE_TOML, load_config, parse_mask
 from .errors import BackendUnavailableError, ConfigError, MincamError
 from .masks import PrintedFilm, export_print_png, generate_library, save_exr
@@ -403,7 +404,7 @@ def config_example(
 def masks_generate(
     out_dir: Annotated[Path, typer.Option("--out", help="directory for the EXR files and previews")] = Path("masks"),
     resolution: Annotated[int, typer.Option(help="texels per side")] = 256,
-    size_m: Annotated[float, typer.Option(help="mask side [m]")] = 2e-3,
+    size_m: Annotated[float, typer.Option(help="mask side [m]")] = paper.MASK_SIZE_M,
 ) -> None:
     """Write the standard mask library (ramps, constant, sinusoid, circular ramp) as OpenEXR + PNG previews."""
 
@@ -420,7 +421,7 @@ def masks_generate(
 def masks_export(
     spec: Annotated[str, typer.Argument(help="'ramp:x', 'constant:0.5', 'file:path.png' ...")],
     out: Annotated[Path, typer.Option("--out", help="PNG to send to the printer (name ending in .png)")],
-    size_m: Annotated[float, typer.Option(help="physical mask side [m]")] = 2e-3,
+    size_m: Annotated[float, typer.Option(help="physical mask side [m]")] = paper.MASK_SIZE_M,
     dpi: Annotated[int, typer.Option(help="printer resolution [dots per inch], 50 to 4800")] = 600,
     levels: Annotated[int, typer.Option(help="grey levels the printer reproduces per dot, 2 to 65536 (above 256 "
                                              "the PNG has 16 bits)")] = 256,
@@ -575,8 +576,8 @@ def _reproduce_config(config: Path | None, quick: bool, **flags: Any) -> tuple[A
         raise ConfigError(flag.replace("[command line]: ", "")) from None
     if getattr(setup, "bit_depth", MIN_BIT_DEPTH) < MIN_BIT_DEPTH:
         where = "--bit-depth" if "bit_depth" in given else "[setup] bit_depth"
-        raise ConfigError(f"{where} = {setup.bit_depth}: give 2 to 32 bits (the paper: 12); a 1-bit ADC reads every "
-                          "change as 0 or 1 DN and the calibration has nothing to fit")
+        raise ConfigError(f"{where} = {setup.bit_depth}: give 2 to 32 bits (the paper: {paper.ADC_BITS}); a 1-bit "
+                          "ADC reads every change as 0 or 1 DN and the calibration has nothing to fit")
     return setup, params
 
 
@@ -589,9 +590,11 @@ def reproduce(
     )] = None,
     quick: Annotated[bool, typer.Option("--quick", help="fewer frames and samples (minutes)")] = False,
     seed: Annotated[int | None, typer.Option(help="seed of every random choice [default 0]")] = None,
-    spacing_m: Annotated[float | None, typer.Option(help="mixel spacing [m] [default 0.033, the paper's]")] = None,
-    depth_m: Annotated[float | None, typer.Option(help="mincam to table/screen distance [m] [default 0.5]")] = None,
-    bit_depth: Annotated[int | None, typer.Option(help="ADC bits [default 12, the paper's]")] = None,
+    spacing_m: Annotated[float | None, typer.Option(
+        help=f"mixel spacing [m] [default {paper.SPACING_M:g}, the paper's]")] = None,
+    depth_m: Annotated[float | None, typer.Option(
+        help=f"mincam to table/screen distance [m] [default {paper.CALIBRATION_DEPTH_M:g}]")] = None,
+    bit_depth: Annotated[int | None, typer.Option(help=f"ADC bits [default {paper.ADC_BITS}, the paper's]")] = None,
     overwrite: Annotated[bool, typer.Option("--overwrite", help="recompute everything, replacing what --out holds "
                                                                 "(without it: another set-up there is refused, "
                                                                 "finished experiments of this one are reused)")
@@ -710,9 +713,9 @@ def design(
     depth_range_m: Annotated[str | None, typer.Option("--depth-range-m", help="working depths MIN,MAX [m]; "
                                                                             "default 0.35,0.7")] = None,
     spacing_m: Annotated[float | None, typer.Option("--spacing-m", help="mixel distance from the centre [m]; "
-                                                                       "default 0.033")] = None,
-    d_f_m: Annotated[float | None, typer.Option("--d-f-m", help="mask-to-detector distance [m]; default 0.002")]
-    = None,
+                                                                       f"default {paper.SPACING_M:g}")] = None,
+    d_f_m: Annotated[float | None, typer.Option("--d-f-m", help="mask-to-detector distance [m]; default "
+                                                                 f"{paper.D_F_M:g}")] = None,
     film_t_min: Annotated[float | None, typer.Option("--film-t-min", help="film's darkest transmission; "
                                                                          "default 0.02")] = None,
     film_t_max: Annotated[float | None, typer.Option("--film-t-max", help="film's clearest transmission; "

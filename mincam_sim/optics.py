@@ -15,13 +15,14 @@ from numbers import Real
 
 import numpy as np
 
+from . import paper
 from .errors import ConfigError
 from .geometry import Pose
 from .masks import DEFAULT_MASK_SIZE_M, Mask, constant, ramp
 
-DEFAULT_DETECTOR_SIZE_M = 1e-4  # [m] 0.1 mm: the paper's 48x48-pixel region of interest
-DEFAULT_D_F_M = 2e-3  # [m] mask-to-detector distance
-PAPER_SPACING_M = 0.033  # [m] distance between neighbouring mixels in the paper's prototype
+DEFAULT_DETECTOR_SIZE_M = paper.DETECTOR_SIZE_M  # [m] 0.1 mm: the paper's 48x48-pixel region of interest
+DEFAULT_D_F_M = paper.D_F_M  # [m] mask-to-detector distance
+PAPER_SPACING_M = paper.SPACING_M  # [m] distance between neighbouring mixels in the paper's prototype
 
 
 def _real(where: str, value, unit: str = "metres") -> float:

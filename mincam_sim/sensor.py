@@ -32,12 +32,14 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
+from . import paper
+
 PLANCK_J_S = 6.62607015e-34  # [J s] exact (SI 2019)
 SPEED_OF_LIGHT_M_S = 299_792_458.0  # [m/s] exact
 
-PAPER_PIXELS_AVERAGED = 48 * 48  # the prototype's 48 x 48-pixel region of interest (paper Sec. 3.1)
-PAPER_REGION_SIDE_M = 1e-4  # [m] "approximately 0.1 mm x 0.1 mm" for those 48 x 48 pixels (paper Sec. 3.1)
-DEFAULT_PIXEL_PITCH_M = 2.2e-6  # [m] 48 x 2.2 um = 0.106 mm, consistent with the paper's ~0.1 mm region
+PAPER_PIXELS_AVERAGED = paper.PIXELS_AVERAGED  # the prototype's 48 x 48-pixel region of interest (Sec. 3.1)
+PAPER_REGION_SIDE_M = paper.DETECTOR_SIZE_M  # [m] "approximately 0.1 mm x 0.1 mm" for those pixels (Sec. 3.1)
+DEFAULT_PIXEL_PITCH_M = paper.PIXEL_PITCH_M  # [m] 48 x 2.2 um = 0.106 mm, consistent with the ~0.1 mm region
 
 MeasureMethod = Literal["aggregate", "per_pixel"]
 
@@ -94,7 +96,7 @@ class SensorModel:
     dark_current_e_per_s: float = 5.0
     full_well_e: float = 10_000.0
     gain_e_per_dn: float | None = None
-    bit_depth: int = 12
+    bit_depth: int = paper.ADC_BITS
     pixels_averaged: int = 1
     detector_area_m2: float = DEFAULT_PIXEL_PITCH_M**2
 
@@ -116,7 +118,9 @@ class SensorModel:
         if isinstance(self.bit_depth, bool) or not isinstance(self.bit_depth, int | np.integer):
             raise ValueError(f"SensorModel.bit_depth must be an integer, got {self.bit_depth!r}")
         if not 1 <= self.bit_depth <= 32:
-            raise ValueError(f"SensorModel.bit_depth must be in 1..32, got {self.bit_depth} (the paper: 12)")
+            raise ValueError(
+                f"SensorModel.bit_depth must be in 1..32, got {self.bit_depth} (the paper: {paper.ADC_BITS})"
+            )
         if isinstance(self.pixels_averaged, bool) or not isinstance(self.pixels_averaged, int | np.integer):
             raise ValueError(f"SensorModel.pixels_averaged must be an integer, got {self.pixels_averaged!r}")
         if self.pixels_averaged < 1:
@@ -134,7 +138,7 @@ class SensorModel:
         params: dict = {
             "pixels_averaged": PAPER_PIXELS_AVERAGED,
             "detector_area_m2": PAPER_REGION_SIDE_M**2,
-            "bit_depth": 12,
+            "bit_depth": paper.ADC_BITS,
         }
         params.update(overrides)
         return cls(**params)

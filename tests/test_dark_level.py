@@ -9,7 +9,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mincam_sim.studies.points import SPACING
+from mincam_sim.studies import study_target
+
+SPACING = study_target({"name": "spacing"})
 
 
 @pytest.mark.parametrize("bit_depth", [8, 10, 12, 16])
@@ -23,7 +25,7 @@ def test_study_point_ignores_empty_frames_at_any_bit_depth(bit_depth):
 
 
 @pytest.mark.parametrize("bit_depth", [8, 12])
-def test_spacing_experiment_subtracts_the_dark_level(bit_depth):
+def test_spacing_experiment_gives_empty_frames_no_position(bit_depth):
     from mincam_sim.experiments import REGISTRY, Setup
 
     exp = REGISTRY["spacing"]

@@ -76,7 +76,7 @@ class Case:
 
 SUITE: tuple[Case, ...] = (
     Case("reference", "squares 2-5 cm, black plane, 0.4-0.7 m (the old training distribution)"),
-    Case("at_0.5m", "squares 2-5 cm at the calibration depth only", depths_m=(0.5,)),
+    Case("at_0.5m", "squares 2-5 cm at the calibration depth only", depths_m=(tr.CALIBRATION_DEPTH_M,)),
     Case("size_1cm", "squares 1 cm", size_range_m=(0.009, 0.011)),
     Case("size_10cm", "squares 9-11 cm", size_range_m=(0.09, 0.11)),
     Case("size_14cm", "squares 13-15 cm", size_range_m=(0.13, 0.15)),

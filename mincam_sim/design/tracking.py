@@ -16,21 +16,22 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from .. import masks as masks_mod
+from .. import paper
 from ..geometry import Pose
 from ..masks import Mask, PrintedFilm
 from ..optics import Mincam, layout, seen_whole_by_every_mixel
 from ..sensor import SensorModel
 
-SPACING_M = 0.033  # [m] distance from the centre to each mixel (paper's prototype)
-D_F_M = 2e-3  # [m] mask-to-detector distance
-DETECTOR_SIZE_M = 1e-4  # [m] detector side (48 x 48 pixels of 2.2 um)
-MASK_SIZE_M = 2e-3  # [m] aperture side
-FIELD_M = 0.5  # [m] calibrated field (diameter) at the calibration depth
-CALIBRATION_DEPTH_M = 0.5  # [m] the paper's calibration depth
+SPACING_M = paper.SPACING_M  # [m] distance from the centre to each mixel (paper's prototype)
+D_F_M = paper.D_F_M  # [m] mask-to-detector distance
+DETECTOR_SIZE_M = paper.DETECTOR_SIZE_M  # [m] detector side (48 x 48 pixels of 2.2 um)
+MASK_SIZE_M = paper.MASK_SIZE_M  # [m] aperture side
+FIELD_M = paper.FIELD_M  # [m] calibrated field (diameter) at the calibration depth
+CALIBRATION_DEPTH_M = paper.CALIBRATION_DEPTH_M  # [m] the paper's calibration depth
 DEPTH_RANGE_M = (0.35, 0.7)  # [m] working depths of the task
 WORKING_RADIUS = 0.45  # objects lie within |q| <= 0.45 (90 % of the calibrated disc)
 OBJECT_SIZE_RANGE_M = (0.02, 0.05)  # [m] side of the square objects
-BIT_DEPTH = 12
+BIT_DEPTH = paper.ADC_BITS
 EXPOSURE_FILL = 0.7
 NAMES = ("x", "1-x", "y", "1-y")  # roles of the four mixels in Eq. 7 (left, right, top, bottom)
 POSITIONS = ("left", "right", "top", "bottom")  # where each mixel sits, seen from behind the mincam
@@ -258,7 +259,7 @@ def calibration_positions(n_per_axis: int) -> np.ndarray:
     return xy[seen]
 
 
-CALIBRATION_SQUARE_M = 0.03  # [m] side of the calibration squares (paper Sec. 4.2.1)
+CALIBRATION_SQUARE_M = paper.CALIBRATION_SQUARE_M  # [m] side of the calibration squares (as the experiments')
 
 
 def features(dn, xp=np):

@@ -1,10 +1,12 @@
 """What an experiment is: a name, the paper section and numbers it reproduces, a parameters dataclass (every
-default in one place, quick-mode overrides beside it), and ``calibrate`` / ``scene`` / ``run`` returning a typed
-:class:`ExperimentResult`."""
+default in one place, quick-mode overrides beside it), ``calibrate`` / ``scene`` / ``run`` returning a typed
+:class:`ExperimentResult`, and how one point of a study of it runs (:meth:`Experiment.study_target`: its
+parameters, metrics and typical seconds, declared here once beside the reproduction)."""
 
 from __future__ import annotations
 
 import dataclasses
+import tempfile
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,6 +16,15 @@ import numpy as np
 
 from ..config import dataclass_from_section
 from .setup import Setup
+from .study_targets import StudyExperiment, figures_not_saved, numeric_details
+
+#: Set-up fields that are no study parameter: the study's own seed and quick mode, and non-numeric fields.
+_SETUP_NOT_STUDIED = frozenset({"seed", "quick", "screen_resolution", "dp_estimator"})
+
+
+def _scalar_fields(obj) -> dict:
+    return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj) if f.init
+            and isinstance(getattr(obj, f.name), int | float) and not isinstance(getattr(obj, f.name), bool)}
 
 
 @dataclass(frozen=True)
@@ -67,7 +78,9 @@ class Experiment(ABC):
 
     Subclasses set ``name``, ``paper_section``, ``paper`` (or None), ``Params`` (a frozen dataclass whose
     defaults are the full-mode values), ``quick_overrides`` (the fields ``--quick`` changes) and
-    ``seed_offset`` (separates the experiments' random streams).
+    ``seed_offset`` (separates the experiments' random streams); as a study target (``mincam-sim study``),
+    ``study_metrics`` (what a point returns), ``study_seconds`` (the rough wall time of one point [s], quick and
+    full) and, where a point is not one run of :meth:`run`, :meth:`study_parameters` and :meth:`study_point`.
     """
 
     name: ClassVar[str]
@@ -77,6 +90,14 @@ class Experiment(ABC):
     Params: ClassVar[type]
     quick_overrides: ClassVar[dict[str, Any]] = {}
     seed_offset: ClassVar[int] = 0
+    #: Raise with any change to the code that changes the numbers of :meth:`run` for the same set-up and
+    #: parameters: part of a reproduction's parameters key, so an older result is recomputed, not reused.
+    version: ClassVar[int] = 1
+    study_metrics: ClassVar[tuple[str, ...]] = ()
+    study_seconds: ClassVar[tuple[float, float]] = (60.0, 1800.0)
+    #: Raise with any change to the code of :meth:`study_point` that changes its numbers for the same parameters
+    #: (it is part of a study's identity: a store of an older point is then refused, not reused).
+    study_version: ClassVar[int] = 1
 
     def params(self, quick: bool = False, table: dict | None = None) -> Any:
         """The parameters: defaults, the quick-mode overrides if ``quick``, then a TOML ``[name]`` table
@@ -110,3 +131,35 @@ class Experiment(ABC):
     @abstractmethod
     def run(self, setup: Setup, params: Any, out_dir: Path, show_progress: bool = False) -> ExperimentResult:
         """Calibrate, render, estimate and score; write plots and data into ``out_dir``."""
+
+    # ------------------------------------------------------------------------------------- as a study target
+    def study_parameters(self) -> dict:
+        """A study point's parameters (name -> full-mode default): by default every scalar field of the set-up
+        (:class:`~.setup.Setup`, but its seed and quick mode) and of ``Params``."""
+        setup = {k: v for k, v in _scalar_fields(Setup()).items() if k not in _SETUP_NOT_STUDIED}
+        own = _scalar_fields(self.Params())
+        clash = sorted(set(setup) & set(own))
+        if clash:  # a programming error: parameters must name one thing
+            raise RuntimeError(f"experiment {self.name}: parameters {clash} are both set-up and experiment fields")
+        return {**setup, **own}
+
+    def study_point(self, params: dict, seed: int, quick: bool) -> dict:
+        """One study point: :meth:`run` on the set-up and parameters ``params`` gives (the others at their
+        quick or full defaults), its figures not drawn; the numbers of its result entry as metrics."""
+        setup_keys = set(_scalar_fields(Setup())) - _SETUP_NOT_STUDIED
+        setup = dataclasses.replace(Setup(quick=quick, seed=seed),
+                                    **{k: v for k, v in params.items() if k in setup_keys})
+        own = dataclasses.replace(self.params(quick), **{k: v for k, v in params.items() if k not in setup_keys})
+        with tempfile.TemporaryDirectory(prefix=f"study_{self.name}_") as tmp, figures_not_saved():
+            result = self.run(setup, own, Path(tmp)).as_dict()
+        return numeric_details(result)
+
+    def study_target(self) -> StudyExperiment:
+        """This experiment as a study target (``[study] experiment = "<name>"``)."""
+        ref = {"name": self.name} if self.study_version == 1 else {"name": self.name, "version": self.study_version}
+        return StudyExperiment(name=self.name, description=self.study_description(),
+                               parameters=self.study_parameters(), metrics=self.study_metrics,
+                               point=self.study_point, seconds_per_point=self.study_seconds, ref=ref)
+
+    def study_description(self) -> str:
+        return f"the {self.name} experiment (paper Sec. {self.paper_section}) per point"

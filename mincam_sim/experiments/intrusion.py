@@ -10,6 +10,7 @@ import numpy as np
 from .. import objects
 from ..calibration import Calibration1D
 from ..estimators import intrusion_position
+from ..paper import CALIBRATION_SQUARE_M, INTRUSION_AVG_ERROR_PCT, INTRUSION_BOUNDARY_X_M, INTRUSION_MAX_ERROR_PCT
 from ..plots import plot_calibration_1d, plot_overlays
 from ..render.elements import toy_updates
 from .base import Experiment, ExperimentResult, PaperNumbers
@@ -63,10 +64,10 @@ class IntrusionParams:
         it (the paper's) or of the binary change there (with the shadow); both are reported.
     """
 
-    boundary_x_m: float = -0.1378
+    boundary_x_m: float = INTRUSION_BOUNDARY_X_M
     band_m: float = 0.03
     calibration_positions: int = 51
-    calibration_square_m: float = 0.03
+    calibration_square_m: float = CALIBRATION_SQUARE_M
     calibration_rel_stderr: float = 1e-3
     frame_rate_hz: float = 125.0  # full mode: a >= 300-frame video (the slower car's 2.4 s run)
     lanes_y_m: tuple[float, ...] = (-0.12, 0.07)
@@ -97,8 +98,8 @@ class IntrusionParams:
             if not (np.isfinite(v) and 0 < v <= 10):
                 raise ValueError(f"speeds_m_s[{k}] must be a car's speed in m/s, > 0 and <= 10, got {v!r}")
         if not (np.isfinite(self.boundary_x_m) and abs(self.boundary_x_m) < 1.0):
-            raise ValueError(f"boundary_x_m must lie in the calibrated field (|x| < 1 m; the paper's is -0.1378), got "
-                             f"{self.boundary_x_m!r}")
+            raise ValueError(f"boundary_x_m must lie in the calibrated field (|x| < 1 m; the paper's is "
+                             f"{INTRUSION_BOUNDARY_X_M}), got {self.boundary_x_m!r}")
 
 
 @dataclass
@@ -116,10 +117,13 @@ class Intrusion(Experiment):
 
     name = "intrusion"
     paper_section = "4.1"
-    paper = PaperNumbers(max_error_pct=11.42, avg_error_pct=4.83)
+    paper = PaperNumbers(max_error_pct=INTRUSION_MAX_ERROR_PCT, avg_error_pct=INTRUSION_AVG_ERROR_PCT)
     Params = IntrusionParams
     quick_overrides = {"calibration_positions": 26, "calibration_rel_stderr": 3e-3, "frame_rate_hz": 5.0}
     seed_offset = 0
+    study_metrics = ("avg_error_pct", "max_error_pct", "rms_error_pct", "noise_sigma_median_pct", "unscored_frames_pct",
+                     "missed_frames", "false_alarm_frames")
+    study_seconds = (60.0, 1200.0)
 
     def calibrate(self, setup: Setup, params: IntrusionParams, rng: np.random.Generator,
                   out_dir: Path) -> dict:

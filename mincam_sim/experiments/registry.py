@@ -1,12 +1,21 @@
-"""The explicit registry of experiments that ``reproduce``, ``study`` and ``demo`` iterate, and the runner that
-writes ``results.json``. A reproduce config is TOML with a ``[setup]`` section and one section per experiment,
-each validated against its dataclass (unknown keys, wrong types and bad values name the field)."""
+"""The one registry of what ``reproduce``, ``study`` and ``demo`` run, and the runner that writes
+``results.json``.
+
+:data:`REGISTRY` holds the experiments. Each declares, once, both how it runs as a reproduction (its parameters
+dataclass, quick-mode overrides and :meth:`~.base.Experiment.run`) and how one study point of it runs (its
+study parameters, metrics and typical seconds: :meth:`~.base.Experiment.study_target`). :data:`STUDY_ONLY`
+holds the two study targets that are no experiment: a render config and the mask design. :func:`study_target`
+looks any of them up by name; :mod:`mincam_sim.studies` reads nothing else.
+
+A reproduce config is TOML with a ``[setup]`` section and one section per experiment, each validated against
+its dataclass (unknown keys, wrong types and bad values name the field)."""
 
 from __future__ import annotations
 
 import dataclasses
 import json
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -21,11 +30,16 @@ from .intrusion import Intrusion
 from .setup import Setup
 from .spacing import Spacing
 from .speed import Speed
+from .study_targets import StudyExperiment, design_target, render_target_from_ref
 from .tracking import Tracking
 
 REGISTRY: dict[str, Experiment] = {e.name: e for e in (Intrusion(), Tracking(), Speed(), Spacing())}
 #: The paper's experiments, in the paper's order (what ``reproduce all`` runs).
 EXPERIMENTS: tuple[str, ...] = tuple(name for name, e in REGISTRY.items() if e.in_paper)
+
+#: Study targets that are no experiment, by name: how each is built from a study's reference (``{"name": ...}``,
+#: for ``render`` with its ``config`` file).
+STUDY_ONLY: dict[str, Callable[[dict], StudyExperiment]] = {"render": render_target_from_ref, "design": design_target}
 
 DEFINITIONS = {
     "position_error_pct": "|predicted - ground truth| (Euclidean in 2D; per_axis: |dx|, |dy| pooled) / calibrated "
@@ -42,6 +56,21 @@ def experiment(name: str) -> Experiment:
     if name not in REGISTRY:
         raise ConfigError(f"unknown experiment {name!r}: choose from {', '.join(REGISTRY)}")
     return REGISTRY[name]
+
+
+def target_names() -> tuple[str, ...]:
+    """Every name ``[study] experiment`` accepts: the registry's experiments, ``render`` and ``design``."""
+    return (*REGISTRY, *STUDY_ONLY)
+
+
+def study_target(ref: dict) -> StudyExperiment:
+    """The study target ``ref["name"]`` (``ref["config"]``: the render config file of ``render``)."""
+    name = ref.get("name")
+    if name in STUDY_ONLY:
+        return STUDY_ONLY[name](ref)
+    if name in REGISTRY:
+        return REGISTRY[name].study_target()
+    raise ConfigError(f"[study] experiment = {name!r} is not one of {', '.join(map(repr, target_names()))}")
 
 
 def load_reproduce_config(source: str | Path | dict | None, quick: bool = False,
@@ -96,7 +125,7 @@ def reproduce(names, setup: Setup, out_dir: str | Path, show_progress: bool = Fa
     for name in names:
         exp = experiment(name)
         p = (params or {}).get(name) or exp.params(setup.quick)
-        params_key = fingerprint(_jsonable(p))
+        params_key = _params_key(exp, p)
         old = results.get(name)
         if isinstance(old, dict) and old.get("params_key") == params_key:
             reused.append(name)
@@ -133,6 +162,12 @@ def _read_results(path: Path) -> dict:
         raise StoreError(f"{path} is not a reproduce results file (a JSON object); rerun with --overwrite "
                          "(overwrite=True) to recompute it, or choose another output directory")
     return results
+
+
+def _params_key(exp: Experiment, params: Any) -> str:
+    """What a result entry was computed with: the parameters and, once raised, the experiment's code version."""
+    jsonable = _jsonable(params)
+    return fingerprint(jsonable if exp.version == 1 else {"params": jsonable, "version": exp.version})
 
 
 def _jsonable(params: Any) -> dict:

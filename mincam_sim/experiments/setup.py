@@ -14,6 +14,7 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
+from .. import paper
 from ..geometry import Pose
 from ..masks import DEFAULT_MASK_SIZE_M, DEFAULT_RESOLUTION
 from ..optics import DEFAULT_D_F_M, DEFAULT_DETECTOR_SIZE_M, PAPER_SPACING_M
@@ -49,14 +50,14 @@ class Setup:
         Fewer frames and samples (for ``make demo`` and the tests).
     """
 
-    depth_m: float = 0.5
+    depth_m: float = paper.CALIBRATION_DEPTH_M
     spacing_m: float = PAPER_SPACING_M
     d_f_m: float = DEFAULT_D_F_M
     detector_size_m: float = DEFAULT_DETECTOR_SIZE_M
     mask_size_m: float = DEFAULT_MASK_SIZE_M
     mask_resolution: int = DEFAULT_RESOLUTION
-    field_m: float = 0.5
-    bit_depth: int = 12
+    field_m: float = paper.FIELD_M
+    bit_depth: int = paper.ADC_BITS
     exposure_fill: float = 0.7
     screen_resolution: tuple[int, int] = DEFAULT_SCREEN_RESOLUTION
     table_light_radiance_w_m2_sr: float = 20.0

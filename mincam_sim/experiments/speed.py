@@ -34,6 +34,7 @@ from ..estimators import (
 from ..geometry import Pose
 from ..metrics import speed_error_rates
 from ..optics import Mincam
+from ..paper import SPEED_AVG_ERROR_PCT, SPEED_MAX_ERROR_PCT
 from ..plots import plot_spectrum, plot_speed
 from ..progress import progress
 from ..readout import read_out
@@ -189,12 +190,14 @@ class Speed(Experiment):
 
     name = "speed"
     paper_section = "4.3"
-    paper = PaperNumbers(max_error_pct=7.55, avg_error_pct=2.85)
+    paper = PaperNumbers(max_error_pct=SPEED_MAX_ERROR_PCT, avg_error_pct=SPEED_AVG_ERROR_PCT)
     Params = SpeedParams
     quick_overrides = {"video_frames": 128, "video_shifts_px": (2, 5, 8), "video_samples_per_texel": 64,
                        "vehicle_frames": 96, "vehicle_speeds_m_s": (4.0, 12.0), "vehicle_spp": 1 << 17,
                        "turn_frames": 128, "turn_spp": 1 << 18}
     seed_offset = 2
+    study_metrics = ("avg_error_pct", "max_error_pct")
+    study_seconds = (120.0, 1800.0)
 
     def scene(self, setup: Setup, params: SpeedParams, rng: np.random.Generator) -> np.ndarray:
         """The road texture of the video: long enough for the fastest shift over all frames."""

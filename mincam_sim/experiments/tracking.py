@@ -11,6 +11,7 @@ import numpy as np
 from .. import objects
 from ..calibration import Calibration2D
 from ..estimators import track_4
+from ..paper import CALIBRATION_SQUARE_M, TRACKING_AVG_ERROR_PCT, TRACKING_MAX_ERROR_PCT
 from ..plots import plot_calibration_2d, plot_overlays, plot_tracks
 from ..render.elements import toy_updates
 from .base import Experiment, ExperimentResult, PaperNumbers
@@ -77,7 +78,7 @@ class TrackingParams:
     toy_speed_m_s: float = 0.04
     reach_fraction: float = 0.4
     calibration_grid: int = 15
-    calibration_square_m: float = 0.03
+    calibration_square_m: float = CALIBRATION_SQUARE_M
     calibration_rel_stderr: float = 1e-3
     table_albedo: float = DEFAULT_TABLE_ALBEDO
     toy_albedos: tuple[float, ...] = ()
@@ -117,11 +118,14 @@ class Tracking(Experiment):
 
     name = "tracking"
     paper_section = "4.2"
-    paper = PaperNumbers(max_error_pct=6.78, avg_error_pct=2.82)
+    paper = PaperNumbers(max_error_pct=TRACKING_MAX_ERROR_PCT, avg_error_pct=TRACKING_AVG_ERROR_PCT)
     Params = TrackingParams
     quick_overrides = {"toys": ("robot", "chick"), "frames_per_toy": 8, "calibration_grid": 9,
                        "calibration_rel_stderr": 3e-3}
     seed_offset = 1
+    study_metrics = ("avg_error_pct", "max_error_pct", "rms_error_pct", "noise_sigma_median_pct", "unscored_frames_pct",
+                     "missed_frames", "false_alarm_frames")
+    study_seconds = (60.0, 1800.0)
 
     def calibrate(self, setup: Setup, params: TrackingParams, rng: np.random.Generator, out_dir: Path) -> dict:
         """A grid of white squares on the screen; fit the bivariate cubic from Eq. 7's output to positions."""

@@ -22,10 +22,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import sparse
 
+from .. import paper
 from . import profiles as prof
 from .profiles import MaskProfile
 
-DEFAULT_MASK_SIZE_M = 2e-3  # [m] square mask side: with d_f = 2 mm it gives a ~53 degree field of view
+DEFAULT_MASK_SIZE_M = paper.MASK_SIZE_M  # [m] square mask side: with d_f = 2 mm, a ~53 degree field of view
 DEFAULT_RESOLUTION = 256  # texels per side of generated masks
 MAX_TEXELS = 8192 * 8192
 

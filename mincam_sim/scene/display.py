@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import paper
 from ..geometry import Pose, clip_polygon_halfspace
 
 INCH_M = 0.0254  # [m]
@@ -25,9 +26,9 @@ def diagonal_to_size(diagonal_in: float, aspect: tuple[int, int] = (16, 9)) -> t
     return diag * a / np.hypot(a, b), diag * b / np.hypot(a, b)
 
 
-PAPER_SCREEN_SIZE_M = diagonal_to_size(50.0)  # the paper's 50" 16:9 calibration display
+PAPER_SCREEN_SIZE_M = diagonal_to_size(paper.SCREEN_DIAGONAL_IN, paper.SCREEN_ASPECT)  # the 50" 16:9 display
 DEFAULT_SCREEN_RESOLUTION = (256, 144)  # display texels (columns, rows)
-DEFAULT_DISTANCE_M = 0.5  # [m]
+DEFAULT_DISTANCE_M = paper.CALIBRATION_DEPTH_M  # [m]
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,7 @@ def display_scale(values, unit: str) -> tuple[float, str]:
 def axis_label(name: str, unit: str) -> str:
     """``name (unit)`` with the unit suffix dropped from the name (``spacing_m`` -> ``spacing (cm)``);
     dimensionless quantities get no unit."""
-    from .points import _SUFFIX_UNITS
+    from ..experiments.study_targets import _SUFFIX_UNITS
 
     text = name
     for suffix, _ in _SUFFIX_UNITS:

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from .. import masks, wave
+from .. import masks, paper, wave
 from ..optics import Mixel
 
 DEFAULT_PERIOD_M = 0.2e-3  # [m] the README's default sinusoid
@@ -53,7 +53,7 @@ def sinusoid_contrast(period_m: float = DEFAULT_PERIOD_M, mixel: Mixel | None = 
             "max_rel_diff": float(np.max(np.abs(r - g)) / np.max(g))}
 
 
-def talbot_curve(u_values: np.ndarray, d_f_m: float = 2e-3, a0: float = 0.5, a1: float = 0.5) -> np.ndarray:
+def talbot_curve(u_values: np.ndarray, d_f_m: float = paper.D_F_M, a0: float = 0.5, a1: float = 0.5) -> np.ndarray:
     """Signed fundamental ratio (wave / geometric) of a sinusoidal intensity mask against u = lambda d_f / p^2.
 
     Each point: a 2 mm sinusoid of period ``p = sqrt(lambda d_f / u)`` seen by a detector of p / 4, the
