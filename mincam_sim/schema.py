@@ -542,7 +542,7 @@ def example_lines(cls: type, instance: Any = None, notes: dict[str, str] | None 
     """
     instance = cls() if instance is None else instance
     notes = notes or {}
-    out = []
+    entries = []
     for f in _fields(cls):
         value = getattr(instance, f.name)
         example = f.metadata.get("example")
@@ -554,9 +554,31 @@ def example_lines(cls: type, instance: Any = None, notes: dict[str, str] | None 
             shown = bool(shown)
         elif shown is None:
             shown = True
-        comment = " ".join(t for t in (field_comment(cls, f), notes.get(f.name, "")) if t)
-        out += _key_lines(f.name, toml_value(value), comment, not shown or commented_keys)
+        entries.append((f.name, toml_value(value), field_comment(cls, f), notes.get(f.name, ""),
+                        not shown or commented_keys))
+    out: list[str] = []
+    i = 0
+    while i < len(entries):
+        j = i
+        while entries[i][2] and j + 1 < len(entries) and entries[j + 1][2] == entries[i][2]:
+            j += 1  # keys documented together (numpydoc "a, b : float"): the comment once, above them
+        if j > i:
+            out += [f"# {p}" for p in _wrap(entries[i][2], EXAMPLE_WIDTH - 2)]
+            for key, value, _, note, commented in entries[i:j + 1]:
+                out += _key_lines(key, value, note, commented)
+        else:
+            key, value, comment, note, commented = entries[i]
+            out += _key_lines(key, value, " ".join(t for t in (comment, note) if t), commented)
+        i = j + 1
     return out
+
+
+def _wrap(text: str, width: int) -> list[str]:
+    """``text`` wrapped to ``width`` columns; ``"\\n"`` starts a new line."""
+    pieces = []
+    for paragraph in text.split("\n"):
+        pieces += textwrap.wrap(paragraph, width, break_long_words=False, break_on_hyphens=False) or [""]
+    return pieces
 
 
 def _key_lines(key: str, value: str, comment: str, commented: bool) -> list[str]:
@@ -566,10 +588,7 @@ def _key_lines(key: str, value: str, comment: str, commented: bool) -> list[str]
         return [head]
     above = len(head) + 1 > VALUE_COLUMN + 8
     column = 0 if above else max(VALUE_COLUMN, len(head) + 1)
-    pieces = []
-    for paragraph in comment.split("\n"):
-        pieces += textwrap.wrap(paragraph, EXAMPLE_WIDTH - column - 2, break_long_words=False,
-                                break_on_hyphens=False) or [""]
+    pieces = _wrap(comment, EXAMPLE_WIDTH - column - 2)
     if above:
         return [f"# {p}".rstrip() for p in pieces] + [head]
     lead = "#" if commented else ""
