@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
-import json
 import textwrap
 import tomllib
 from collections.abc import Callable, Iterable, Sequence
@@ -251,7 +250,8 @@ class Like:
 
 
 def typed_value(section: str, key: str, value: Any, default: Any) -> Any:
-    """``value`` checked against the type of ``default`` (bool, int, float, str, or a tuple of them)."""
+    """``value`` checked against the type of ``default`` (bool, int, float, str, or a tuple of them: a list,
+    non-empty unless the default is empty)."""
     if isinstance(default, bool):
         return boolean(section, key, value)
     if isinstance(default, int):
@@ -261,7 +261,7 @@ def typed_value(section: str, key: str, value: Any, default: Any) -> Any:
     if isinstance(default, str):
         return string(section, key, value)
     if isinstance(default, tuple | list):
-        if not isinstance(value, list | tuple) or len(value) == 0:
+        if not isinstance(value, list | tuple) or (len(value) == 0 and len(default) > 0):
             raise ConfigError(f"{where(section, key)} must be a non-empty list like {list(default)}, got "
                               f"{describe(value)}")
         item = default[0] if default else 0.0
@@ -499,7 +499,7 @@ def toml_value(value: Any) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, str):
-        return json.dumps(value)
+        return _toml_string(value)
     if isinstance(value, float):
         text = repr(value)
         if "e" in text and np.isfinite(value):
@@ -517,6 +517,15 @@ def toml_value(value: Any) -> str:
     if isinstance(value, dict):
         return "{" + ", ".join(f"{k} = {toml_value(v)}" for k, v in value.items()) + "}"
     raise TypeError(f"no TOML form for {value!r}")
+
+
+_ESCAPES = {'"': '\\"', "\\": "\\\\", "\b": "\\b", "\t": "\\t", "\n": "\\n", "\f": "\\f", "\r": "\\r"}
+
+
+def _toml_string(text: str) -> str:
+    """A TOML basic string: quotes, backslashes and control characters escaped."""
+    out = [_ESCAPES.get(ch) or (f"\\u{ord(ch):04x}" if ord(ch) < 0x20 or ord(ch) == 0x7F else ch) for ch in text]
+    return '"' + "".join(out) + '"'
 
 
 def inline_table(cls: type, **values: Any) -> str:
