@@ -286,8 +286,8 @@ def setting(default: Any, comment: str, check: Check | None = None, *, example: 
     example : Any, optional
         The value the documented file shows instead of the default (for keys without one).
     shown : bool, optional
-        Whether the documented file sets the key (True) or shows it commented out (False); default: set when
-        it has a default or is given an ``example`` with a default of None ... (see :func:`example_lines`).
+        Whether the documented file sets the key (True) or shows it commented out (False). Default: a key
+        with a default is set to it; a key whose default is None is shown commented out with its ``example``.
     """
     return dataclasses.field(default=default, metadata={"comment": comment, "check": check, "example": example,
                                                         "shown": shown})

@@ -268,3 +268,16 @@ def test_the_world_page_snippet_is_the_shipped_room_config():
                 assert all(shipped[k] == v for k, v in mover.items()), mover
         for key, value in keys.items():
             assert room[section][key] == value, (section, key)
+
+
+def test_the_configuration_page_shows_the_generated_examples():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("gen_pages", ROOT / "docs" / "gen_pages.py")
+    gen = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(gen)
+    page = gen.config_reference()
+    for text in (EXAMPLE_TOML, world_example_toml(), study_example_toml()):
+        assert text.rstrip() in page
+    config_md = (ROOT / "docs" / "config.md").read_text(encoding="utf-8")
+    assert "literalinclude} ../scenes/experiments/reproduce.toml" in config_md  # the generated file, tested above
