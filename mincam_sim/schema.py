@@ -413,7 +413,8 @@ class Schema:
     def tables(self, raw: Any) -> dict[str, Any]:
         """Each part's table (``{}`` / ``[]`` when absent) from a parsed document, after refusing unknown
         sections, sections that are no table, and a ``[name]`` table where ``[[name]]`` tables belong."""
-        raw = table("the document", raw) if not isinstance(raw, dict) else raw
+        if not isinstance(raw, dict):
+            raise ConfigError(f"a TOML document is a table of sections, got {describe(raw)}")
         bad = [k for k in raw if not isinstance(k, str)]
         if bad:
             raise ConfigError(f"section names must be strings, got {bad[0]!r}")
@@ -453,11 +454,9 @@ class Schema:
         own = {k: v for k, v in table(part.header, given).items() if k not in subs}
         return read_section(name, own, part.cls, base)
 
-    def example(self, instances: dict[str, Any] | None = None, notes: dict[str, dict[str, str]] | None = None,
-                commented_keys: bool = False) -> str:
+    def example(self, notes: dict[str, dict[str, str]] | None = None, commented_keys: bool = False) -> str:
         """The documented file: the title, then every section with every key, its default and its comment.
 
-        ``instances`` gives the values to show for some sections (default: the dataclass's defaults);
         ``notes[section][key]`` is appended to a key's comment; ``commented_keys`` writes every key commented
         out (a file whose keys are all optional and would override other defaults if set).
         """
@@ -467,9 +466,7 @@ class Schema:
             lines += [_comment(t) for t in part.intro.splitlines()]
             lines.append(f"# {part.header}" if part.commented else part.header)
             if part.cls is not None:
-                instance = (instances or {}).get(part.name)
-                lines += example_lines(part.cls, instance, (notes or {}).get(part.name, {}),
-                                       commented_keys or part.commented)
+                lines += example_lines(part.cls, (notes or {}).get(part.name, {}), commented_keys or part.commented)
             lines += [_comment_out(b) for b in part.example.splitlines()] if part.commented else \
                 part.example.splitlines()
         return "\n".join(lines).strip("\n") + "\n"
@@ -541,15 +538,15 @@ def field_comment(cls: type, f: dataclasses.Field) -> str:
     return attribute_docs(cls).get(f.name, "")
 
 
-def example_lines(cls: type, instance: Any = None, notes: dict[str, str] | None = None,
-                  commented_keys: bool = False) -> list[str]:
+def example_lines(cls: type, notes: dict[str, str] | None = None, commented_keys: bool = False) -> list[str]:
     """``key = value  # comment`` lines of every field of ``cls``.
 
     A field with a default of None is optional: shown commented out with its ``example`` (or left out of the
     file with no example); a field with an ``example`` and a None default is shown set to the example when
-    its ``shown`` is True. Long comments continue on the next lines, aligned.
+    its ``shown`` is True. Long comments continue on the next lines, aligned; fields documented together
+    (numpydoc ``a, b : float``) share one comment, written above them.
     """
-    instance = cls() if instance is None else instance
+    instance = cls()
     notes = notes or {}
     entries = []
     for f in _fields(cls):
