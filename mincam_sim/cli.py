@@ -390,14 +390,29 @@ def render(
 @app.command("config-example")
 def config_example(
     world: Annotated[bool, typer.Option("--world", help="the world-scene config (your own scene from a file)")] = False,
+    reproduce: Annotated[bool, typer.Option("--reproduce", help="the reproduce config (reproduce --config FILE): "
+                                                                 "[setup] and every experiment's parameters")] = False,
+    study: Annotated[bool, typer.Option("--study", help="a study file (study run FILE)")] = False,
 ) -> None:
-    """Print the documented TOML schema with every default."""
+    """Print a documented TOML file with every key and its default (a render config unless an option says
+    which file)."""
+    if world + reproduce + study > 1:
+        raise ConfigError("config-example prints one file: give at most one of --world, --reproduce, --study")
     if world:
         from .world_config import world_example_toml
 
-        typer.echo(world_example_toml(), nl=False)
-        return
-    typer.echo(EXAMPLE_TOML)
+        text = world_example_toml()
+    elif reproduce:
+        from .experiments.reproduce_file import reproduce_example_toml
+
+        text = reproduce_example_toml()
+    elif study:
+        from .studies.spec import study_example_toml
+
+        text = study_example_toml()
+    else:
+        text = EXAMPLE_TOML
+    typer.echo(text, nl=False)
 
 
 @masks_app.command("generate")

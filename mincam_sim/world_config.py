@@ -1,10 +1,10 @@
 """TOML configuration of a world render: your own scene (a Mitsuba XML file and/or meshes and lights), movers on
 trajectories, the mincam in the scene's world coordinates (pure Python/numpy; validated field by field).
 
-The schema and its documented example come from one table, :data:`WORLD_SCHEMA` (``mincam-sim
-config-example --world`` prints :func:`world_example_toml`). Every problem raises
-:class:`~mincam_sim.errors.ConfigError` naming the field and the fix. Relative paths resolve against the
-config file's directory.
+The sections are dataclasses of :mod:`mincam_sim.schema` (the ``[mincam]`` section extends the render file's);
+:data:`WORLD_SCHEMA` lists them and writes the documented example (``mincam-sim config-example --world`` prints
+:func:`world_example_toml`). Every problem raises :class:`~mincam_sim.errors.ConfigError` naming the field and
+the fix. Relative paths resolve against the config file's directory.
 """
 
 from __future__ import annotations
@@ -16,132 +16,211 @@ from typing import Any
 
 import numpy as np
 
-from .config import (
-    _SCHEMA,
-    ConfigError,
-    _build_mincam,
-    _check_keys,
-    _choice,
-    _describe,
-    _integer,
-    _number,
-    _path,
-    _read_source,
-    _string,
-    _table,
-    _vector,
-)
+from .config import MincamSection, MixelTable, _build_mincam
+from .errors import ConfigError
 from .geometry import Pose
 from .optics import Mincam
+from .schema import (
+    Choice,
+    Integer,
+    Number,
+    Part,
+    Schema,
+    Text,
+    Vector,
+    describe,
+    read_document,
+    read_section,
+    setting,
+)
+from .schema import number as _number
+from .schema import path as _path
+from .schema import string as _string
+from .schema import vector as _vector
 
 ESTIMATORS = ("stratified", "plain")
 UP_AXES = ("z", "y")
 LIGHT_KINDS = ("area", "point", "spot", "sky")
+BACKGROUNDS = ("without_movers", "as_built", "first_frame")
 MAX_WORLD_FRAMES = 1_000_000
 
-# (section, key, default, comment): the one source of the defaults and of the documented example
-WORLD_SCHEMA: list[tuple[str, str, Any, str]] = [
-    ("run", "estimator", "stratified", '"stratified" (rays where the change is) or "plain" (the reference)'),
-    ("run", "spp", 16384, "rays per mixel per frame and pass"),
-    ("run", "target_rel_stderr", 0.0, "> 0: raise spp until the worst significant dP reaches this"),
-    ("run", "replicates", 8, "independent estimates per value, for the standard error"),
-    ("run", "seed", 0, "same seed, same numbers"),
-    ("run", "max_depth", 3, "path length from the mask: 2 = direct light, 3 = one inter-reflection"),
-    ("run", "variant", "", '"" = automatic (cuda_ad_mono > llvm_ad_mono)'),
-    ("run", "out_dir", "out/world", "measurements.npz / .csv and a plot of dP; relative to this file"),
-    ("mincam", "layout", "cross", '"pair", "cross" or "custom" ([[mixel]] tables, poses in world coordinates)'),
-    ("mincam", "position_m", [0.0, 0.0, 0.5], "pair / cross: the centre of the layout, world coordinates"),
-    ("mincam", "forward", [0.0, 0.0, -1.0], "pair / cross: viewing direction"),
-    ("mincam", "up", [0.0, 1.0, 0.0], "pair / cross: the layout's up (its +y)"),
-    ("world", "scene", "", "a Mitsuba 3 XML scene (relative to this file); shapes addressed by their id"),
-    ("world", "up", "z", '"z", or "y" for a scene authored y-up (turned so that its +y is the world +z)'),
-    ("world", "frame_rate_hz", 30.0, "frames per second: the time column, and keyframe sampling"),
-    ("world", "background", "without_movers", '"without_movers" (movers removed), "as_built", or "first_frame"'),
-]
-_OBJECT_KEYS = {"id": None, "mesh": None, "albedo": 0.8, "position_m": [0.0, 0.0, 0.0],
-                "rotation_deg": [0.0, 0.0, 0.0], "scale": 1.0}
-_LIGHT_KEYS = {"id": None, "kind": None, "position_m": [0.0, 0.0, 1.0], "forward": [0.0, 0.0, -1.0],
-               "size_m": [0.3, 0.3], "radiance_w_m2_sr": 10.0, "intensity_w_sr": 1.0, "cutoff_deg": 20.0}
-_MOVER_KEYS = {"id": None, "offsets_m": None, "rotations_deg": None, "times_s": None, "keyframes_m": None,
-               "csv": None}
-_CAMERA_KEYS = {"position_m": None, "look_at_m": None, "up": [0.0, 1.0, 0.0], "fov_deg": 60.0, "width_px": 160,
-                "height_px": 120, "spp": 64, "threshold": 0.05}
+
+def _world_variant(section: str, key: str, value: Any) -> str:
+    if value not in ("", "cuda_ad_mono", "llvm_ad_mono"):
+        raise ConfigError(f"[run] variant {value!r}: world scenes need '', 'cuda_ad_mono' or 'llvm_ad_mono'")
+    return value
 
 
-def _defaults(section: str) -> dict:
-    return {key: default for s, key, default, _ in WORLD_SCHEMA if s == section}
+def _rows_check(width: int):
+    def check(section: str, key: str, value: Any) -> np.ndarray:
+        return _rows(section, key, value, width)
+    return check
 
 
-def _mincam_defaults() -> dict:
-    return {**_SCHEMA["mincam"], **_defaults("mincam")}
+def _times(section: str, key: str, value: Any) -> list[float]:
+    if not isinstance(value, list) or not value:
+        raise ConfigError(f"{section}: {key} must be a non-empty list of times in seconds, got {describe(value)}")
+    return [_number(section, f"{key}[{j}]", v) for j, v in enumerate(value)]
+
+
+def _below(limit: float):
+    def check(section: str, key: str, value: Any) -> float:
+        v = _number(section, key, value, positive=True)
+        if v >= limit:
+            raise ConfigError(f"{section} {key} must be below {limit:g}, got {v}")
+        return v
+    return check
+
+
+def _positive_pair(section: str, key: str, value: Any) -> tuple[float, float]:
+    size = _vector(section, key, value, 2)
+    if min(size) <= 0:
+        raise ConfigError(f"{section}: {key} must be two positive lengths, got {list(size)}")
+    return size  # type: ignore[return-value]
+
+
+def _world_id(section: str, key: str, value: Any) -> str:
+    text = _string(section, key, value)
+    if not text or "." in text or text.strip() != text:
+        raise ConfigError(f"{section}: id {text!r} must be a non-empty name without '.' or surrounding spaces")
+    return text
+
+
+# ------------------------------------------------------------------------------------------------ sections
+@dataclass(frozen=True)
+class WorldRunSection:
+    """``[run]`` of a world render: the estimator and its budget."""
+
+    estimator: str = setting("stratified", '"stratified" (rays where the change is) or "plain" (the reference)',
+                             Choice(ESTIMATORS))
+    spp: int = setting(16384, "rays per mixel per frame and pass", Integer())
+    target_rel_stderr: float = setting(0.0, "> 0: raise spp until the worst significant dP reaches this",
+                                       Number(minimum=0.0))
+    replicates: int = setting(8, "independent estimates per value, for the standard error",
+                              Integer(minimum=2, maximum=4096))
+    seed: int = setting(0, "same seed, same numbers", Integer(minimum=0))
+    max_depth: int = setting(3, "path length from the mask: 2 = direct light, 3 = one inter-reflection",
+                             Integer(minimum=2, maximum=16))
+    variant: str = setting("", '"" = automatic (cuda_ad_mono > llvm_ad_mono)', _world_variant)
+    out_dir: str = setting("out/world", "measurements.npz / .csv and a plot of dP; relative to this file", Text())
+
+
+@dataclass(frozen=True)
+class WorldMincamSection(MincamSection):
+    """``[mincam]`` of a world render: the display config's keys, the layout's pose in world coordinates."""
+
+    layout: str = setting("cross", '"pair", "cross" or "custom" ([[mixel]] tables, poses in world coordinates)',
+                          Choice(("pair", "cross", "custom")))
+    position_m: tuple[float, float, float] = setting((0.0, 0.0, 0.5), "pair / cross: the centre of the layout, "
+                                                     "world coordinates", Vector(3))
+    forward: tuple[float, float, float] = setting((0.0, 0.0, -1.0), "pair / cross: viewing direction", Vector(3))
+    up: tuple[float, float, float] = setting((0.0, 1.0, 0.0), "pair / cross: the layout's up (its +y)", Vector(3))
+
+
+@dataclass(frozen=True)
+class WorldSection:
+    """``[world]``: the scene file, its orientation and timing."""
+
+    scene: str = setting("", "a Mitsuba 3 XML scene (relative to this file); shapes addressed by their id", Text())
+    up: str = setting("z", '"z", or "y" for a scene authored y-up (turned so that its +y is the world +z)',
+                      Choice(UP_AXES))
+    frame_rate_hz: float = setting(30.0, "frames per second: the time column, and keyframe sampling",
+                                   Number(positive=True))
+    background: str = setting("without_movers", '"without_movers" (movers removed), "as_built", or "first_frame"',
+                              Choice(BACKGROUNDS))
+
+
+@dataclass(frozen=True)
+class ObjectTable:
+    """One ``[[world.object]]``: a mesh file placed in the scene."""
+
+    id: str | None = setting(None, "the name movers and parameters use (required)", _world_id, example="toy",
+                             shown=True)
+    mesh: str | None = setting(None, "OBJ, PLY, STL, glTF/GLB (read by trimesh; relative to this file; required)",
+                               Text(), example="toy.obj", shown=True)
+    albedo: float = setting(0.8, "diffuse grey reflectance in [0, 1]", Number(minimum=0.0, maximum=1.0))
+    position_m: tuple[float, float, float] = setting((0.0, 0.0, 0.0), "where its file origin goes", Vector(3))
+    rotation_deg: tuple[float, float, float] = setting((0.0, 0.0, 0.0), "about x, then y, then z (degrees)",
+                                                       Vector(3))
+    scale: float = setting(1.0, "file units to metres", Number(positive=True))
+
+
+@dataclass(frozen=True)
+class LightTable:
+    """One ``[[world.light]]``: an emitter added to the scene."""
+
+    id: str | None = setting(None, "its name (required)", _world_id, example="lamp", shown=True)
+    kind: str | None = setting(None, '"area" (a square emitting along forward), "point", "spot", "sky" (required)',
+                               Choice(LIGHT_KINDS), example="area", shown=True)
+    position_m: tuple[float, float, float] = setting((0.0, 0.0, 1.0), "its centre", Vector(3))
+    forward: tuple[float, float, float] = setting((0.0, 0.0, -1.0), "area and spot lights: where they shine",
+                                                  Vector(3))
+    size_m: tuple[float, float] = setting((0.3, 0.3), "area lights: width, height", _positive_pair)
+    radiance_w_m2_sr: float = setting(10.0, "area lights and sky", Number(minimum=0.0))
+    intensity_w_sr: float = setting(1.0, "point and spot lights", Number(minimum=0.0))
+    cutoff_deg: float = setting(20.0, "spot lights: half-angle of the cone (below 90)", _below(90.0))
+
+
+@dataclass(frozen=True)
+class MoverTable:
+    """One ``[[world.mover]]``: a moving shape and its trajectory (one of offsets_m, keyframes_m with times_s, or
+    csv)."""
+
+    id: str | None = setting(None, "a shape of the XML scene or an object above (required)", _world_id,
+                             example="toy", shown=True)
+    offsets_m: Any = setting(None, "each frame's displacement from where the scene places it", _rows_check(3),
+                             example=((-0.1, 0.0, 0.0), (0.0, 0.0, 0.0), (0.1, 0.0, 0.0)), shown=True)
+    rotations_deg: Any = setting(None, "optional: each frame's rotation about the shape's centre (x, y, z)",
+                                 _rows_check(3), example=((0, 0, 0), (0, 0, 45), (0, 0, 90)))
+    times_s: Any = setting(None, "keyframe times, increasing, instead of offsets_m ...", _times,
+                           example=(0.0, 1.0))
+    keyframes_m: Any = setting(None, "... the displacement at each, sampled at frame_rate_hz", _rows_check(3),
+                               example=((-0.1, 0, 0), (0.1, 0, 0)))
+    csv: str | None = setting(None, "or a file of t_s,x_m,y_m,z_m rows (relative to this file)", Text(),
+                              example="path.csv")
+
+
+@dataclass(frozen=True)
+class CameraTable:
+    """``[world.camera]``: the optional ground-truth pinhole camera."""
+
+    position_m: tuple[float, float, float] | None = setting(None, "its centre (required)", Vector(3),
+                                                            example=(0.0, 0.0, 0.5), shown=True)
+    look_at_m: tuple[float, float, float] | None = setting(None, "the point it looks at (required)", Vector(3),
+                                                           example=(0.0, 0.0, 0.0), shown=True)
+    up: tuple[float, float, float] = setting((0.0, 1.0, 0.0), "the image's up", Vector(3))
+    fov_deg: float = setting(60.0, "field of view (below 180)", _below(180.0))
+    width_px: int = setting(160, "image width", Integer(maximum=8192))
+    height_px: int = setting(120, "image height", Integer(maximum=8192))
+    spp: int = setting(64, "samples per pixel", Integer(maximum=1 << 20))
+    threshold: float = setting(0.05, "change detected where |image - background| > threshold x background max",
+                               Number(positive=True))
+
+
+#: The world render file: its sections, in the order the documented example shows them.
+WORLD_SCHEMA = Schema(
+    "mincam-sim render configuration of a world scene (mincam-sim render world.toml).\n"
+    "Units are in the key names: _m metres, _deg degrees, _s seconds, _hz per second, _w_m2_sr radiance.",
+    (Part("run", WorldRunSection), Part("mincam", WorldMincamSection),
+     Part("mixel", MixelTable, array=True, commented=True,
+          intro='For layout = "custom", one table per mixel (poses in world coordinates), as in display configs:'),
+     Part("world", WorldSection),
+     Part("world.object", ObjectTable, array=True,
+          intro="Objects and lights declared here (in addition to, or instead of, the XML scene):"),
+     Part("world.light", LightTable, array=True),
+     Part("world.mover", MoverTable, array=True,
+          intro="One per moving shape (a shape of the XML scene or an object above), each frame's displacement "
+                "from where\nthe scene places it (one of: offsets_m, or keyframes_m at times_s, or a csv of "
+                "t_s,x_m,y_m,z_m rows):"),
+     Part("world.camera", CameraTable, commented=True,
+          intro="Optional ground-truth pinhole camera: images of every frame and the centroid of each frame's "
+                "change")),
+)
 
 
 def world_example_toml() -> str:
-    """The documented world config, every key with its default (generated from :data:`WORLD_SCHEMA`)."""
-    lines = ["# mincam-sim render configuration of a world scene (mincam-sim render world.toml).",
-             "# Units are in the key names: _m metres, _deg degrees, _s seconds, _hz per second, _w_m2_sr radiance.",
-             ""]
-    for section in ("run", "mincam", "world"):
-        lines.append(f"[{section}]")
-        for s, key, default, comment in WORLD_SCHEMA:
-            if s == section:
-                lines.append(f"{key} = {_toml(default):<18} # {comment}")
-        if section == "mincam":
-            lines += [f"{k} = {_toml(v):<18} # as in display configs" for k, v in _SCHEMA["mincam"].items()
-                      if k not in ("layout",)]
-        lines.append("")
-    lines += [
-        "# Objects and lights declared here (in addition to, or instead of, the XML scene):",
-        "[[world.object]]",
-        'id = "toy"                 # the name movers and parameters use',
-        'mesh = "toy.obj"           # OBJ, PLY, STL, glTF/GLB (read by trimesh; relative to this file)',
-        "albedo = 0.8               # diffuse grey reflectance in [0, 1]",
-        "position_m = [0.0, 0.0, 0.0]",
-        "rotation_deg = [0.0, 0.0, 0.0]   # about x, then y, then z (degrees)",
-        "scale = 1.0                # file units to metres",
-        "",
-        "[[world.light]]",
-        'id = "lamp"',
-        'kind = "area"              # "area" (a square emitting along forward), "point", "spot", "sky"',
-        "position_m = [0.0, 0.0, 1.2]",
-        "forward = [0.0, 0.0, -1.0]",
-        "size_m = [0.3, 0.3]        # area lights",
-        "radiance_w_m2_sr = 10.0    # area lights and sky",
-        "intensity_w_sr = 1.0       # point and spot lights",
-        "cutoff_deg = 20.0          # spot lights",
-        "",
-        "# One per moving shape (a shape of the XML scene or an object above), each frame's displacement from where",
-        "# the scene places it (one of: offsets_m, or keyframes_m at times_s, or a csv of t_s,x_m,y_m,z_m rows):",
-        "[[world.mover]]",
-        'id = "toy"',
-        "offsets_m = [[-0.1, 0.0, 0.0], [0.0, 0.0, 0.0], [0.1, 0.0, 0.0]]",
-        "# rotations_deg = [[0, 0, 0], [0, 0, 45], [0, 0, 90]]   # optional, about the shape's centre",
-        "# times_s = [0.0, 1.0]                          # keyframes instead of offsets_m ...",
-        "# keyframes_m = [[-0.1, 0, 0], [0.1, 0, 0]]     # ... sampled at frame_rate_hz",
-        '# csv = "path.csv"',
-        "",
-        "# Optional ground-truth pinhole camera: images of every frame and the centroid of each frame's change",
-        "# [world.camera]",
-        "# position_m = [0.0, 0.0, 0.5]",
-        "# look_at_m = [0.0, 0.0, 0.0]",
-        "# up = [0.0, 1.0, 0.0]",
-        "# fov_deg = 60.0",
-        "# width_px = 160",
-        "# height_px = 120",
-        "# spp = 64",
-        "# threshold = 0.05        # change detected where |image - background| > threshold x background max",
-    ]
-    return "\n".join(lines) + "\n"
-
-
-def _toml(value: Any) -> str:
-    if isinstance(value, str):
-        return f'"{value}"'
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, list):
-        return "[" + ", ".join(_toml(v) for v in value) + "]"
-    return repr(value)
+    """The documented world config, every key with its default (written from :data:`WORLD_SCHEMA`)."""
+    return WORLD_SCHEMA.example()
 
 
 @dataclass(frozen=True)
@@ -226,7 +305,7 @@ class WorldConfig:
 
 def is_world_config(source: str | Path | dict) -> bool:
     """True when a TOML document describes a world scene (it has a ``[world]`` section)."""
-    raw, _, _ = _read_source(source, None)
+    raw, _, _ = read_document(source, None)
     return isinstance(raw, dict) and "world" in raw
 
 
@@ -238,51 +317,34 @@ def load_world_config(source: str | Path | dict, base_dir: str | Path | None = N
     ConfigError
         For every problem with the document: the message names the field and the fix.
     """
-    raw, base, path = _read_source(source, base_dir)
-    unknown = sorted(set(raw) - {"run", "mincam", "mixel", "world"})
-    if unknown:
-        raise ConfigError(f"unknown section(s) {unknown} in a world config; allowed: [run], [mincam], [[mixel]], "
-                          "[world] (with [[world.object]], [[world.light]], [[world.mover]], [world.camera])")
-    run = _check_keys("run", raw.get("run", {}), _defaults("run"))
-    estimator = _choice("run", "estimator", run["estimator"], ESTIMATORS)
-    spp = _integer("run", "spp", run["spp"])
-    replicates = _integer("run", "replicates", run["replicates"], minimum=2, maximum=4096)
-    if spp < replicates:
-        raise ConfigError(f"[run] spp = {spp} is fewer than replicates = {replicates}; each replicate needs rays")
-    target = _number("run", "target_rel_stderr", run["target_rel_stderr"], minimum=0.0)
-    seed = _integer("run", "seed", run["seed"], minimum=0)
-    max_depth = _integer("run", "max_depth", run["max_depth"], minimum=2, maximum=16)
-    variant = run["variant"]
-    if variant not in ("", "cuda_ad_mono", "llvm_ad_mono"):
-        raise ConfigError(f"[run] variant {variant!r}: world scenes need '', 'cuda_ad_mono' or 'llvm_ad_mono'")
-    out_dir = _path("run", "out_dir", run["out_dir"], base)
-    run_cfg = WorldRunConfig(estimator, spp, target, replicates, seed, max_depth, variant or None, out_dir)
-
-    mincam = _world_mincam(raw, base)
-    world = _table("[world]", raw["world"])
-    sub = {k: world.pop(k) for k in ("object", "light", "mover", "camera") if k in world}
-    w = _check_keys("world", world, _defaults("world"))
+    raw, base, path = read_document(source, base_dir)
+    tables = WORLD_SCHEMA.tables(raw)
+    run: WorldRunSection = WORLD_SCHEMA.read("run", tables["run"])
+    if run.spp < run.replicates:
+        raise ConfigError(f"[run] spp = {run.spp} is fewer than replicates = {run.replicates}; each replicate "
+                          "needs rays")
+    run_cfg = WorldRunConfig(run.estimator, run.spp, run.target_rel_stderr, run.replicates, run.seed, run.max_depth,
+                             run.variant or None, _path("run", "out_dir", run.out_dir, base))
+    mincam = _world_mincam(WORLD_SCHEMA.read("mincam", tables["mincam"]), tables["mixel"], base)
+    w: WorldSection = WORLD_SCHEMA.read("world", tables["world"])
     files: list[Path] = []
     scene_file = None
-    if w["scene"]:
-        scene_file = _path("world", "scene", w["scene"], base)
+    if w.scene:
+        scene_file = _path("world", "scene", w.scene, base)
         if not scene_file.is_file():
             raise ConfigError(f"[world] scene: {scene_file} does not exist (relative paths are taken from the "
                               "config's folder)")
         files.append(scene_file)
         files.extend(referenced_files(scene_file))
-    up = _choice("world", "up", w["up"], UP_AXES)
-    rate = _number("world", "frame_rate_hz", w["frame_rate_hz"], positive=True)
-    background = _choice("world", "background", w["background"], ("without_movers", "as_built", "first_frame"))
-    objects = [_object(i, t, base, files) for i, t in enumerate(_array("world.object", sub.get("object", [])))]
-    lights = [_light(i, t) for i, t in enumerate(_array("world.light", sub.get("light", [])))]
+    objects = [_object(i, t, base, files) for i, t in enumerate(tables["world.object"])]
+    lights = [_light(i, t) for i, t in enumerate(tables["world.light"])]
     if scene_file is None and not objects:
         raise ConfigError("[world] needs a scene = \"file.xml\" or at least one [[world.object]]")
     ids = [o.id for o in objects] + [light.id for light in lights]
     dupes = sorted({i for i in ids if ids.count(i) > 1})
     if dupes:
         raise ConfigError(f"[world] ids {dupes} are used twice; every object and light needs its own id")
-    movers = [_mover(i, t, base, rate, files) for i, t in enumerate(_array("world.mover", sub.get("mover", [])))]
+    movers = [_mover(i, t, base, w.frame_rate_hz, files) for i, t in enumerate(tables["world.mover"])]
     if not movers:
         raise ConfigError("[world] needs at least one [[world.mover]] (id = a shape, offsets_m = one per frame)")
     counts = {m.id: len(m.offsets_m) for m in movers}
@@ -291,9 +353,9 @@ def load_world_config(source: str | Path | dict, base_dir: str | Path | None = N
     names = [m.id for m in movers]
     if len(set(names)) != len(names):
         raise ConfigError(f"[[world.mover]] ids {names}: each shape can move in one mover table only")
-    camera = _camera(sub["camera"]) if "camera" in sub else None
-    return WorldConfig(run_cfg, mincam, scene_file, up, rate, background, objects, lights, movers, camera,
-                       raw, path, files)
+    camera = _camera(tables["world.camera"]) if "camera" in (raw.get("world") or {}) else None
+    return WorldConfig(run_cfg, mincam, scene_file, w.up, w.frame_rate_hz, w.background, objects, lights, movers,
+                       camera, raw, path, files)
 
 
 def referenced_files(xml_path: Path) -> list[Path]:
@@ -316,37 +378,17 @@ def referenced_files(xml_path: Path) -> list[Path]:
     return found
 
 
-def _array(where: str, value: Any) -> list:
-    if isinstance(value, dict):
-        raise ConfigError(f"[[{where}]] entries are an array of tables (double brackets), not a single [{where}]")
-    if not isinstance(value, list):
-        raise ConfigError(f"[[{where}]] must be an array of tables, got {_describe(value)}")
-    return [_table(f"[[{where}]] #{i + 1}", t) for i, t in enumerate(value)]
-
-
-def _id(where: str, value: Any) -> str:
+def _required(where: str, key: str, value: Any, what: str) -> Any:
     if value is None:
-        raise ConfigError(f"{where}: id is required (the name movers and parameters use)")
-    text = _string(where, "id", value)
-    if not text or "." in text or text.strip() != text:
-        raise ConfigError(f"{where}: id {text!r} must be a non-empty name without '.' or surrounding spaces")
-    return text
+        raise ConfigError(f"{where}: {key} is required ({what})")
+    return value
 
 
-def _world_mincam(raw: dict, base: Path) -> Mincam:
-    tables = raw.get("mixel", [])
-    if isinstance(tables, dict) or not isinstance(tables, list):
-        raise ConfigError("mixels are given as [[mixel]] tables (an array of tables, double brackets)")
-    for i, table in enumerate(tables):
-        _table(f"[[mixel]] #{i + 1}", table)
-    m = _check_keys("mincam", raw.get("mincam", {}), _mincam_defaults())
-    centre = {k: m.pop(k) for k in ("position_m", "forward", "up")}
+def _world_mincam(m: WorldMincamSection, tables: list, base: Path) -> Mincam:
     mincam = _build_mincam(m, tables, base)
-    if m["layout"] == "custom":
+    if m.layout == "custom":
         return mincam
-    position = np.array(_vector("mincam", "position_m", centre["position_m"], 3))
-    forward = np.array(_vector("mincam", "forward", centre["forward"], 3))
-    up = np.array(_vector("mincam", "up", centre["up"], 3))
+    position, forward, up = np.array(m.position_m), np.array(m.forward), np.array(m.up)
     if np.linalg.norm(forward) == 0 or np.linalg.norm(np.cross(forward, up)) < 1e-9:
         raise ConfigError("[mincam] forward must be non-zero and up must not be parallel to it")
     target = Pose(tuple(position), tuple(forward), tuple(up)).matrix()
@@ -358,48 +400,32 @@ def _world_mincam(raw: dict, base: Path) -> Mincam:
     return Mincam(mixels, allow_overlap=mincam.allow_overlap)
 
 
-def _object(i: int, table: dict, base: Path, files: list[Path]) -> WorldObject:
+def _object(i: int, given: dict, base: Path, files: list[Path]) -> WorldObject:
     where = f"[[world.object]] #{i + 1}"
-    t = _check_keys(where, table, _OBJECT_KEYS)
-    oid = _id(where, t["id"])
-    if t["mesh"] is None:
-        raise ConfigError(f"{where} ({oid}): mesh is required (a mesh file: OBJ, PLY, STL, glTF/GLB)")
-    mesh = _path(where, "mesh", t["mesh"], base)
+    t: ObjectTable = read_section(where, given, ObjectTable)
+    oid = _required(where, "id", t.id, "the name movers and parameters use")
+    _required(f"{where} ({oid})", "mesh", t.mesh, "a mesh file: OBJ, PLY, STL, glTF/GLB")
+    mesh = _path(where, "mesh", t.mesh, base)
     if not mesh.is_file():
         raise ConfigError(f"{where} ({oid}): mesh file {mesh} does not exist (relative to the config's folder)")
     files.append(mesh)
-    albedo = _number(where, "albedo", t["albedo"], minimum=0.0)
-    if albedo > 1:
-        raise ConfigError(f"{where} ({oid}): albedo must lie in [0, 1], got {albedo}")
-    return WorldObject(oid, mesh, albedo, _vector(where, "position_m", t["position_m"], 3),
-                       _vector(where, "rotation_deg", t["rotation_deg"], 3),
-                       _number(where, "scale", t["scale"], positive=True))
+    return WorldObject(oid, mesh, t.albedo, t.position_m, t.rotation_deg, t.scale)
 
 
-def _light(i: int, table: dict) -> WorldLight:
+def _light(i: int, given: dict) -> WorldLight:
     where = f"[[world.light]] #{i + 1}"
-    t = _check_keys(where, table, _LIGHT_KEYS)
-    lid = _id(where, t["id"])
-    if t["kind"] is None:
-        raise ConfigError(f"{where} ({lid}): kind is required: one of {', '.join(LIGHT_KINDS)}")
-    kind = _choice(where, "kind", t["kind"], LIGHT_KINDS)
-    forward = _vector(where, "forward", t["forward"], 3)
-    if np.linalg.norm(forward) == 0:
+    t: LightTable = read_section(where, given, LightTable)
+    lid = _required(where, "id", t.id, "its name")
+    kind = _required(f"{where} ({lid})", "kind", t.kind, f"one of {', '.join(LIGHT_KINDS)}")
+    if np.linalg.norm(t.forward) == 0:
         raise ConfigError(f"{where} ({lid}): forward must be a non-zero direction")
-    size = _vector(where, "size_m", t["size_m"], 2)
-    if min(size) <= 0:
-        raise ConfigError(f"{where} ({lid}): size_m must be two positive lengths, got {list(size)}")
-    cutoff = _number(where, "cutoff_deg", t["cutoff_deg"], positive=True)
-    if cutoff >= 90:
-        raise ConfigError(f"{where} ({lid}): cutoff_deg must be below 90, got {cutoff}")
-    return WorldLight(lid, kind, _vector(where, "position_m", t["position_m"], 3), forward, size,
-                      _number(where, "radiance_w_m2_sr", t["radiance_w_m2_sr"], minimum=0.0),
-                      _number(where, "intensity_w_sr", t["intensity_w_sr"], minimum=0.0), cutoff)
+    return WorldLight(lid, kind, t.position_m, t.forward, t.size_m, t.radiance_w_m2_sr, t.intensity_w_sr,
+                      t.cutoff_deg)
 
 
 def _rows(where: str, key: str, value: Any, width: int) -> np.ndarray:
     if not isinstance(value, list) or not value:
-        raise ConfigError(f"{where}: {key} must be a non-empty list of [x, y, z] rows, got {_describe(value)}")
+        raise ConfigError(f"{where}: {key} must be a non-empty list of [x, y, z] rows, got {describe(value)}")
     rows = [_vector(where, f"{key}[{j}]", row, width) for j, row in enumerate(value)]
     arr = np.array(rows, dtype=float)
     if not np.all(np.isfinite(arr)):
@@ -407,32 +433,30 @@ def _rows(where: str, key: str, value: Any, width: int) -> np.ndarray:
     return arr
 
 
-def _mover(i: int, table: dict, base: Path, rate: float, files: list[Path]) -> Mover:
+def _mover(i: int, given: dict, base: Path, rate: float, files: list[Path]) -> Mover:
     where = f"[[world.mover]] #{i + 1}"
-    t = _check_keys(where, table, _MOVER_KEYS)
-    mid = _id(where, t["id"])
+    t: MoverTable = read_section(where, given, MoverTable)
+    mid = _required(where, "id", t.id, "a shape of the scene or an object")
     where = f"{where} ({mid})"
-    given = [k for k in ("offsets_m", "keyframes_m", "csv") if t[k] is not None]
-    if len(given) != 1:
+    trajectories = {"offsets_m": t.offsets_m, "keyframes_m": t.keyframes_m, "csv": t.csv}
+    chosen = [k for k, v in trajectories.items() if v is not None]
+    if len(chosen) != 1:
         raise ConfigError(f"{where}: give exactly one of offsets_m, keyframes_m (with times_s) or csv; got "
-                          f"{given or 'none'}")
-    if t["offsets_m"] is not None:
-        offsets = _rows(where, "offsets_m", t["offsets_m"], 3)
-    elif t["keyframes_m"] is not None:
-        keys = _rows(where, "keyframes_m", t["keyframes_m"], 3)
-        offsets = _sample_keyframes(where, t["times_s"], keys, rate)
+                          f"{chosen or 'none'}")
+    if t.offsets_m is not None:
+        offsets = t.offsets_m
+    elif t.keyframes_m is not None:
+        offsets = _sample_keyframes(where, t.times_s, t.keyframes_m, rate)
     else:
-        csv_path = _path(where, "csv", t["csv"], base)
+        csv_path = _path(where, "csv", t.csv, base)
         files.append(csv_path)
         times, keys = _read_trajectory_csv(where, csv_path)
         offsets = _sample_keyframes(where, times, keys, rate)
     if len(offsets) > MAX_WORLD_FRAMES:
         raise ConfigError(f"{where}: {len(offsets)} frames is more than {MAX_WORLD_FRAMES}")
-    rotations = None
-    if t["rotations_deg"] is not None:
-        rotations = _rows(where, "rotations_deg", t["rotations_deg"], 3)
-        if len(rotations) != len(offsets):
-            raise ConfigError(f"{where}: rotations_deg has {len(rotations)} rows but there are {len(offsets)} frames")
+    rotations = t.rotations_deg
+    if rotations is not None and len(rotations) != len(offsets):
+        raise ConfigError(f"{where}: rotations_deg has {len(rotations)} rows but there are {len(offsets)} frames")
     return Mover(mid, offsets, rotations)
 
 
@@ -440,7 +464,7 @@ def _sample_keyframes(where: str, times: Any, keys: np.ndarray, rate: float) -> 
     if times is None:
         raise ConfigError(f"{where}: keyframes_m needs times_s (one time per keyframe, seconds, increasing)")
     if not isinstance(times, (list, np.ndarray)) or len(times) != len(keys):
-        raise ConfigError(f"{where}: times_s must list one time per keyframe ({len(keys)}), got {_describe(times)}")
+        raise ConfigError(f"{where}: times_s must list one time per keyframe ({len(keys)}), got {describe(times)}")
     t = np.array([_number(where, f"times_s[{j}]", v) for j, v in enumerate(times)], dtype=float)
     if len(t) < 2 or np.any(np.diff(t) <= 0):
         raise ConfigError(f"{where}: times_s must hold at least two increasing times, got {t.tolist()}")
@@ -478,21 +502,11 @@ def _numeric(row: list[str]) -> bool:
     return True
 
 
-def _camera(table: Any) -> CameraSpec:
+def _camera(given: dict) -> CameraSpec:
     where = "[world.camera]"
-    t = _check_keys("world.camera", _table(where, table), _CAMERA_KEYS)
-    for key in ("position_m", "look_at_m"):
-        if t[key] is None:
-            raise ConfigError(f"{where}: {key} is required")
-    position = _vector(where, "position_m", t["position_m"], 3)
-    look = _vector(where, "look_at_m", t["look_at_m"], 3)
+    t: CameraTable = read_section(where, given, CameraTable)
+    position = _required(where, "position_m", t.position_m, "the camera's centre [m]")
+    look = _required(where, "look_at_m", t.look_at_m, "the point it looks at [m]")
     if np.allclose(position, look):
         raise ConfigError(f"{where}: look_at_m must differ from position_m")
-    fov = _number(where, "fov_deg", t["fov_deg"], positive=True)
-    if fov >= 180:
-        raise ConfigError(f"{where}: fov_deg must be below 180, got {fov}")
-    threshold = _number(where, "threshold", t["threshold"], positive=True)
-    return CameraSpec(position, look, _vector(where, "up", t["up"], 3), fov,
-                      _integer(where, "width_px", t["width_px"], maximum=8192),
-                      _integer(where, "height_px", t["height_px"], maximum=8192),
-                      _integer(where, "spp", t["spp"], maximum=1 << 20), threshold)
+    return CameraSpec(position, look, t.up, t.fov_deg, t.width_px, t.height_px, t.spp, t.threshold)

@@ -14,7 +14,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ..config import dataclass_from_section
+from ..schema import dataclass_from_section
 from .setup import Setup
 from .study_targets import StudyExperiment, figures_not_saved, numeric_details
 

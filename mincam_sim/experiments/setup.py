@@ -36,16 +36,28 @@ class Setup:
         are ``2 spacing_m`` (6.6 cm) apart.
     d_f_m, detector_size_m, mask_size_m : float
         Mixel geometry [m]: mask 2 mm at 2 mm gives a ~53 deg field of view, detector 0.1 mm.
+    mask_resolution : int
+        Texels per side of the generated masks.
     field_m : float
         Calibrated range [m]: the paper's 50 cm boundary / field of view; error rates are % of it.
     bit_depth : int
         ADC bits (paper: 12); the sensor is :meth:`~mincam_sim.sensor.SensorModel.paper_prototype` (48 x 48
         pixels averaged).
+    exposure_fill : float
+        Auto-exposure: the brightest reading fills this fraction of the ADC range, in (0, 1].
+    screen_resolution : tuple of int
+        Display texels (columns, rows) of the 50" 16:9 screen.
+    table_light_radiance_w_m2_sr : float
+        Radiance of the square area light over the table [W m^-2 sr^-1].
     spp : int
         Plain-estimator samples per mixel per frame on the tabletop (halved in quick mode); the stratified
         estimator spends ``spp / 128`` rays per pass for the same noise (:mod:`.pipeline`).
     dp_estimator : {"stratified", "plain"}
         How frame changes dP are rendered (both unbiased; "plain" is the reference).
+    camera_px : int
+        Pixels per side of the ground-truth camera's images (>= 8).
+    seed : int
+        Seed of every random choice (each experiment adds its own offset): same seed, same numbers.
     quick : bool
         Fewer frames and samples (for ``make demo`` and the tests).
     """

@@ -1,43 +1,24 @@
-"""A study file: which experiment, which parameter points, which metrics (TOML, validated like ``render``).
+"""A study file: which experiment, which parameter points, which metrics (TOML, read like a render config).
 
-```toml
-[study]
-name = "spacing"
-experiment = "spacing"         # spacing, intrusion, tracking, speed, render (+ config = "x.toml"), design
-seed = 0
-replicates = 2                 # runs per point: the metric is their mean, <metric>_stderr its standard error
-common_random_numbers = true   # the same seed stream at every point (false: a seed per point)
-out_dir = "../../out/studies/spacing"   # relative to this file
+Sections: ``[study]`` (:class:`StudySection`: the target, seed, replicates, output), ``[fixed]`` (parameters
+held at one value; the others keep the experiment's defaults), exactly one of ``[grid]`` (the full product of
+parameter lists: the result's dimensions), ``[points]`` (an explicit list, equal lengths) or ``[random]`` (``n``
+points sampled from ``param = [low, high]`` ranges; both give one dimension ``point``), ``[quick]`` (with
+``--quick``: lists replace ``[grid]`` lists, single values replace ``[fixed]`` ones) and ``[metrics]``
+(:class:`MetricsSection`). A render config's keys are dotted: ``mincam.d_f_m = [0.001, 0.002]``. The documented
+example, with every ``[study]`` default, is :func:`study_example_toml` (``mincam-sim config-example --study``);
+``scenes/studies/*.toml`` are working studies.
 
-[fixed]                        # parameters held at one value (others keep the experiment's defaults)
-calibration_depth_m = 0.5
-
-[grid]                         # the full product of these lists (dimensions of the result)
-spacing_m = [0.0, 0.02, 0.033, 0.06, 0.1]
-depth_m = [0.3, 0.5, 1.0]
-
-[quick]                        # with --quick: lists replace [grid] lists, single values replace [fixed] ones
-spacing_m = [0.0, 0.033]
-depth_m = [0.5, 1.0]
-
-[metrics]
-keep = ["avg_before_pct", "avg_after_pct"]   # default: all the experiment's metrics
-```
-
-Instead of ``[grid]``, ``[points]`` gives an explicit list (``spacing_m = [...]``, ``depth_m = [...]``, equal
-lengths) or ``[random]`` a random sample (``n = 20``, ``seed = 1``, and ``param = [low, high]`` ranges); both
-give one dimension ``point``. A render config's keys are dotted: ``mincam.d_f_m = [0.001, 0.002]``.
-
-Refused, one line each: an unknown parameter, a non-integer value of an integer parameter, a key both in
-``[fixed]`` and ``[grid]``, a value twice in one grid list, and a grid of more than ``max_points`` points (the
-message gives the count and the estimated time; ``--max-points`` raises the limit).
+Refused, one line each: an unknown section, key or parameter (with the closest name), a non-integer value of an
+integer parameter, a key both in ``[fixed]`` and ``[grid]``, a value twice in one grid list, and a grid of more
+than ``max_points`` points (the message gives the count and the estimated time; ``--max-points`` raises the
+limit).
 """
 
 from __future__ import annotations
 
 import itertools
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -45,12 +26,89 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError
-from .points import StudyExperiment, study_target
+from ..schema import Flag, Integer, Part, Schema, Text, closest, read_document, read_section, setting, toml_value
+from .points import SPACING, StudyExperiment, study_target, target_names
 
-SECTIONS = {"study", "fixed", "grid", "points", "random", "quick", "metrics"}
-STUDY_KEYS = ("name", "experiment", "seed", "out_dir", "replicates", "common_random_numbers", "config")
 DEFAULT_MAX_POINTS = 10_000
 MAX_REPLICATES = 1000
+
+
+def _experiment(section: str, key: str, value: Any) -> str:
+    if not isinstance(value, str) or value not in target_names():
+        hint = closest(value, target_names()) if isinstance(value, str) else None
+        extra = f" (did you mean {hint!r}?)" if hint else ""
+        raise ConfigError(f"[study] experiment = {value!r} is not one of {', '.join(map(repr, target_names()))}"
+                          f"{extra}")
+    return value
+
+
+def _names(section: str, key: str, value: Any) -> tuple[str, ...]:
+    if not isinstance(value, list) or not value or not all(isinstance(v, str) for v in value):
+        raise ConfigError(f"[{section}] {key} must be a non-empty list of metric names (strings), got {value!r}")
+    return tuple(value)
+
+
+@dataclass(frozen=True)
+class StudySection:
+    """``[study]``: the target, how many runs per point, where the results go."""
+
+    name: str | None = setting(None, "the study's name (default: the experiment's)", Text(nonempty=True),
+                               example="spacing")
+    experiment: str | None = setting(None, 'spacing, intrusion, tracking, speed, render (+ config = "x.toml"), '
+                                     "design (required)", _experiment, example="spacing", shown=True)
+    config: str | None = setting(None, 'experiment = "render" only: the render config, relative to this file',
+                                 Text(nonempty=True), example="render.toml")
+    seed: int = setting(0, "seed of the study's random streams: same seed, same numbers", Integer(minimum=0))
+    replicates: int = setting(2, "runs per point: a metric is their mean, <metric>_stderr its standard error",
+                              Integer(minimum=1, maximum=MAX_REPLICATES))
+    common_random_numbers: bool = setting(True, "the same seed stream at every point (false: a seed per point)",
+                                          Flag())
+    out_dir: str | None = setting(None, "default: out/studies/<name>; relative to this file", Text(nonempty=True),
+                                  example="out/studies/spacing")
+
+
+@dataclass(frozen=True)
+class RandomSample:
+    """The sample size and seed of ``[random]`` (its other keys are ``param = [low, high]`` ranges)."""
+
+    n: int | None = setting(None, "points to sample (required; --quick: at most 4)", Integer(), example=20,
+                            shown=True)
+    seed: int = setting(0, "seed of the sample (its own: [study] seed does not move the points)",
+                        Integer(minimum=0))
+
+
+@dataclass(frozen=True)
+class MetricsSection:
+    """``[metrics]``: which of the target's metrics the result keeps."""
+
+    keep: tuple[str, ...] | None = setting(None, "default: all the experiment's metrics", _names,
+                                           example=("avg_before_pct", "avg_after_pct"))
+
+
+def study_schema() -> Schema:
+    """The sections of a study file; the free tables' examples use the spacing target's parameters."""
+    depth = toml_value(SPACING.parameters["calibration_depth_m"])
+    return Schema(
+        "mincam-sim study run STUDY.toml (written by `mincam-sim config-example --study`): a target, its\n"
+        "parameter points and the metrics to keep. Units are in the parameter names.",
+        (Part("study", StudySection),
+         Part("fixed", intro="Parameters held at one value (the others keep the experiment's defaults):",
+              example=f"calibration_depth_m = {depth}"),
+         Part("grid", intro="The full product of these lists (the result's dimensions); or [points] or [random]:",
+              example="spacing_m = [0.0, 0.033, 0.1]\ndepth_m = [0.5, 1.0]"),
+         Part("points", commented=True, intro="Instead of [grid]: an explicit list of points (equal lengths), one "
+              "dimension \"point\":", example="spacing_m = [0.0, 0.033]\ndepth_m = [0.5, 1.0]"),
+         Part("random", RandomSample, commented=True, intro="Or a random sample, one dimension \"point\": "
+              "param = [low, high] ranges:", example="spacing_m = [0.0, 0.1]"),
+         Part("quick", intro="With --quick: lists replace [grid] lists, single values replace [fixed] ones:",
+              example="spacing_m = [0.0, 0.033]"),
+         Part("metrics", MetricsSection)),
+    )
+
+
+def study_example_toml() -> str:
+    """The documented study file (a small spacing study), every ``[study]`` key with its default."""
+    return study_schema().example()
 
 
 @dataclass
@@ -75,13 +133,6 @@ class StudySpec:
         return {k: v for k, v in self.points[0].items() if k not in self.dims} if self.points else {}
 
 
-def _table(raw: dict, name: str) -> dict:
-    value = raw.get(name, {})
-    if not isinstance(value, dict):
-        raise ConfigError(f"[{name}] must be a table, got {type(value).__name__}")
-    return value
-
-
 def _flatten(table: dict, prefix: str = "") -> dict:
     """Nested tables (TOML dotted keys: ``mincam.d_f_m = [...]``) as dotted names."""
     out = {}
@@ -101,8 +152,10 @@ def _hint(experiment: StudyExperiment) -> str:
 
 def _values(section: str, key: str, value: Any, experiment: StudyExperiment, unique: bool = True) -> list:
     if key not in experiment.parameters:
-        raise ConfigError(f"[{section}] {key}: not a parameter of experiment {experiment.name!r}{_hint(experiment)}; "
-                          f"choose from {', '.join(sorted(experiment.parameters))}")
+        near = closest(key, experiment.parameters)
+        guess = f" (did you mean {near}?)" if near else ""
+        raise ConfigError(f"[{section}] {key}: not a parameter of experiment {experiment.name!r}{guess}"
+                          f"{_hint(experiment)}; choose from {', '.join(sorted(experiment.parameters))}")
     if not isinstance(value, list) or not value:
         raise ConfigError(f"[{section}] {key} must be a non-empty list of numbers, got {value!r}")
     integer = key in experiment.integer_parameters()
@@ -137,29 +190,6 @@ def _check_size(n_points: int, experiment: StudyExperiment, replicates: int, qui
                           f"grid or raise the limit with --max-points {n_points} (max_points={n_points})")
 
 
-def _read(source: str | Path | dict, base_dir: str | Path | None) -> tuple[dict, Path]:
-    if isinstance(source, dict):
-        return source, Path(base_dir or ".")
-    path = Path(source)
-    if "\n" not in str(source) and path.suffix == ".toml":
-        if not path.is_file():
-            raise ConfigError(f"study file {path} does not exist")
-        text, base = path.read_text(encoding="utf-8"), path.parent
-    else:
-        text, base = str(source), Path(base_dir or ".")
-    try:
-        return tomllib.loads(text), base
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"study is not valid TOML: {err}") from None
-
-
-def _integer(key: str, value: Any, minimum: int, maximum: int | None = None) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value < minimum or (maximum and value > maximum):
-        bound = f" and <= {maximum}" if maximum else ""
-        raise ConfigError(f"[study] {key} must be an integer >= {minimum}{bound}, got {value!r}")
-    return value
-
-
 def load_study(source: str | Path | dict, quick: bool = False, base_dir: str | Path | None = None,
                max_points: int = DEFAULT_MAX_POINTS) -> StudySpec:
     """Parse and validate a study (TOML file, TOML text or dict); ``quick`` applies the ``[quick]`` table.
@@ -169,36 +199,25 @@ def load_study(source: str | Path | dict, quick: bool = False, base_dir: str | P
     ConfigError
         One line naming the field and the fix (see the module docstring for what is refused).
     """
-    raw, base = _read(source, base_dir)
-    unknown = sorted(set(raw) - SECTIONS)
-    if unknown:
-        raise ConfigError(f"unknown section(s) {unknown} in the study; allowed: {sorted(SECTIONS)}")
-    study = _table(raw, "study")
-    bad = sorted(set(study) - set(STUDY_KEYS))
-    if bad:
-        raise ConfigError(f"[study]: unknown key(s) {bad}; allowed: {', '.join(STUDY_KEYS)}")
-    exp_name = study.get("experiment")
-    ref = {"name": exp_name}
-    if exp_name == "render":
-        config = study.get("config")
-        if not isinstance(config, str) or not config:
+    raw, base, _ = read_document(source, base_dir, kind="study")
+    schema = study_schema()
+    tables = schema.tables(raw)
+    study: StudySection = read_section("study", tables["study"], StudySection)
+    if study.experiment is None:
+        raise ConfigError(f"[study] experiment is required: one of {', '.join(map(repr, target_names()))}")
+    ref = {"name": study.experiment}
+    if study.experiment == "render":
+        if study.config is None:
             raise ConfigError("[study] experiment = \"render\" needs config = \"path/to/render.toml\" (relative to "
                               "the study file)")
-        ref["config"] = str(Path(config) if Path(config).is_absolute() else base / config)
-    elif "config" in study:
-        raise ConfigError(f"[study] config is for experiment = \"render\" only (experiment is {exp_name!r})")
+        ref["config"] = str(Path(study.config) if Path(study.config).is_absolute() else base / study.config)
+    elif study.config is not None:
+        raise ConfigError(f"[study] config is for experiment = \"render\" only (experiment is "
+                          f"{study.experiment!r})")
     experiment = study_target(ref)
-    name = study.get("name", exp_name)
-    if not isinstance(name, str) or not name:
-        raise ConfigError(f"[study] name must be a non-empty string, got {name!r}")
-    seed = _integer("seed", study.get("seed", 0), 0)
-    replicates = _integer("replicates", study.get("replicates", 2), 1, MAX_REPLICATES)
-    crn = study.get("common_random_numbers", True)
-    if not isinstance(crn, bool):
-        raise ConfigError(f"[study] common_random_numbers must be true or false, got {crn!r}")
-    out_dir = study.get("out_dir", f"out/studies/{name}")
-    if not isinstance(out_dir, str) or not out_dir:
-        raise ConfigError(f"[study] out_dir must be a path string, got {out_dir!r}")
+    name = study.experiment if study.name is None else study.name
+    seed, replicates, crn = study.seed, study.replicates, study.common_random_numbers
+    out_dir = f"out/studies/{name}" if study.out_dir is None else study.out_dir
     out = Path(out_dir) if Path(out_dir).is_absolute() else base / out_dir
     if isinstance(max_points, bool) or not isinstance(max_points, int) or max_points < 1:
         raise ConfigError(f"--max-points must be an integer >= 1, got {max_points!r}")
@@ -207,9 +226,9 @@ def load_study(source: str | Path | dict, quick: bool = False, base_dir: str | P
     if len(kinds) != 1:
         raise ConfigError("a study needs exactly one of [grid], [points] or [random]")
     kind = kinds[0]
-    table = _flatten(_table(raw, kind))
-    fixed_table = _flatten(_table(raw, "fixed"))
-    quick_table = _flatten(_table(raw, "quick")) if quick else {}
+    table = _flatten(tables[kind])
+    fixed_table = _flatten(tables["fixed"])
+    quick_table = _flatten(tables["quick"]) if quick else {}
     if kind == "random":
         swept = set(table) - {"n", "seed"}
     else:
@@ -259,12 +278,11 @@ def load_study(source: str | Path | dict, quick: bool = False, base_dir: str | P
             points.append({**fixed, **{key: v[i] for key, v in lists.items()}})
             indices.append((i,))
     else:
-        n = table.pop("n", None)
-        rseed = table.pop("seed", 0)
-        if isinstance(n, bool) or not isinstance(n, int) or n < 1:
-            raise ConfigError(f"[random] n must be an integer >= 1, got {n!r}")
-        if isinstance(rseed, bool) or not isinstance(rseed, int) or rseed < 0:
-            raise ConfigError(f"[random] seed must be an integer >= 0, got {rseed!r}")
+        sample: RandomSample = read_section("random", {k: table.pop(k) for k in ("n", "seed") if k in table},
+                                            RandomSample)
+        if sample.n is None:
+            raise ConfigError("[random] n is required: the number of points to sample (e.g. n = 20)")
+        n, rseed = sample.n, sample.seed
         if quick:
             n = min(n, 4)
         _check_size(n, experiment, replicates, quick, max_points)
@@ -282,8 +300,9 @@ def load_study(source: str | Path | dict, quick: bool = False, base_dir: str | P
         for i in range(n):
             points.append({**fixed, **{k: float(rng.uniform(lo, hi)) for k, (lo, hi) in ranges.items()}})
             indices.append((i,))
-    keep = _table(raw, "metrics").get("keep", list(experiment.metrics))
-    if not isinstance(keep, list) or not keep or any(m not in experiment.metrics for m in keep):
+    chosen = read_section("metrics", tables["metrics"], MetricsSection).keep
+    keep = list(experiment.metrics) if chosen is None else list(chosen)
+    if any(m not in experiment.metrics for m in keep):
         raise ConfigError(f"[metrics] keep must list metrics of {experiment.name!r}: {', '.join(experiment.metrics)}")
     if len(set(keep)) != len(keep):
         raise ConfigError("[metrics] keep lists a metric more than once")
