@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from . import masks as masks_mod
+from . import paper
 from .errors import ConfigError
 from .geometry import Pose
 from .masks import Mask
@@ -33,6 +34,7 @@ from .optics import (
     pair_layout,
 )
 from .scene.display import (
+    DEFAULT_DISTANCE_M,
     DEFAULT_SCREEN_RESOLUTION,
     FrameSource,
     Screen,
@@ -243,11 +245,12 @@ class MixelTable:
 class ScreenSection:
     """``[screen]``: the display the frames are shown on."""
 
-    diagonal_in: float = setting(50.0, 'display diagonal (paper: 50")', Number(positive=True))
+    diagonal_in: float = setting(paper.SCREEN_DIAGONAL_IN, 'display diagonal (paper: 50")', Number(positive=True))
     aspect: tuple[float, float] = setting((16, 9), "width : height", _aspect)
     resolution: tuple[int, int] = setting(tuple(DEFAULT_SCREEN_RESOLUTION), "display texels (columns, rows)",
                                           _resolution)
-    distance_m: float = setting(0.5, "from the mincam plane (z = 0) to the screen, which faces the mincam",
+    distance_m: float = setting(DEFAULT_DISTANCE_M,
+                                "from the mincam plane (z = 0) to the screen, which faces the mincam",
                                 Number(positive=True))
 
 

@@ -114,7 +114,9 @@ class WorldRenderer:
         backend.require_jit("The fast mixel sensor (a Python Mitsuba plugin)")
         self.mi = backend.mitsuba()
         self.mincam, self.replicates = mincam, int(replicates)
-        self.freeze_launches = True  # replay the stratified launches (dr.freeze) instead of tracing them per frame
+        # replay the stratified launches (dr.freeze) instead of tracing them per frame: on LLVM, where the moving
+        # meshes' vertices are written in place and their buffers' addresses key the recordings
+        self.freeze_launches = backend.variant().startswith("llvm")
         self.pair_lanes = True  # background pass: trace again only the lanes whose frame paths met a moving shape
         elements = expand_elements(elements)
         # The scene is built around the mincam: Mitsuba offsets every secondary ray by ~1e-4 x (1 + max|p|)

@@ -27,7 +27,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..schema import Flag, Integer, Part, Schema, Text, closest, read_document, read_section, setting, toml_value
-from .points import SPACING, StudyExperiment, study_target, target_names
+from .points import StudyExperiment, study_target, target_names
 
 DEFAULT_MAX_POINTS = 10_000
 MAX_REPLICATES = 1000
@@ -87,7 +87,7 @@ class MetricsSection:
 
 def study_schema() -> Schema:
     """The sections of a study file; the free tables' examples use the spacing target's parameters."""
-    depth = toml_value(SPACING.parameters["calibration_depth_m"])
+    depth = toml_value(study_target({"name": "spacing"}).parameters["calibration_depth_m"])
     return Schema(
         "mincam-sim study run STUDY.toml (written by `mincam-sim config-example --study`): a target, its\n"
         "parameter points and the metrics to keep. Units are in the parameter names.",
