@@ -118,6 +118,35 @@ def _safe(name: str) -> str:
     return "".join(c if c.isalnum() or c in "-_" else "_" for c in name)
 
 
+@dataclass(frozen=True)
+class MapSampling:
+    """How a texel's samples are traced: ``replicates`` independent blocks of ``strata x strata`` samples."""
+
+    strata: int
+    replicates: int
+
+    @classmethod
+    def of(cls, samples_per_texel: int, replicates: int) -> MapSampling:
+        """The sampling of ``samples_per_texel`` (rounded down to ``replicates x k^2``, k >= 1); a clear
+        ``ValueError`` for counts that are not integers or too small."""
+        n = samples_per_texel
+        if isinstance(n, bool) or int(n) != n or n < 2:
+            raise ValueError(f"samples_per_texel must be an integer >= 2, got {n!r}")
+        if isinstance(replicates, bool) or int(replicates) != replicates or not 2 <= replicates <= n:
+            raise ValueError(f"replicates must be an integer in [2, samples_per_texel], got {replicates!r}")
+        return cls(max(1, int(np.sqrt(n / replicates))), int(replicates))
+
+    @property
+    def block(self) -> int:
+        """Samples per block (``strata^2``)."""
+        return self.strata * self.strata
+
+    @property
+    def samples_per_texel(self) -> int:
+        """Samples traced per texel and mixel."""
+        return self.replicates * self.block
+
+
 def response_maps(
     mincam: Mincam,
     screen: Screen,
@@ -145,75 +174,113 @@ def response_maps(
         traced: an interrupted tracing resumes mixel by mixel, and any run that needs the same map reuses it.
     """
     backend.require_jit("Response maps")
-    if isinstance(samples_per_texel, bool) or int(samples_per_texel) != samples_per_texel or samples_per_texel < 2:
-        raise ValueError(f"samples_per_texel must be an integer >= 2, got {samples_per_texel!r}")
-    if isinstance(replicates, bool) or int(replicates) != replicates or not 2 <= replicates <= samples_per_texel:
-        raise ValueError(f"replicates must be an integer in [2, samples_per_texel], got {replicates!r}")
-    user_mincam, user_screen = mincam, screen
-    world = MincamScene.display(mincam, screen)
-    mincam, screen = world.mincam, world.screen  # moved around the mincam (float32 precision far from the origin)
-    scene = world.fast_scene  # screen + the mixels' bodies: the visibility rays' scene
-    mi = backend.mitsuba()
-    import drjit as dr
-
-    strata = max(1, int(np.sqrt(samples_per_texel / replicates)))  # k
-    block = strata * strata
-    spt = replicates * block
-    rows, cols = screen.shape
-    n_tex = rows * cols
-    texels_per_chunk = max(1, min(n_tex, max_lanes // spt))
-    right, up, normal = (np.asarray(a).tolist() for a in screen.pose.axes())
-    center = [float(c) for c in screen.pose.position_m]
-    texel_area = screen.texel_area_m2
+    sampling = MapSampling.of(samples_per_texel, replicates)
+    world = MincamScene.display(mincam, screen)  # moved around the mincam (float32 precision far from the origin)
     indices = list(range(len(mincam))) if mixel_indices is None else list(mixel_indices)
-
+    rows, cols = world.screen.shape
+    n_tex = rows * cols
+    keys = ({k: _mixel_key(world.mincam, k, world.screen, sampling, seed, max_lanes) for k in indices}
+            if cache is not None else {})
     weights = np.zeros((len(indices), n_tex))
     variance = np.zeros((len(indices), n_tex))
-    sampler = mi.load_dict({"type": "independent"})
-    keys = {k: _mixel_key(mincam, k, screen, spt, replicates, seed, max_lanes) for k in indices} if cache else {}
-    cached = {}
-    if cache is not None:
-        for k in indices:
-            entry = cache.get(keys[k])
-            if entry is not None and entry.arrays["weights_sr"].shape == (n_tex,):
-                cached[k] = entry.arrays
+    todo = _load_cached(cache, keys, indices, weights, variance)
+    tracer = _MapTracer(world, sampling, seed)
+    texels_per_chunk = max(1, min(n_tex, max_lanes // sampling.samples_per_texel))
+    launches = [(out_k, k, start) for out_k, k in todo for start in range(0, n_tex, texels_per_chunk)]
+    for out_k, k, start in progress(launches, desc=f"response maps ({sampling.samples_per_texel} samples/texel)",
+                                    disable=not show_progress, unit="chunk"):
+        count = min(texels_per_chunk, n_tex - start)
+        weights[out_k, start : start + count], variance[out_k, start : start + count] = tracer.trace(k, start, count)
+        if cache is not None and start + count == n_tex:  # this mixel is complete
+            cache.put(keys[k], {"weights_sr": weights[out_k], "variance_sr2": variance[out_k]},
+                      {"mixel": world.mincam[k].name, "samples_per_texel": sampling.samples_per_texel})
+    meta = _maps_meta(world.mincam, mincam, screen, indices, sampling, seed, keys)
+    return ResponseMaps(weights.reshape(len(indices), rows, cols), variance.reshape(len(indices), rows, cols),
+                        [world.mincam[k].name for k in indices], meta)
+
+
+def _load_cached(cache: ContentCache | None, keys: dict, indices: list[int], weights: np.ndarray,
+                 variance: np.ndarray) -> list[tuple[int, int]]:
+    """Fill the rows of the mixels whose maps ``cache`` holds; return ``(row, mixel)`` of those left to trace."""
+    todo = []
     for out_k, k in enumerate(indices):
-        if k in cached:
-            weights[out_k], variance[out_k] = cached[k]["weights_sr"], cached[k]["variance_sr2"]
-    launches = [(out_k, k, start) for out_k, k in enumerate(indices) if k not in cached
-                for start in range(0, n_tex, texels_per_chunk)]
-    evaluators = {k: RayWeight(mincam[k]) for k in indices if k not in cached}
-    for out_k, k, start in progress(launches, desc=f"response maps ({spt} samples/texel)", disable=not show_progress,
-                                    unit="chunk"):
-        mixel = mincam[k]
+        entry = cache.get(keys[k]) if cache is not None else None
+        if entry is not None and entry.arrays["weights_sr"].shape == weights.shape[1:]:
+            weights[out_k], variance[out_k] = entry.arrays["weights_sr"], entry.arrays["variance_sr2"]
+        else:
+            todo.append((out_k, k))
+    return todo
+
+
+class _MapTracer:
+    """Traces chunks of consecutive texels of one mixel's map (the estimator of the module docstring)."""
+
+    def __init__(self, world: MincamScene, sampling: MapSampling, seed: int) -> None:
+        self.mi = backend.mitsuba()
+        self.mincam, self.screen, self.sampling, self.seed = world.mincam, world.screen, sampling, int(seed)
+        self.scene = world.fast_scene  # screen + the mixels' bodies: the visibility rays' scene
+        self.sampler = self.mi.load_dict({"type": "independent"})
+        self._evaluators: dict[int, RayWeight] = {}
+
+    def trace(self, k: int, start: int, count: int) -> tuple[np.ndarray, np.ndarray]:
+        """Weights and their variances [sr] of texels ``start .. start + count - 1`` for mixel ``k``."""
+        import drjit as dr
+
+        texel, s_det, s_screen = self._samples(k, start, count)
+        g = self._pair_weight(k, s_det, self._screen_point(texel, s_screen))
+        block, replicates = self.sampling.block, self.sampling.replicates
+        blocks = np.asarray(dr.block_sum(g, block), dtype=np.float64).reshape(count, replicates) / block
+        return blocks.mean(axis=1), blocks.var(axis=1, ddof=1) / replicates
+
+    def _samples(self, k: int, start: int, count: int):
+        """Each lane's texel, detector sample and texel sample (unit square), stratified and paired in blocks."""
+        mi = self.mi
+        import drjit as dr
+
+        strata, block, spt = self.sampling.strata, self.sampling.block, self.sampling.samples_per_texel
+        self.sampler.seed(derive_seed(self.seed, "response", k, start), count * spt)
+        lane = dr.arange(mi.UInt32, count * spt)
+        texel = lane // spt + start
+        j = lane % block  # detector stratum within the block
+        jx, jy = j % strata, j // strata
+        pi_x, pi_y = _block_permutations(derive_seed(self.seed, "pairing", k, start),
+                                         count * self.sampling.replicates, strata)
+        local_block = lane // block
+        mx = dr.gather(mi.UInt32, pi_x, local_block * strata + jy)  # texel stratum paired with (jx, jy)
+        my = dr.gather(mi.UInt32, pi_y, local_block * strata + jx)
+        jitter_det = self.sampler.next_2d()
+        jitter_screen = self.sampler.next_2d()
+        s_det = mi.Point2f((mi.Float(jx) + jitter_det.x) / strata, (mi.Float(jy) + jitter_det.y) / strata)
+        s_screen = mi.Point2f((mi.Float(mx) + jitter_screen.x) / strata, (mi.Float(my) + jitter_screen.y) / strata)
+        return texel, s_det, s_screen
+
+    def _screen_point(self, texel, s_screen):
+        """World point [m] of the texel sample ``s_screen`` in texel ``texel`` (row-major, row 0 at the top)."""
+        mi, screen = self.mi, self.screen
+        rows, cols = screen.shape
+        right, up, _ = (np.asarray(a).tolist() for a in screen.pose.axes())
+        center = [float(c) for c in screen.pose.position_m]
+        col = mi.Float(texel % cols)
+        row = mi.Float(texel // cols)
+        xs = ((col + s_screen.x) / cols - 0.5) * screen.width_m
+        ys = (0.5 - (row + s_screen.y) / rows) * screen.height_m
+        return mi.Point3f(*(center[i] + xs * right[i] + ys * up[i] for i in range(3)))
+
+    def _pair_weight(self, k: int, s_det, p_screen):
+        """``T cos_d cos_s / r^2 A_texel`` of each (detector point, screen point) pair, 0 where the mask, the
+        housing, a back-facing screen or a mixel's body stops it."""
+        mi = self.mi
+        import drjit as dr
+
+        mixel = self.mincam[k]
+        if k not in self._evaluators:
+            self._evaluators[k] = RayWeight(mixel)
         to_world = mixel.pose.matrix()
         rot = mi.Matrix3f(to_world[:3, :3].tolist())
         origin = mi.Point3f(*(float(c) for c in to_world[:3, 3]))
         rot_t = mi.Matrix3f(to_world[:3, :3].T.tolist())
         d_f, det = mixel.d_f_m, mixel.detector_size_m
-        count = min(texels_per_chunk, n_tex - start)
-        sampler.seed(derive_seed(seed, "response", k, start), count * spt)
-        lane = dr.arange(mi.UInt32, count * spt)
-        texel = lane // spt + start
-        j = lane % block  # detector stratum within the block
-        jx, jy = j % strata, j // strata
-        pi_x, pi_y = _block_permutations(derive_seed(seed, "pairing", k, start), count * replicates, strata)
-        local_block = lane // block
-        mx = dr.gather(mi.UInt32, pi_x, local_block * strata + jy)  # texel stratum paired with (jx, jy)
-        my = dr.gather(mi.UInt32, pi_y, local_block * strata + jx)
-        col = mi.Float(texel % cols)
-        row = mi.Float(texel // cols)
-        jitter_det = sampler.next_2d()
-        jitter_screen = sampler.next_2d()
-        s_det = mi.Point2f((mi.Float(jx) + jitter_det.x) / strata, (mi.Float(jy) + jitter_det.y) / strata)
-        s_screen = mi.Point2f((mi.Float(mx) + jitter_screen.x) / strata, (mi.Float(my) + jitter_screen.y) / strata)
-        xs = ((col + s_screen.x) / cols - 0.5) * screen.width_m
-        ys = (0.5 - (row + s_screen.y) / rows) * screen.height_m
-        p_screen = mi.Point3f(
-            center[0] + xs * right[0] + ys * up[0],
-            center[1] + xs * right[1] + ys * up[1],
-            center[2] + xs * right[2] + ys * up[2],
-        )
+        normal = [float(c) for c in np.asarray(self.screen.pose.axes()[2])]
         x_d = mi.Vector3f((s_det.x - 0.5) * det, (s_det.y - 0.5) * det, 0.0)
         p_det = origin + rot @ x_d
         delta = p_screen - p_det
@@ -221,30 +288,29 @@ def response_maps(
         direction = delta * dr.rsqrt(r2)
         d_local = rot_t @ direction
         cos_d = d_local.z
-        cos_s = -dr.dot(direction, mi.Vector3f(*(float(c) for c in normal)))
+        cos_s = -dr.dot(direction, mi.Vector3f(*normal))
         valid = (cos_d > 0) & (cos_s > 0)
         t_mask = d_f / dr.maximum(cos_d, 1e-12)
         x_m = x_d + d_local * t_mask
-        transmission = evaluators[k](*local_to_mask_xy(x_m.x, x_m.y), -d_local.x / cos_d, d_local.y / cos_d,
-                                     valid)
+        transmission = self._evaluators[k](*local_to_mask_xy(x_m.x, x_m.y), -d_local.x / cos_d, d_local.y / cos_d,
+                                           valid)
         valid &= transmission > 0
         p_start = p_det + direction * (t_mask + START_OFFSET_M)
         dist_after = dr.sqrt(r2) - t_mask - START_OFFSET_M
         shadow = mi.Ray3f(p_start, direction, dist_after * (1 - 1e-5), 0.0, [])
-        valid &= ~scene.ray_test(shadow, valid)
-        g = dr.select(valid, transmission * cos_d * cos_s / r2 * texel_area, 0.0)
-        blocks = np.asarray(dr.block_sum(g, block), dtype=np.float64).reshape(count, replicates) / block
-        weights[out_k, start : start + count] = blocks.mean(axis=1)
-        variance[out_k, start : start + count] = blocks.var(axis=1, ddof=1) / replicates
-        if cache is not None and start + count == n_tex:  # this mixel is complete
-            cache.put(keys[k], {"weights_sr": weights[out_k], "variance_sr2": variance[out_k]},
-                      {"mixel": mincam[k].name, "samples_per_texel": spt})
-    names = [mincam[k].name for k in indices]
+        valid &= ~self.scene.ray_test(shadow, valid)
+        return dr.select(valid, transmission * cos_d * cos_s / r2 * self.screen.texel_area_m2, 0.0)
+
+
+def _maps_meta(mincam: Mincam, user_mincam: Mincam, user_screen: Screen, indices: list[int], sampling: MapSampling,
+               seed: int, keys: dict) -> dict:
+    """What the maps are: estimator, sampling, seed, units, masks, optics, backend, geometry, cache keys."""
+    strata = sampling.strata
     meta = {
         "form": "response_map",
         "estimator": "texel_area_sampling_with_visibility_rays",
-        "samples_per_texel": spt,
-        "replicate_blocks": replicates,
+        "samples_per_texel": sampling.samples_per_texel,
+        "replicate_blocks": sampling.replicates,
         "strata_per_block": f"{strata}x{strata}",
         "pairing": "detector stratum (jx, jy) with texel stratum (pi_x(jy), pi_y(jx)), pi random permutations of "
                    "0..k-1 per block",
@@ -258,8 +324,7 @@ def response_maps(
     }
     if keys:
         meta["cache_keys"] = {mincam[k].name: keys[k] for k in indices}
-    return ResponseMaps(weights.reshape(len(indices), rows, cols), variance.reshape(len(indices), rows, cols),
-                        names, meta)
+    return meta
 
 
 def _block_permutations(seed: int, n_blocks: int, strata: int):
@@ -273,8 +338,9 @@ def _block_permutations(seed: int, n_blocks: int, strata: int):
     return mi.UInt32(perms[:n_blocks].ravel()), mi.UInt32(perms[n_blocks:].ravel())
 
 
-def _mixel_key(mincam: Mincam, k: int, screen: Screen, spt: int, replicates: int, seed: int, max_lanes: int) -> str:
+def _mixel_key(mincam: Mincam, k: int, screen: Screen, sampling: MapSampling, seed: int, max_lanes: int) -> str:
     """Content key of one mixel's map: everything its numbers depend on."""
     return fingerprint({"kind": "response_map", "mincam": mincam, "mixel_index": k, "screen": screen,
-                        "samples_per_texel": spt, "replicates": replicates, "seed": int(seed),
+                        "samples_per_texel": sampling.samples_per_texel, "replicates": sampling.replicates,
+                        "seed": int(seed),
                         "max_lanes": int(max_lanes), "variant": backend.variant(), "versions": library_versions()})
