@@ -22,6 +22,11 @@ not with the samples per texel (close 2 x 3 mm ramp, 4 blocks: relative sigma 5.
 ``k`` random pairs. A *fixed* pairing converges to an integral over a sub-manifold of the product domain,
 and identical pairings across blocks hide that from the standard error. The variance of each weight comes
 from the spread of the independent blocks.
+
+Random numbers: texel ``t`` of mixel ``k`` draws those of launch ``t`` of the mixel's seed
+(:class:`.tracing.LaneSampler`, the launch-seed rule of every loop), and each block's pairing its own stretch of
+one PCG64 stream per mixel. Texels are traced in chunks of at most :data:`.tracing.MAX_LANES` samples, and a
+map is the same bit for bit whatever the chunks.
 """
 
 from __future__ import annotations
@@ -41,13 +46,13 @@ from ..optics import Mincam
 from ..progress import progress
 from ..scene.display import Screen
 from ..store import ContentCache
-from . import backend
+from . import backend, tracing
 from .estimation import derive_seed
 from .mask_eval import RayWeight, local_to_mask_xy, mask_model_meta, optics_meta
 from .mincam_scene import MincamScene, geometry_meta
 from .mixel_sensor import START_OFFSET_M
 
-MAX_LANES = 1 << 23  # samples per kernel launch
+RANDOM_NUMBERS = "per texel: launch `texel` of the mixel's seed; pairings: one PCG64 stream per mixel, by block"
 
 
 @dataclass
@@ -153,7 +158,6 @@ def response_maps(
     samples_per_texel: int = 64,
     seed: int = 0,
     mixel_indices: Sequence[int] | None = None,
-    max_lanes: int = MAX_LANES,
     replicates: int = 4,
     show_progress: bool = False,
     cache: ContentCache | None = None,
@@ -179,13 +183,12 @@ def response_maps(
     indices = list(range(len(mincam))) if mixel_indices is None else list(mixel_indices)
     rows, cols = world.screen.shape
     n_tex = rows * cols
-    keys = ({k: _mixel_key(world.mincam, k, world.screen, sampling, seed, max_lanes) for k in indices}
-            if cache is not None else {})
+    keys = {k: _mixel_key(world.mincam, k, world.screen, sampling, seed) for k in indices} if cache is not None else {}
     weights = np.zeros((len(indices), n_tex))
     variance = np.zeros((len(indices), n_tex))
     todo = _load_cached(cache, keys, indices, weights, variance)
     tracer = _MapTracer(world, sampling, seed)
-    texels_per_chunk = max(1, min(n_tex, max_lanes // sampling.samples_per_texel))
+    texels_per_chunk = max(1, min(n_tex, tracing.MAX_LANES // sampling.samples_per_texel))
     launches = [(out_k, k, start) for out_k, k in todo for start in range(0, n_tex, texels_per_chunk)]
     for out_k, k, start in progress(launches, desc=f"response maps ({sampling.samples_per_texel} samples/texel)",
                                     disable=not show_progress, unit="chunk"):
@@ -219,7 +222,6 @@ class _MapTracer:
         self.mi = backend.mitsuba()
         self.mincam, self.screen, self.sampling, self.seed = world.mincam, world.screen, sampling, int(seed)
         self.scene = world.fast_scene  # screen + the mixels' bodies: the visibility rays' scene
-        self.sampler = self.mi.load_dict({"type": "independent"})
         self._evaluators: dict[int, RayWeight] = {}
 
     def trace(self, k: int, start: int, count: int) -> tuple[np.ndarray, np.ndarray]:
@@ -233,23 +235,29 @@ class _MapTracer:
         return blocks.mean(axis=1), blocks.var(axis=1, ddof=1) / replicates
 
     def _samples(self, k: int, start: int, count: int):
-        """Each lane's texel, detector sample and texel sample (unit square), stratified and paired in blocks."""
+        """Each lane's texel, detector sample and texel sample (unit square), stratified and paired in blocks.
+
+        Every texel draws its own random numbers (those of launch ``texel`` of the mixel's seed,
+        :class:`.tracing.LaneSampler`) and its own pairings: a chunk's numbers do not depend on where the chunk
+        starts, so the maps do not depend on the lane limit.
+        """
         mi = self.mi
         import drjit as dr
 
         strata, block, spt = self.sampling.strata, self.sampling.block, self.sampling.samples_per_texel
-        self.sampler.seed(derive_seed(self.seed, "response", k, start), count * spt)
+        replicates = self.sampling.replicates
         lane = dr.arange(mi.UInt32, count * spt)
-        texel = lane // spt + start
+        texel = lane // spt + dr.opaque(mi.UInt32, start)
+        sampler = tracing.LaneSampler(derive_seed(self.seed, "response", k), texel, lane % spt)
         j = lane % block  # detector stratum within the block
         jx, jy = j % strata, j // strata
-        pi_x, pi_y = _block_permutations(derive_seed(self.seed, "pairing", k, start),
-                                         count * self.sampling.replicates, strata)
+        pi_x, pi_y = _block_permutations(derive_seed(self.seed, "pairing", k), start * replicates,
+                                         count * replicates, strata)
         local_block = lane // block
         mx = dr.gather(mi.UInt32, pi_x, local_block * strata + jy)  # texel stratum paired with (jx, jy)
         my = dr.gather(mi.UInt32, pi_y, local_block * strata + jx)
-        jitter_det = self.sampler.next_2d()
-        jitter_screen = self.sampler.next_2d()
+        jitter_det = sampler.next_2d()
+        jitter_screen = sampler.next_2d()
         s_det = mi.Point2f((mi.Float(jx) + jitter_det.x) / strata, (mi.Float(jy) + jitter_det.y) / strata)
         s_screen = mi.Point2f((mi.Float(mx) + jitter_screen.x) / strata, (mi.Float(my) + jitter_screen.y) / strata)
         return texel, s_det, s_screen
@@ -315,6 +323,7 @@ def _maps_meta(mincam: Mincam, user_mincam: Mincam, user_screen: Screen, indices
         "pairing": "detector stratum (jx, jy) with texel stratum (pi_x(jy), pi_y(jx)), pi random permutations of "
                    "0..k-1 per block",
         "seed": seed,
+        "random_numbers": RANDOM_NUMBERS,
         "units": "sr (W/m^2 on the detector per W m^-2 sr^-1 of texel radiance)",
         "masks": {mincam[k].name: mask_model_meta(mincam[k].mask) for k in indices},
         "optics": {mincam[k].name: optics_meta(mincam[k]) for k in indices},
@@ -327,20 +336,27 @@ def _maps_meta(mincam: Mincam, user_mincam: Mincam, user_screen: Screen, indices
     return meta
 
 
-def _block_permutations(seed: int, n_blocks: int, strata: int):
-    """Two random permutations of ``0..strata-1`` per block, flattened (block-major) as Dr.Jit UInt32 arrays."""
+def _block_permutations(seed: int, first_block: int, n_blocks: int, strata: int):
+    """Two random permutations of ``0..strata-1`` for each of blocks ``first_block .. first_block + n_blocks - 1``
+    of a mixel, flattened (block-major) as Dr.Jit UInt32 arrays.
+
+    Block ``b`` sorts the doubles ``2 b strata .. 2 (b + 1) strata - 1`` of one PCG64 stream seeded ``seed``
+    (the stream is advanced to its block): a block's pairing is the same in whichever chunk it is traced.
+    """
     mi = backend.mitsuba()
     if strata == 1:
         zeros = mi.UInt32(np.zeros(n_blocks, dtype=np.uint32))
         return zeros, zeros
-    rng = np.random.default_rng(seed)
-    perms = rng.random((2 * n_blocks, strata)).argsort(axis=1).astype(np.uint32)
-    return mi.UInt32(perms[:n_blocks].ravel()), mi.UInt32(perms[n_blocks:].ravel())
+    bits = np.random.PCG64(seed)
+    bits.advance(int(first_block) * 2 * strata)  # one 64-bit draw per double
+    perms = np.random.Generator(bits).random((n_blocks, 2, strata)).argsort(axis=-1).astype(np.uint32)
+    return mi.UInt32(perms[:, 0].ravel()), mi.UInt32(perms[:, 1].ravel())
 
 
-def _mixel_key(mincam: Mincam, k: int, screen: Screen, sampling: MapSampling, seed: int, max_lanes: int) -> str:
+def _mixel_key(mincam: Mincam, k: int, screen: Screen, sampling: MapSampling, seed: int) -> str:
     """Content key of one mixel's map: everything its numbers depend on."""
     return fingerprint({"kind": "response_map", "mincam": mincam, "mixel_index": k, "screen": screen,
                         "samples_per_texel": sampling.samples_per_texel, "replicates": sampling.replicates,
                         "seed": int(seed),
-                        "max_lanes": int(max_lanes), "variant": backend.variant(), "versions": library_versions()})
+                        "random_numbers": RANDOM_NUMBERS, "variant": backend.variant(),
+                        "versions": library_versions()})

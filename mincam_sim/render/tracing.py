@@ -14,7 +14,7 @@ import numpy as np
 
 from . import backend
 
-MAX_LANES = 1 << 22  # rays traced per kernel launch
+MAX_LANES = 1 << 22  # lanes (rays, samples) per kernel launch: the one limit of every launch loop of the package
 
 
 def launch_seed(seed: int, launch: int) -> int:
@@ -28,6 +28,42 @@ def seeded_sampler(seed: int, launch: int, lanes: int):
     sampler = backend.mitsuba().load_dict({"type": "independent"})
     sampler.seed(launch_seed(seed, launch), int(lanes))
     return sampler
+
+
+def launch_seeds(seed: int, launches):
+    """:func:`launch_seed` lane by lane, for a Dr.Jit ``UInt32`` array of launch indices (the same arithmetic
+    modulo 2^31)."""
+    mi = backend.mitsuba()
+    import drjit as dr
+
+    return (dr.opaque(mi.UInt32, (int(seed) * 1_000_003) & 0xFFFFFFFF) + launches) & 0x7FFFFFFF
+
+
+class LaneSampler:
+    """Random numbers of lanes drawn from many launches at once: the lane of ``index`` in launch ``launch``
+    (``UInt32`` arrays, one entry per lane) draws exactly what lane ``index`` of ``seeded_sampler(seed, launch,
+    lanes)`` draws (the independent sampler's TEA-scrambled PCG32 stream of that lane).
+
+    A loop that gives every *group* of samples (a texel, a replicate) a launch index of its own, and packs as
+    many groups into a kernel launch as :data:`MAX_LANES` allows, draws the same numbers whatever the limit.
+    """
+
+    def __init__(self, seed: int, launch, index) -> None:
+        mi = backend.mitsuba()
+        v0, v1 = mi.sample_tea_32(launch_seeds(seed, launch), index)
+        self._point = mi.Point2f
+        self._rng = mi.PCG32()
+        self._rng.seed(mi.UInt64(v0), mi.UInt64(v1))  # as the independent sampler seeds its lane ``index``
+
+    def next_1d(self):
+        """One uniform number in [0, 1) per lane."""
+        return self._rng.next_float32()
+
+    def next_2d(self):
+        """A uniform point of [0, 1)^2 per lane (x drawn first, as the independent sampler's ``next_2d``)."""
+        x = self._rng.next_float32()
+        y = self._rng.next_float32()
+        return self._point(x, y)
 
 
 def trace_groups(
