@@ -44,14 +44,19 @@ from ..imageio import write_exr
 from ..measurements import Measurements
 from ..optics import Mincam
 from ..progress import progress
-from ..scene.display import Screen
+from ..scene.display import FrameSource, Screen, as_frame_source
 from ..store import ContentCache
 from . import backend, tracing
-from .estimation import derive_seed
+from .estimation import derive_seed, pilot_to_target
 from .mask_eval import RayWeight, local_to_mask_xy, mask_model_meta, optics_meta
 from .mincam_scene import MincamScene, geometry_meta
 from .mixel_sensor import START_OFFSET_M
 
+MAX_SAMPLES_PER_TEXEL = 1 << 14  # cap of the target-noise search
+FIRST_SAMPLES_PER_TEXEL = 16  # the search's first maps
+SEARCH_GROWTH = (2, 8)  # each step of the search traces at least 2x, at most 8x the samples of the last one
+SEARCH_EXPONENT = (0.5, 1.5)  # bounds of the measured convergence rate (stratified: faster than n^-1/2)
+FRAME_CHUNK_BYTES = 1 << 27  # frames measured per chunk: at most 128 MiB of frame data in memory
 RANDOM_NUMBERS = "per texel: launch `texel` of the mixel's seed; pairings: one PCG64 stream per mixel, by block"
 
 
@@ -92,6 +97,22 @@ class ResponseMaps:
         meta = {**self.meta, "form": "response_map"}
         return Measurements(values, np.sqrt(var), list(self.mixel_names), meta)
 
+    def measure_source(self, frames: FrameSource, indices=None, show_progress: bool = False,
+                       desc: str = "frames") -> Measurements:
+        """Measurements of (some of) a frame source, chunk by chunk (at most :data:`FRAME_CHUNK_BYTES` of frames
+        in memory); a frame with NaN, infinite or negative radiance is refused, by its index."""
+        indices = np.arange(len(frames)) if indices is None else np.asarray(indices)
+        values = np.empty((len(indices), len(self.mixel_names)))
+        errors = np.empty_like(values)
+        step = frames.chunk_size(FRAME_CHUNK_BYTES)
+        for lo in progress(range(0, len(indices), step), desc=desc, disable=not show_progress):
+            idx = indices[lo : lo + step]
+            stack = frames[idx]
+            check_radiance(stack, idx)
+            m = self.measure(stack)
+            values[lo : lo + len(idx)], errors[lo : lo + len(idx)] = m.irradiance_w_m2, m.stderr_w_m2
+        return Measurements(values, errors, list(self.mixel_names), {**self.meta, "form": "response_map"})
+
     def save_exr(self, directory: str | Path) -> list[Path]:
         """One OpenEXR per mixel (channels W and sigma), the picture of what the mixel sees."""
         directory = Path(directory)
@@ -117,6 +138,15 @@ class ResponseMaps:
         with np.load(path, allow_pickle=False) as d:
             return cls(d["weights_sr"], d["variance_sr2"], [str(s) for s in d["mixel_names"]],
                        json.loads(str(d["meta_json"])))
+
+
+def check_radiance(stack: np.ndarray, indices: np.ndarray) -> None:
+    """Refuse NaN, infinite or negative radiance, naming the first bad frame."""
+    bad = ~(stack >= 0).all(axis=(1, 2)) | ~np.isfinite(stack.sum(axis=(1, 2)))  # NaN fails ">= 0"
+    if bad.any():
+        i = int(indices[np.argmax(bad)])
+        raise ValueError(f"frame {i} contains NaN, infinite or negative radiance; frames must be finite and >= 0 "
+                         "W m^-2 sr^-1")
 
 
 def _safe(name: str) -> str:
@@ -200,6 +230,51 @@ def response_maps(
     meta = _maps_meta(world.mincam, mincam, screen, indices, sampling, seed, keys)
     return ResponseMaps(weights.reshape(len(indices), rows, cols), variance.reshape(len(indices), rows, cols),
                         [world.mincam[k].name for k in indices], meta)
+
+
+def response_maps_to_target(
+    mincam: Mincam, screen: Screen, frames, target_rel_stderr: float, seed: int = 0,
+    max_samples_per_texel: int = MAX_SAMPLES_PER_TEXEL, cache: ContentCache | None = None,
+    show_progress: bool = False, replicates: int = 4,
+) -> tuple[ResponseMaps, list[dict]]:
+    """Response maps whose measurements of ``frames`` all reach ``target_rel_stderr`` (if the cap allows).
+
+    The budget rule of every solver (:func:`.estimation.pilot_to_target`), fitted to maps: from 16 samples
+    per texel, each attempt's maps measure the frames and the count is extrapolated with the convergence rate
+    ``rel ~ n^-a`` measured on the last two attempts (``a`` in [0.5, 1.5]: stratified sampling converges
+    faster than ``n^-1/2``; 0.5 until two attempts exist), by 2x to 8x per step, and traced as ``replicates x
+    k^2`` (at least one stratum per axis more each step), until an attempt reaches the target or the cap.
+    Every attempt's maps go to ``cache`` (so a rerun or a resumed run repeats the search in milliseconds).
+    Returns the last attempt's maps and the trail of (samples_per_texel, worst relative stderr) tried.
+    """
+    frames = as_frame_source(frames)
+    made: dict[int, ResponseMaps] = {}
+
+    def measure(n: int):
+        made[n] = response_maps(mincam, screen, n, seed, cache=cache, show_progress=show_progress,
+                                replicates=replicates)
+        m = made[n].measure_source(frames, show_progress=show_progress, desc=f"target search ({n} samples/texel)")
+        return m.irradiance_w_m2, m.stderr_w_m2
+
+    first = MapSampling.of(max(FIRST_SAMPLES_PER_TEXEL, replicates), replicates).samples_per_texel
+    n, trail = pilot_to_target(measure, first, target_rel_stderr, max_samples_per_texel, significance=0.0,
+                               rounds=None, measured_exponent=SEARCH_EXPONENT, growth=SEARCH_GROWTH, unseen_growth=1,
+                               quantize=_stratum_steps(replicates, max_samples_per_texel))
+    return made[n], [{"samples_per_texel": t["samples"], "worst_rel_stderr": t["worst_rel_stderr"]} for t in trail]
+
+
+def _stratum_steps(replicates: int, cap: int):
+    """The search's quantisation: ``wanted`` samples per texel after maps of ``samples`` are traced as
+    ``replicates x k^2`` with at least one stratum per axis more (rounding 2x back down to the same ``k`` would
+    repeat an attempt forever), at most the cap's strata, never fewer than ``samples``."""
+    max_strata = max(1, int(np.sqrt(cap / replicates)))
+
+    def quantize(wanted: float, samples: int) -> int:
+        strata = int(round(np.sqrt(samples / replicates)))
+        strata = min(max_strata, max(strata + 1, int(np.sqrt(wanted / replicates))))
+        return max(samples, replicates * strata * strata)
+
+    return quantize
 
 
 def _load_cached(cache: ContentCache | None, keys: dict, indices: list[int], weights: np.ndarray,
