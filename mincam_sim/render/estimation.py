@@ -6,7 +6,8 @@
 * Standard errors: every value is the mean of ``R >= 2`` independent replicate estimates;
   :func:`replicate_mean_stderr` returns the mean and ``std(ddof=1) / sqrt(R)``.
 * Budgets: :func:`samples_for_target` extrapolates a pilot's sample count to a target relative standard error,
-  with one margin and one cap for all forms.
+  with one margin and one cap for all forms; :func:`pilot_to_target` runs the pilots (the ray forms, and with
+  a measured rate and quantised counts the response maps' search).
 """
 
 from __future__ import annotations

@@ -248,19 +248,23 @@ def response_maps_to_target(
     Returns the last attempt's maps and the trail of (samples_per_texel, worst relative stderr) tried.
     """
     frames = as_frame_source(frames)
-    made: dict[int, ResponseMaps] = {}
+
+    def trace(n: int) -> ResponseMaps:
+        return response_maps(mincam, screen, n, seed, cache=cache, show_progress=show_progress, replicates=replicates)
+
+    last: list = [None, None]  # (samples per texel, maps) of the latest attempt only: maps can be large
 
     def measure(n: int):
-        made[n] = response_maps(mincam, screen, n, seed, cache=cache, show_progress=show_progress,
-                                replicates=replicates)
-        m = made[n].measure_source(frames, show_progress=show_progress, desc=f"target search ({n} samples/texel)")
+        last[:] = n, trace(n)
+        m = last[1].measure_source(frames, show_progress=show_progress, desc=f"target search ({n} samples/texel)")
         return m.irradiance_w_m2, m.stderr_w_m2
 
     first = MapSampling.of(max(FIRST_SAMPLES_PER_TEXEL, replicates), replicates).samples_per_texel
     n, trail = pilot_to_target(measure, first, target_rel_stderr, max_samples_per_texel, significance=0.0,
                                rounds=None, measured_exponent=SEARCH_EXPONENT, growth=SEARCH_GROWTH, unseen_growth=1,
                                quantize=_stratum_steps(replicates, max_samples_per_texel))
-    return made[n], [{"samples_per_texel": t["samples"], "worst_rel_stderr": t["worst_rel_stderr"]} for t in trail]
+    maps = last[1] if n == last[0] else trace(n)  # the quantised search ends on its latest attempt
+    return maps, [{"samples_per_texel": t["samples"], "worst_rel_stderr": t["worst_rel_stderr"]} for t in trail]
 
 
 def _stratum_steps(replicates: int, cap: int):
