@@ -125,7 +125,7 @@ def test_optimiser_lowers_the_training_loss_and_is_repeatable():
     from dataclasses import replace
 
     from mincam_sim.design.optimise import build_problem, fit_decoder, initial_logits
-    from mincam_sim.render.differentiable import optimise_masks
+    from mincam_sim.design.optimiser import optimise_masks
 
     # the narrow distribution of the first designs (squares 2-5 cm on black), where 30 steps visibly help
     task = replace(tr.TrackingTask.quick(), train_depths_m=(0.35, 0.7), frames_per_depth=40, strata=6, grid=6,
@@ -223,3 +223,42 @@ def test_cli_design_tracking_quick(tmp_path):
         assert np.nanmean(err) == pytest.approx(c["rows"][DESIGNED]["avg_error_pct"])
     assert "held-out suite" in r.output and "two_objects" in r.output
     assert "cross_layout" in d["baseline"]["masks"]
+
+
+def test_poly_terms_is_one_implementation_for_numpy_and_drjit():
+    """The monomials up to degree 3 of (x, y), constant first, against their explicit list; the same function
+    on Dr.Jit arrays gives the same float32 values (only * and + are used); the old names warn and delegate."""
+    import warnings
+
+    from mincam_sim.polynomial import poly_terms
+
+    rng = np.random.default_rng(3)
+    x, y = rng.uniform(-2, 2, (2, 50))
+    explicit = [np.ones(50), x, y, x * x, x * y, y * y, x * x * x, x * x * y, x * y * y, y * y * y]
+    got = poly_terms(x, y, degree=3)
+    assert len(got) == 10
+    for g, e in zip(got, explicit, strict=True):
+        np.testing.assert_array_equal(g, e)
+    assert len(poly_terms(x, y, rng.uniform(size=50), degree=3)) == 20  # C(3 + 3, 3)
+    with pytest.raises(ValueError, match="degree"):
+        poly_terms(x, degree=-1)
+    from mincam_sim.design import decoder
+    from mincam_sim.render import differentiable
+
+    with pytest.warns(DeprecationWarning, match="mincam_sim.polynomial"):
+        stacked = decoder.poly_terms([x, y], 3)
+    np.testing.assert_array_equal(stacked, np.stack(got, axis=-1))
+    with pytest.warns(DeprecationWarning, match="mincam_sim.polynomial"):
+        assert differentiable.poly_terms is poly_terms
+    with pytest.raises(ImportError, match="mincam_sim.design.optimiser"):
+        from mincam_sim.render.differentiable import optimise_masks  # noqa: F401
+    _needs_jit()
+    from mincam_sim.render import backend
+
+    mi = backend.mitsuba()
+    x32, y32 = x.astype(np.float32), y.astype(np.float32)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        traced = poly_terms(mi.Float(x32), mi.Float(y32), degree=3)
+    for t, e in zip(traced, poly_terms(x32, y32, degree=3), strict=True):
+        np.testing.assert_array_equal(np.asarray(t), e)

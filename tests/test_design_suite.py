@@ -193,7 +193,7 @@ def test_noiseless_fit_with_capped_loss_is_finite_repeatable_and_bounded():
     _needs_jit()
     from mincam_sim.design import parameterization as par
     from mincam_sim.design.optimise import build_problem, fit_decoder, initial_logits, training_rms
-    from mincam_sim.render.differentiable import optimise_masks
+    from mincam_sim.design.optimiser import optimise_masks
 
     task = replace(tr.TrackingTask.quick(), train_depths_m=(0.4, 0.6), frames_per_depth=48, strata=5, grid=5)
     problem = build_problem(task)

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from mincam_sim.render.estimation import UNSEEN_GROWTH, pilot_to_target
+from mincam_sim.render.estimation import TARGET_MARGIN, UNSEEN_GROWTH, pilot_to_target
 
 TARGET = 0.01
 
@@ -115,3 +115,75 @@ def test_a_store_of_other_replicates_is_not_reused(tmp_path):
     render_frames(pair_layout(), screen, frame, samples_per_texel=256, replicates=4, out_dir=tmp_path)
     with pytest.raises(StoreError, match="replicates"):
         render_frames(pair_layout(), screen, frame, samples_per_texel=256, replicates=16, out_dir=tmp_path)
+
+
+def _stratified(true_values, rel_at_one_sample, exponent):
+    """Pilots of an estimator whose relative error falls as samples^-exponent (a stratified one: exponent 1)."""
+    calls = []
+
+    def measure(samples):
+        calls.append(samples)
+        values = np.asarray(true_values, float)
+        return values, values * rel_at_one_sample * samples**-exponent
+
+    return measure, calls
+
+
+def _squares(replicates, cap):
+    """``replicates x k^2``, one k more at least, at most the cap's k (as the response maps' search)."""
+    top = int(np.sqrt(cap / replicates))
+
+    def quantize(wanted, samples):
+        k = min(top, max(int(round(np.sqrt(samples / replicates))) + 1, int(np.sqrt(wanted / replicates))))
+        return max(samples, replicates * k * k)
+
+    return quantize
+
+
+def test_a_quantised_search_measures_its_rate_and_steps_within_bounds():
+    """Counts traced as 4 k^2, each step 2x to 8x the last, the convergence rate measured on the last two
+    pilots: a stratified estimator (rel ~ 1/n) reaches the target with fewer samples than the plain rule's
+    n^-1/2 extrapolation asks for, and every pilot count is one that was traced."""
+    kw = dict(significance=0.0, rounds=None, growth=(2, 8), unseen_growth=1, quantize=_squares(4, 1 << 20))
+    measure, calls = _stratified([1.0, 3.0], 10.0, 1.0)
+    samples, trail = pilot_to_target(measure, 16, 1e-3, 1 << 20, measured_exponent=(0.5, 1.5), **kw)
+    assert trail[-1]["worst_rel_stderr"] <= 1e-3 and samples == calls[-1] == trail[-1]["samples"]
+    assert all(c % 4 == 0 and np.sqrt(c // 4) % 1 == 0 for c in calls)
+    ratios = np.diff(calls) / np.array(calls[:-1]) + 1
+    assert np.all(ratios >= 2) and np.all(ratios <= 8)
+    plain_measure, plain_calls = _stratified([1.0, 3.0], 10.0, 1.0)
+    plain, _ = pilot_to_target(plain_measure, 16, 1e-3, 1 << 20, **kw)  # exponent 0.5 throughout
+    # rel = 10 / n: the target needs 10,000 samples; the measured rate asks for them times the margin, the
+    # plain rule for more (and both reach the target)
+    assert 10_000 <= samples <= TARGET_MARGIN * 10_000 < plain
+
+
+def test_a_quantised_search_ends_on_a_traced_count():
+    """At the cap, and when nothing is significant (``unseen_growth=1``), the search returns the last count it
+    traced: the result is that pilot itself (e.g. cached maps), never an untraced extrapolation."""
+    kw = dict(significance=0.0, rounds=None, growth=(2, 8), unseen_growth=1, quantize=_squares(4, 1000),
+              measured_exponent=(0.5, 1.5))
+    measure, calls = _stratified([1.0], 10.0, 1.0)
+    samples, trail = pilot_to_target(measure, 16, 1e-9, 1000, **kw)
+    assert samples == calls[-1] == 4 * 15**2 and trail[-1]["worst_rel_stderr"] > 1e-9
+    measure, calls = _stratified([0.0], 10.0, 1.0)
+    samples, trail = pilot_to_target(measure, 16, 1e-3, 1000, **kw)
+    assert calls == [16] and samples == 16 and trail[0]["worst_rel_stderr"] is None
+
+
+def test_the_response_map_search_traces_stratum_steps():
+    """The maps' search (the same rule): every attempt is replicates x k^2 samples per texel, more each step,
+    and its last maps reach the target."""
+    from mincam_sim.optics import pair_layout
+    from mincam_sim.render.response_map import response_maps_to_target
+    from mincam_sim.scene.display import Screen
+
+    screen = Screen(resolution=(32, 18))
+    frame = np.zeros((1, 18, 32))
+    frame[0, 8:10, 15:17] = 1.0
+    maps, trail = response_maps_to_target(pair_layout(), screen, frame, 4e-4, seed=1)
+    traced = [t["samples_per_texel"] for t in trail]
+    assert len(traced) >= 3 and traced[0] == 16 and bool(np.all(np.diff(traced) > 0))
+    assert all(np.sqrt(n / 4) % 1 == 0 for n in traced) and maps.meta["samples_per_texel"] == traced[-1]
+    m = maps.measure(frame)
+    assert np.max(m.stderr_w_m2 / m.irradiance_w_m2) <= 4e-4 and trail[-1]["worst_rel_stderr"] <= 4e-4

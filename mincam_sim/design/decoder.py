@@ -3,24 +3,23 @@
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from .. import polynomial
 from ..atomic import atomic_write_json
 from . import tracking as tr
 
 
 def poly_terms(variables: list[np.ndarray], degree: int) -> np.ndarray:
-    """Monomials of total degree <= ``degree`` (the order of :func:`mincam_sim.render.differentiable.poly_terms`)."""
-    from itertools import combinations_with_replacement
-
-    cols = [np.ones_like(variables[0])]
-    for d in range(1, degree + 1):
-        for combo in combinations_with_replacement(range(len(variables)), d):
-            cols.append(np.prod([variables[i] for i in combo], axis=0))
-    return np.stack(cols, axis=-1)
+    """Deprecated: ``np.stack(mincam_sim.polynomial.poly_terms(*variables, degree=degree), axis=-1)``."""
+    warnings.warn("mincam_sim.design.decoder.poly_terms is deprecated and will be removed in the next release: "
+                  "use np.stack(mincam_sim.polynomial.poly_terms(*variables, degree=degree), axis=-1)",
+                  DeprecationWarning, stacklevel=2)
+    return np.stack(polynomial.poly_terms(*variables, degree=degree), axis=-1)
 
 
 @dataclass
@@ -52,7 +51,7 @@ class Decoder:
         dn = np.asarray(dn, dtype=np.float64)
         with np.errstate(divide="ignore", invalid="ignore"):
             feats = tr.FEATURES[self.features](dn.T)
-            return poly_terms(list(feats), self.degree) @ self.coefficients.T
+            return np.stack(polynomial.poly_terms(*feats, degree=self.degree), axis=-1) @ self.coefficients.T
 
     def to_json(self, path: str | Path) -> Path:
         return atomic_write_json(path, {"kind": "mincam_sim.design.Decoder", "features": self.features,
@@ -66,4 +65,4 @@ class Decoder:
         return cls(d["features"], int(d["degree"]), np.array(d["coefficients"]))
 
 
-__all__ = ["Decoder", "poly_terms"]
+__all__ = ["Decoder"]

@@ -8,9 +8,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..masks import Mask
+from ..polynomial import poly_terms
 from . import parameterization as par
 from . import tracking as tr
-from .decoder import Decoder, poly_terms
+from .decoder import Decoder
+from .problem import DesignProblem
 
 
 @dataclass
@@ -200,7 +202,7 @@ def build_problem(task: tr.TrackingTask, show_progress: bool = False):
         return sigma
 
     index, weight = par.bilinear_upsample(task.grid, dots)
-    problem = dz.DesignProblem(
+    problem = DesignProblem(
         matrices=matrices, upsample_index=index, upsample_weight=weight, targets=targets,
         features=tr.FEATURES[task.decoder], n_params=task.grid**2, t_min=film.t_min, t_max=film.t_max, gamma=film.gamma,
         levels=film.levels, dn_per_w_m2=gain, noise_dn=noise_dn, background_rows=background_rows,
@@ -224,16 +226,15 @@ STARTS = {"paper": (False, False), "x pair swapped": (True, False), "y pair swap
 
 def design(task: tr.TrackingTask, show_progress: bool = False) -> Design:
     """Optimise the four masks (and the calibration in the loop) for the tracking task."""
-    from ..render import differentiable as dz
+    from .optimiser import optimise_masks
 
     problem = build_problem(task, show_progress)
     # Multi-start: the paper's ramps under the four assignments of each pair's two ramps to its two mixels
     # (gradient descent cannot turn a ramp into its complement); the lowest *training* loss wins.
     runs = {}
     for label, (swap_x, swap_y) in STARTS.items():
-        runs[label] = dz.optimise_masks(problem, initial_logits(task, swap_x, swap_y), iterations=task.iterations,
-                                        learning_rate=task.learning_rate, seed=task.seed,
-                                        show_progress=show_progress)
+        runs[label] = optimise_masks(problem, initial_logits(task, swap_x, swap_y), iterations=task.iterations,
+                                     learning_rate=task.learning_rate, seed=task.seed, show_progress=show_progress)
     index, weight = problem.upsample_index, problem.upsample_weight
     dots = task.dot_shape()
     film = task.film()
@@ -295,7 +296,7 @@ def fit_decoder(problem, transmissions: list[np.ndarray], task: tr.TrackingTask,
     dn = np.concatenate([problem.dn_per_w_m2 * irr + sigma * rng.standard_normal(irr.shape)
                          for _ in range(max(draws, 1))], axis=1)
     targets = np.tile(problem.targets, (max(draws, 1), 1))
-    design_matrix = poly_terms(list(tr.FEATURES[task.decoder](dn)), 3)
+    design_matrix = np.stack(poly_terms(*tr.FEATURES[task.decoder](dn), degree=3), axis=-1)
     ok = np.all(np.isfinite(design_matrix), axis=1)
     coef = np.stack([np.linalg.lstsq(design_matrix[ok], targets[ok, i], rcond=None)[0] for i in range(2)])
     return Decoder(task.decoder, 3, coef)

@@ -1,7 +1,7 @@
 """Mask parameterisation for design: a coarse grid of logits, bilinear onto the printer's dot grid, a sigmoid
 onto the printer's grey values, and the film's tone curve onto printable transmissions. Pure numpy.
 
-The optimiser (``mincam_sim.render.differentiable.optimise_masks``) evaluates the same chain in Dr.Jit;
+The optimiser (``mincam_sim.design.optimiser.optimise_masks``) evaluates the same chain in Dr.Jit;
 ``dots_from_logits`` is its NumPy twin (used for checks and for building the printable mask).
 """
 

@@ -5,6 +5,7 @@ figures), all written atomically. A finished design of another identity in the s
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -101,37 +102,84 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
     overrides
         Fields of ``TrackingTask`` (training distribution, geometry, film; ``make_task``).
     """
-    from dataclasses import asdict
-
-    from .evaluate import HeldOut, measure, score
     from .gradcheck import check_gradients
     from .optimise import design
-    from .report import plot_error_vs_depth, plot_loss, plot_masks, plot_suite
-    from .suite import evaluate_suite
 
+    _check_request(task_name, dpi, overrides)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    task = make_task(quick, seed, **overrides)
+    identity = design_identity(task_name, task, quick, seed)
+    _refuse_another_design(out, identity, overwrite)
+    grad = check_gradients(seed=seed)
+    t_check = time.perf_counter() - start
+    result = design(task, show_progress=show_progress)
+    t_design = time.perf_counter() - start - t_check
+    ev = _evaluate(task, result, show_progress)
+    t_eval = time.perf_counter() - start - t_check - t_design
+    labels = _write_figures_and_data(out, task, result, ev)
+    report = {
+        "task": task_name,
+        "quick": quick,
+        "gradient_check": {"max_rel_error": grad["max_rel_error"], "n_checked": grad["n_checked"],
+                           "checks": [{"parameter": c["parameter"], "rel_error": c["rel_error"]}
+                                      for c in grad["checks"]],
+                           "method": "forward-mode AD vs central differences, same seed"},
+        **_results_report(result, ev),
+        "training": _training_report(result, task),
+        "setup": _setup_report(task, ev.held_out),
+        "runtime_s": {"gradient_check": t_check, "design": t_design, "evaluation": t_eval,
+                      "total": time.perf_counter() - start},
+    }
+    offsets_m = [(dx / tr.SPACING_M * task.spacing_m, dy / tr.SPACING_M * task.spacing_m) for dx, dy in tr.OFFSETS_M]
+    write_print_sheet(list(result.printer_masks), offsets_m, task.dpi, task.film(), out / "print_sheet.png",
+                      names=labels, title=f"designed {task_name} masks (seed {seed}), seen from the detectors")
+    atomic_write_json(out / "design.json", report, indent=1, default=float)
+    check_identity(out, identity, overwrite=True, name=IDENTITY_FILE)  # last: the design is finished
+    return report
+
+
+def _check_request(task_name: str, dpi: float | None, overrides: dict) -> None:
+    """Refuse an unknown task or a bad ``dpi``; a given ``dpi`` becomes the task's (in ``overrides``)."""
     if task_name not in TASKS:
         raise ValueError(f"unknown design task {task_name!r}: choose one of {', '.join(TASKS)}")
     if dpi is not None:
         if not (np.isfinite(dpi) and dpi > 0):
             raise ValueError(f"dpi must be a positive number of dots per inch, got {dpi!r}")
         overrides["dpi"] = float(dpi)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    start = time.perf_counter()
-    task = make_task(quick, seed, **overrides)
-    film = task.film()
-    identity = design_identity(task_name, task, quick, seed)
+
+
+def _refuse_another_design(out: Path, identity: dict, overwrite: bool) -> None:
+    """A finished design in ``out`` of another identity (or of none recorded) is refused unless ``overwrite``."""
     if (out / "design.json").exists() and not overwrite:
         if not (out / IDENTITY_FILE).exists():
             raise StaleResultError(f"{out} holds a finished design without a record of what it was computed from "
                                    "(an older version); choose another output directory or rerun with --overwrite")
         check_identity(out, identity, name=IDENTITY_FILE)
 
-    grad = check_gradients(seed=seed)
-    t_check = time.perf_counter() - start
-    result = design(task, show_progress=show_progress)
-    t_design = time.perf_counter() - start - t_check
 
+@dataclass
+class _Evaluation:
+    """The physical held-out evaluation of a design: printed masks, scores, references and the suite."""
+
+    held_out: object
+    current: list
+    designed: list
+    learned: object
+    baseline: dict
+    ours: dict
+    references: dict
+    suite: dict
+
+
+def _evaluate(task: tr.TrackingTask, result, show_progress: bool) -> _Evaluation:
+    """Measure the printed current, mirrored and designed masks on the held-out draw (response maps), score
+    them (with the references that split the gain between masks and decoder) and run the held-out suite."""
+    from .evaluate import HeldOut, measure, score
+    from .suite import evaluate_suite
+
+    film = task.film()
     held_out = HeldOut.draw(task)
     current = [film.print(m) for m in task.baseline_masks()]
     mirrored = [film.print(m) for m in tr.paper_masks()]
@@ -151,46 +199,52 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
     entries = suite_entries(task, designed, learned, result.reference_decoders["x pair swapped"])
     suite = evaluate_suite(entries, task, task.suite_frames, task.suite_texels, task.suite_samples_per_texel,
                            baseline=BASELINE, show_progress=show_progress)
-    t_eval = time.perf_counter() - start - t_check - t_design
+    return _Evaluation(held_out, current, designed, learned, baseline, ours, references, suite)
 
+
+def _write_figures_and_data(out: Path, task: tr.TrackingTask, result, ev: _Evaluation) -> list[str]:
+    """The print-ready PNG masks, the decoder, the figures and ``design_data.npz``; returns the mixels' labels."""
+    from .report import plot_error_vs_depth, plot_loss, plot_masks, plot_suite
+
+    film = task.film()
     for mask, name in zip(result.printer_masks, tr.POSITIONS, strict=True):
         path = out / f"mask_designed_{name}.png"
         with atomic_path(path) as tmp:
             export_print_png(mask, tmp, dpi=task.dpi, film=film)
-    if learned is not None:
+    if ev.learned is not None:
         result.decoder.to_json(out / "decoder.json")
     plot_loss(result.histories, result.start, out / "loss.png")
     labels = [f"{p} mixel" for p in tr.POSITIONS]
-    plot_masks({"current ramps (baseline)": current, "designed": designed}, labels, out / "masks.png")
-    plot_error_vs_depth({"current ramps, Eq. 7 (baseline)": baseline, "designed": ours,
-                         "mirrored ramps (old layout)": references["mirrored_ramps_old_layout"]},
+    plot_masks({"current ramps (baseline)": ev.current, "designed": ev.designed}, labels, out / "masks.png")
+    plot_error_vs_depth({"current ramps, Eq. 7 (baseline)": ev.baseline, "designed": ev.ours,
+                         "mirrored ramps (old layout)": ev.references["mirrored_ramps_old_layout"]},
                         out / "error_vs_depth.png")
-    plot_suite(suite, out / "suite.png")
+    plot_suite(ev.suite, out / "suite.png")
     atomic_save_npz(out / "design_data.npz", printer_input=np.stack([m.transmission for m in result.printer_masks]),
-                    printed_transmission=np.stack([m.transmission for m in designed]), loss_rms=result.loss_rms,
-                    **{f"{who}_{k}": v for who, r in (("baseline", baseline), ("designed", ours))
+                    printed_transmission=np.stack([m.transmission for m in ev.designed]), loss_rms=result.loss_rms,
+                    **{f"{who}_{k}": v for who, r in (("baseline", ev.baseline), ("designed", ev.ours))
                        for k, v in r["arrays"].items()},
                     **{f"suite_{case}_{'designed' if lab == DESIGNED else 'baseline'}_error_pct": err
-                       for case, rows in suite["errors"].items() for lab, err in rows.items()
+                       for case, rows in ev.suite["errors"].items() for lab, err in rows.items()
                        if lab in (DESIGNED, BASELINE)})
-    ratio = ours["avg_error_pct"] / baseline["avg_error_pct"]
+    return labels
+
+
+def _results_report(result, ev: _Evaluation) -> dict:
+    """``baseline``, ``designed``, ``references``, ``suite`` and ``goal`` of ``design.json``."""
+    suite = ev.suite
+    ratio = ev.ours["avg_error_pct"] / ev.baseline["avg_error_pct"]
     suite_ratios = {c["name"]: c["ratio_to_baseline"][DESIGNED] for c in suite["cases"]}
-    report = {
-        "task": task_name,
-        "quick": quick,
-        "gradient_check": {"max_rel_error": grad["max_rel_error"], "n_checked": grad["n_checked"],
-                           "checks": [{"parameter": c["parameter"], "rel_error": c["rel_error"]}
-                                      for c in grad["checks"]],
-                           "method": "forward-mode AD vs central differences, same seed"},
-        "baseline": {**_summary(baseline), "label": BASELINE,
+    return {
+        "baseline": {**_summary(ev.baseline), "label": BASELINE,
                      "masks": "ramps of the layout the package builds (optics.cross_layout: 1 - x left, x right, "
                               "y top, 1 - y bottom) as printed on the film",
                      "decoder": "Eq. 7 ratios, cubic calibration on 3 cm squares at 0.5 m (the experiments')"},
-        "designed": {**_summary(ours), "masks": "optimised, as printed on the film",
+        "designed": {**_summary(ev.ours), "masks": "optimised, as printed on the film",
                      "decoder": ("cubic polynomial of the four normalised changes, fitted in the design loop on "
-                                 "the training set (no physical calibration)" if learned is not None else
+                                 "the training set (no physical calibration)" if ev.learned is not None else
                                  "Eq. 7 ratios, cubic calibration at 0.5 m")},
-        "references": {k: _summary(v) for k, v in references.items()},
+        "references": {k: _summary(v) for k, v in ev.references.items()},
         "suite": {"cases": suite["cases"], "baseline": BASELINE, "designed": DESIGNED,
                   "calibration_squares": suite["calibration_squares"],
                   "designed_over_baseline": suite_ratios,
@@ -204,28 +258,30 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
         "goal": {"designed_over_baseline_avg": ratio, "met": bool(ratio <= 0.5),
                  "statement": "designed average error <= half the baseline's (current ramps, Eq. 7), old "
                               "held-out draw (squares 2-5 cm, black plane); the suite says where it holds"},
-        "training": {"rms_error_start_pct": 100 * result.initial_rms, "rms_error_end_pct": 100 * result.final_rms,
-                     "start_kept": result.start,
-                     "candidates_rms_pct": {k: 100 * v for k, v in (result.candidates or {}).items()},
-                     "starts": {k: {kk: 100 * vv for kk, vv in v.items()} for k, v in result.starts.items()},
-                     "objects": result.n_train, "iterations": task.iterations,
-                     "loss": "mean squared position error of the centroid of the change, noisy 12-bit read-out "
-                             "at each frame's exposure (background included), cubic fitted per step"},
-        "setup": {"spacing_m": task.spacing_m, "d_f_m": task.d_f_m, "detector_size_m": tr.DETECTOR_SIZE_M,
-                  "mask_size_m": tr.MASK_SIZE_M, "field_m": tr.FIELD_M, "depth_range_m": list(task.depth_range_m),
-                  "calibration_depth_m": tr.CALIBRATION_DEPTH_M, "working_radius": tr.WORKING_RADIUS,
-                  "held_out_depths_m": held_out.depths_m.tolist(), "film": asdict(film), "task": task.as_dict(),
-                  "error_definition": "|predicted - true| in normalised field coordinates, % of the field "
-                                      "(50 cm at 0.5 m, scaled with depth)"},
-        "runtime_s": {"gradient_check": t_check, "design": t_design, "evaluation": t_eval,
-                      "total": time.perf_counter() - start},
     }
-    offsets_m = [(dx / tr.SPACING_M * task.spacing_m, dy / tr.SPACING_M * task.spacing_m) for dx, dy in tr.OFFSETS_M]
-    write_print_sheet(list(result.printer_masks), offsets_m, task.dpi, film, out / "print_sheet.png",
-                      names=labels, title=f"designed {task_name} masks (seed {seed}), seen from the detectors")
-    atomic_write_json(out / "design.json", report, indent=1, default=float)
-    check_identity(out, identity, overwrite=True, name=IDENTITY_FILE)  # last: the design is finished
-    return report
+
+
+def _training_report(result, task: tr.TrackingTask) -> dict:
+    """``training`` of ``design.json``: the optimisation's start, end, candidates and loss."""
+    return {"rms_error_start_pct": 100 * result.initial_rms, "rms_error_end_pct": 100 * result.final_rms,
+            "start_kept": result.start,
+            "candidates_rms_pct": {k: 100 * v for k, v in (result.candidates or {}).items()},
+            "starts": {k: {kk: 100 * vv for kk, vv in v.items()} for k, v in result.starts.items()},
+            "objects": result.n_train, "iterations": task.iterations,
+            "loss": "mean squared position error of the centroid of the change, noisy 12-bit read-out "
+                    "at each frame's exposure (background included), cubic fitted per step"}
+
+
+def _setup_report(task: tr.TrackingTask, held_out) -> dict:
+    """``setup`` of ``design.json``: the geometry, the field, the held-out depths, the film and the task."""
+    from dataclasses import asdict
+
+    return {"spacing_m": task.spacing_m, "d_f_m": task.d_f_m, "detector_size_m": tr.DETECTOR_SIZE_M,
+            "mask_size_m": tr.MASK_SIZE_M, "field_m": tr.FIELD_M, "depth_range_m": list(task.depth_range_m),
+            "calibration_depth_m": tr.CALIBRATION_DEPTH_M, "working_radius": tr.WORKING_RADIUS,
+            "held_out_depths_m": held_out.depths_m.tolist(), "film": asdict(task.film()), "task": task.as_dict(),
+            "error_definition": "|predicted - true| in normalised field coordinates, % of the field "
+                                "(50 cm at 0.5 m, scaled with depth)"}
 
 
 __all__ = ["BASELINE", "DESIGNED", "MIRRORED", "RAMPS_LEARNED", "TASKS", "make_task", "run_design", "suite_entries"]

@@ -94,13 +94,67 @@ def locate_in_world(world: WorldRenderer, camera: GroundTruthCamera, frames: Seq
     ``unscored_frames_pct`` its share of the ground-truth frames. If no frame can be scored the error rates are
     ``None``. Rates are Euclidean (``normalisation``); ``per_axis`` gives the same frames per axis.
     """
+    _check_ground_truth(ground_truth, objects, frames)
+    rays = spp // STRATIFIED_SHARE if setup.dp_estimator == "stratified" else spp
+    seen = _observe(world, frames, background, setup, rng, predict, rays, show_progress)
+    truths = _ground_truths(world, camera, frames, background, setup, objects, region, axis, show_progress)
+    truth = truths.by_name[ground_truth]
+    other_name = "change" if ground_truth == "object" else "object"
+    extrap = (extrapolated(seen.change, seen.readout.threshold_dn) if extrapolated is not None
+              else np.zeros(len(frames), dtype=bool))
+    labels = np.asarray(groups if groups is not None else ["all"] * len(frames))
+    pair_sum_dn = seen.change.sum(axis=1) / (seen.change.shape[1] / 2)  # the mean denominator of Eq. 4 / 7 [DN]
+    score = _Scoring(seen.detected, seen.predicted, truths.net_fraction, pair_sum_dn, extrap,
+                     extrapolated is not None, setup.field_m)
+    everything = np.ones(len(frames), dtype=bool)
+    main = score(truth, everything)
+    ok = main.pop("_ok")
+    other = score(truths.by_name[other_name], everything) if objects is not None else None
+    if other is not None:
+        other.pop("_ok")
+    by_group = {}
+    for label in sorted(set(labels.tolist()), key=labels.tolist().index):
+        g = score(truth, labels == label)
+        g.pop("_ok")
+        by_group[label] = g
+    summary = {**main, "ground_truth": ground_truth, "by_group": by_group, f"vs_{other_name}_centroid": other,
+               **_summary_extras(seen, truths, truth, ok, objects is not None, score.rates, setup, rays)}
+    arrays = {"predicted_m": seen.predicted, "truth_m": truth, "truth_object_m": truths.object,
+              "truth_change_m": truths.change, "signed_centroid_m": truths.signed, "detected": seen.detected,
+              "evaluated": ok, "extrapolated": extrap & ok, "group": labels,
+              "net_change_fraction": truths.net_fraction, "pair_sum_dn": pair_sum_dn,
+              "predicted_noiseless_m": seen.predicted_ideal, "predicted_sigma_m": seen.sigma,
+              "sensor_sigma_m": seen.sigma_sensor, "change_dn": seen.change, "dP_w_m2": seen.dp.irradiance_w_m2,
+              "dP_stderr_w_m2": seen.dp.stderr_w_m2}
+    return Located(summary, arrays, truths.images, truths.background_image)
+
+
+def _check_ground_truth(ground_truth: str, objects, frames: Sequence[dict]) -> None:
     if ground_truth not in GROUND_TRUTHS:
         raise ValueError(f"ground_truth must be one of {GROUND_TRUTHS}, got {ground_truth!r}")
     if ground_truth == "object" and objects is None:
         raise ValueError("the object ground truth needs the frames' meshes (objects=...)")
     if objects is not None and len(objects) != len(frames):
         raise ValueError(f"objects lists {len(objects)} frames, the run has {len(frames)}")
-    rays = spp // STRATIFIED_SHARE if setup.dp_estimator == "stratified" else spp
+
+
+@dataclass
+class _Observed:
+    """What the mincam saw: dP, its read-out, detections, predicted positions and their noise."""
+
+    dp: object
+    readout: object
+    detected: np.ndarray
+    change: np.ndarray
+    predicted: np.ndarray
+    predicted_ideal: np.ndarray
+    sigma: np.ndarray
+    sigma_sensor: np.ndarray
+
+
+def _observe(world: WorldRenderer, frames, background, setup: Setup, rng: np.random.Generator, predict,
+             rays: int, show_progress: bool) -> _Observed:
+    """Render dP of every frame, read it out with the sensor, detect, predict and propagate the noise."""
     dp, _ = world.measure_changes(frames, background, spp=rays, seed=setup.seed, show_progress=show_progress,
                                   estimator=setup.dp_estimator)
     bg_irr = np.asarray(dp.meta["background_w_m2"])
@@ -116,7 +170,29 @@ def locate_in_world(world: WorldRenderer, camera: GroundTruthCamera, frames: Seq
     predicted_ideal = estimate(readout.ideal_change_dn(frame_irr, bg_irr))
     sigma = propagate_sigma(estimate, change, readout.change_sigma_dn(frame_irr, bg_irr, dp.stderr_w_m2))
     sigma_sensor = propagate_sigma(estimate, change, readout.change_sigma_dn(frame_irr, bg_irr))
+    return _Observed(dp, readout, detected, change, predicted, predicted_ideal, sigma, sigma_sensor)
 
+
+@dataclass
+class _Truths:
+    """The ground-truth camera's view: both centroids, the signed centroid, the net change fraction, images."""
+
+    change: np.ndarray
+    object: np.ndarray
+    signed: np.ndarray
+    net_fraction: np.ndarray
+    images: list
+    background_image: np.ndarray
+
+    @property
+    def by_name(self) -> dict:
+        return {"object": self.object, "change": self.change}
+
+
+def _ground_truths(world: WorldRenderer, camera: GroundTruthCamera, frames, background, setup: Setup, objects,
+                   region, axis, show_progress: bool) -> _Truths:
+    """Render the ground-truth camera for the background and every frame (the world is left at the
+    background) and take each frame's centroids."""
     world.update(background)
     bg_image = world.camera_image(spp=GROUND_TRUTH_SPP, seed=setup.seed)
     shape = (len(frames),) if axis is not None else (len(frames), 2)
@@ -139,27 +215,34 @@ def locate_in_world(world: WorldRenderer, camera: GroundTruthCamera, frames: Seq
         net_fraction[i] = diff.sum() / total if total > 0 else np.nan
         images.append(image)
     world.update(background)
+    return _Truths(truth_change, truth_object, signed, net_fraction, images, bg_image)
 
-    truths = {"object": truth_object, "change": truth_change}
-    truth = truths[ground_truth]
-    other_name = "change" if ground_truth == "object" else "object"
-    extrap = (extrapolated(change, readout.threshold_dn) if extrapolated is not None
-              else np.zeros(len(frames), dtype=bool))
-    labels = np.asarray(groups if groups is not None else ["all"] * len(frames))
-    pair_sum_dn = change.sum(axis=1) / (change.shape[1] / 2)  # the mean denominator of Eq. 4 / 7 [DN]
 
-    def rates(pred: np.ndarray, true: np.ndarray, normalisation: str = "euclidean") -> dict | None:
+@dataclass
+class _Scoring:
+    """Scores predictions against a ground truth over a subset of the frames (see :func:`locate_in_world`)."""
+
+    detected: np.ndarray
+    predicted: np.ndarray
+    net_fraction: np.ndarray
+    pair_sum_dn: np.ndarray
+    extrap: np.ndarray
+    has_extrapolation: bool
+    field_m: float
+
+    def rates(self, pred: np.ndarray, true: np.ndarray, normalisation: str = "euclidean") -> dict | None:
         both = _finite_rows(pred) & _finite_rows(true)
-        return error_rates(pred, true, setup.field_m, normalisation) if both.any() else None
+        return error_rates(pred, true, self.field_m, normalisation) if both.any() else None
 
-    def scoring(true: np.ndarray, keep: np.ndarray) -> dict:
+    def __call__(self, true: np.ndarray, keep: np.ndarray) -> dict:
         """Rates and frame accounting against ``true`` over the frames in ``keep``."""
+        detected, predicted, extrap = self.detected, self.predicted, self.extrap
         has_truth = _finite_rows(true) & keep
         scored = detected & has_truth  # frames to score: a NaN prediction among them counts as missing
         ok = scored & _finite_rows(predicted)
         n_missed = int((has_truth & ~detected).sum())
         n_no_position = int((scored & ~_finite_rows(predicted)).sum())
-        headline = rates(predicted[scored], true[scored]) or {
+        headline = self.rates(predicted[scored], true[scored]) or {
             "max_error_pct": None, "p95_error_pct": None, "avg_error_pct": None, "rms_error_pct": None, "n": 0,
             "n_missing": n_no_position, "n_without_truth": 0, "missing_pct": 100.0 if scored.any() else None,
             "normalisation": "euclidean"}
@@ -174,50 +257,32 @@ def locate_in_world(world: WorldRenderer, camera: GroundTruthCamera, frames: Seq
             "unscored_frames_pct": (100.0 * (n_missed + n_no_position) / int(has_truth.sum())
                                     if has_truth.any() else None),
             "false_alarm_frames": int((~_finite_rows(true) & keep & detected).sum()),
-            "extrapolated_frames": int((extrap & ok).sum()) if extrapolated is not None else None,
-            "without_extrapolated": rates(predicted[ok & ~extrap], true[ok & ~extrap]),
-            "per_axis": rates(predicted[ok], true[ok], "per_axis"),
-            "contrast": _contrast(net_fraction[ok], pair_sum_dn[ok]),
+            "extrapolated_frames": int((extrap & ok).sum()) if self.has_extrapolation else None,
+            "without_extrapolated": self.rates(predicted[ok & ~extrap], true[ok & ~extrap]),
+            "per_axis": self.rates(predicted[ok], true[ok], "per_axis"),
+            "contrast": _contrast(self.net_fraction[ok], self.pair_sum_dn[ok]),
             "_ok": ok,
         }
 
-    everything = np.ones(len(frames), dtype=bool)
-    main = scoring(truth, everything)
-    ok = main.pop("_ok")
-    other = scoring(truths[other_name], everything) if objects is not None else None
-    if other is not None:
-        other.pop("_ok")
-    by_group = {}
-    for label in sorted(set(labels.tolist()), key=labels.tolist().index):
-        g = scoring(truth, labels == label)
-        g.pop("_ok")
-        by_group[label] = g
-    sigma_norm = sigma if sigma.ndim == 1 else np.hypot(*sigma.T)
+
+def _summary_extras(seen: _Observed, truths: _Truths, truth: np.ndarray, ok: np.ndarray, with_objects: bool,
+                    rates, setup: Setup, rays: int) -> dict:
+    """The summary beyond the headline: the two truths against each other, noiseless and signed-centroid
+    references, the noise, the dP estimator and the exposure."""
+    sigma_norm = seen.sigma if seen.sigma.ndim == 1 else np.hypot(*seen.sigma.T)
     with np.errstate(divide="ignore", invalid="ignore"):
-        dp_rel = np.abs(dp.stderr_w_m2 / dp.irradiance_w_m2)
-    both_truths = _finite_rows(truth_object) & _finite_rows(truth_change)
-    summary = {
-        **main,
-        "ground_truth": ground_truth,
-        "by_group": by_group,
-        f"vs_{other_name}_centroid": other,
-        "object_vs_change_centroid": (rates(truth_change[both_truths], truth_object[both_truths])
-                                      if objects is not None else None),
-        "noiseless": rates(predicted_ideal[ok], truth[ok]),
-        "signed_centroid_vs_ground_truth": rates(signed[ok], truth[ok]),
-        "vs_signed_centroid": rates(predicted[ok], signed[ok]),
+        dp_rel = np.abs(seen.dp.stderr_w_m2 / seen.dp.irradiance_w_m2)
+    both_truths = _finite_rows(truths.object) & _finite_rows(truths.change)
+    return {
+        "object_vs_change_centroid": (rates(truths.change[both_truths], truths.object[both_truths])
+                                      if with_objects else None),
+        "noiseless": rates(seen.predicted_ideal[ok], truth[ok]),
+        "signed_centroid_vs_ground_truth": rates(truths.signed[ok], truth[ok]),
+        "vs_signed_centroid": rates(seen.predicted[ok], truths.signed[ok]),
         "noise_sigma_median_pct": float(100 * np.median(sigma_norm[ok]) / setup.field_m) if ok.any() else None,
         "dP_worst_rel_stderr": float(np.nanmax(dp_rel[ok])) if ok.any() else None,
         "spp_per_mixel_per_frame": rays,
-        "dP_estimator": dp.meta["estimator"],
-        "rays_per_mixel_per_frame": dp.meta["rays_per_mixel_per_frame"],
-        "exposure_s": readout.sensor.exposure_s,
+        "dP_estimator": seen.dp.meta["estimator"],
+        "rays_per_mixel_per_frame": seen.dp.meta["rays_per_mixel_per_frame"],
+        "exposure_s": seen.readout.sensor.exposure_s,
     }
-    arrays = {"predicted_m": predicted, "truth_m": truth, "truth_object_m": truth_object,
-              "truth_change_m": truth_change, "signed_centroid_m": signed, "detected": detected,
-              "evaluated": ok, "extrapolated": extrap & ok, "group": labels,
-              "net_change_fraction": net_fraction, "pair_sum_dn": pair_sum_dn,
-              "predicted_noiseless_m": predicted_ideal, "predicted_sigma_m": sigma,
-              "sensor_sigma_m": sigma_sensor, "change_dn": change, "dP_w_m2": dp.irradiance_w_m2,
-              "dP_stderr_w_m2": dp.stderr_w_m2}
-    return Located(summary, arrays, images, bg_image)

@@ -25,21 +25,22 @@ The aperture edge and visibility are not differentiated (no boundary terms): der
 objects well inside the field of view (:func:`check_inside_fov` says which).
 
 For mask design, measurements are linear in the mask: :func:`design_matrix` bins the same samples by printer
-dot (``nearest``) so that ``E_k = A_k @ T_k``; :func:`optimise_masks` then optimises texel logits, a decoder
-and the film's tone mapping through that linear model with ``mi.ad.Adam``.
+dot (``nearest``) so that ``E_k = A_k @ T_k``; the design floor (:mod:`mincam_sim.design.optimiser`) then
+optimises texel logits, a decoder and the film's tone mapping through that linear model with ``mi.ad.Adam``
+(its Dr.Jit operations from :mod:`.autodiff`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from contextlib import contextmanager
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
+from .. import polynomial as _polynomial
 from ..optics import Mincam, Mixel
-from ..progress import bar
 from . import backend
+from .autodiff import single_threaded
 from .mask_eval import local_to_mask_xy
 from .mixel_sensor import START_OFFSET_M
 
@@ -111,24 +112,6 @@ class Samples:
 def _mi():
     backend.require_jit("Differentiable mixel measurements (Dr.Jit AD)")
     return backend.mitsuba()
-
-
-@contextmanager
-def single_threaded():
-    """Run Dr.Jit kernels on one thread inside the block (then restore the pool).
-
-    The reverse pass of a ``gather`` is an atomic scatter-add, whose float32 sum depends on the order in
-    which threads reach it: with several threads the same seed gave gradients differing by ~1e-5 relative,
-    and optimisations that drifted apart. On one thread the order is fixed: same seed, same numbers.
-    """
-    import drjit as dr
-
-    threads = dr.thread_count()
-    dr.set_thread_count(1)
-    try:
-        yield
-    finally:
-        dr.set_thread_count(threads)
 
 
 def bodies_scene(mincam: Mincam):
@@ -386,199 +369,24 @@ class GradientProbe:
         return (self.values(position=plus) - self.values(position=minus)) / (2 * step)
 
 
-# ----------------------------------------------------------------------------------------------------------
-# Optimisation of masks and decoder through the linear model
+_MOVED = {"DesignProblem": "mincam_sim.design.problem", "DesignResult": "mincam_sim.design.problem",
+          "masks_from_logits": "mincam_sim.design.optimiser", "optimise_masks": "mincam_sim.design.optimiser"}
 
 
-@dataclass
-class DesignProblem:
-    """Everything the optimiser needs, as plain arrays (built by :mod:`mincam_sim.design`).
-
-    Attributes
-    ----------
-    matrices : list of (n_frames, D) ndarray
-        Per mixel, the linear model ``E = A @ T`` on the printer-dot grid [W/m^2].
-    upsample_index, upsample_weight : (D, 4) ndarray
-        Bilinear interpolation of the (G, G) parameter grid onto the D printer dots (indices into G*G).
-    targets : (n_frames, 2) ndarray
-        True positions (normalised field coordinates, :mod:`mincam_sim.design.tracking`).
-    features : callable
-        ``features(dn, xp)`` -> tuple of decoder inputs from the (n_mixels,) list of DN arrays, written with
-        the array namespace ``xp`` (``drjit`` inside the optimiser, ``numpy`` at inference).
-    n_params : int
-        G * G logits per mask.
-    t_min, t_max, gamma, levels : film tone mapping (:class:`mincam_sim.masks.PrintedFilm`).
-    dn_per_w_m2 : float
-        Sensor gain for the exposure [DN per W/m^2].
-    noise_dn : callable
-        ``noise_dn(irradiance (n_mixels, n_frames) ndarray) -> sigma [DN]`` of the background-subtracted change,
-        or, with ``background_rows``, ``noise_dn(change, background)`` (both (n_mixels, n_frames) [W/m^2]).
-    background_rows : list of (n_rows, D) ndarray, optional
-        Per mixel, linear models of the backgrounds behind the frames (e.g. a uniform plane of unit radiance
-        per depth) [W/m^2 per unit transmission].
-    background_weights : (n_frames, n_rows) ndarray, optional
-        Each frame's background as a combination of those rows: its irradiance is ``W @ (R_k @ T_k)``.
-    fit_noiseless : bool
-        Fit the decoder of each step on the noiseless read-out (as a calibration is fitted), and score it on
-        the noisy one; default: fit and score on the same noisy batch.
-    error_cap : float, optional
-        Robust loss: a frame's squared error counts at most ``error_cap**2`` (a lost frame, e.g. a change that
-        noise cancels, weighs as one error of ``error_cap`` and carries no gradient) [fraction of the field].
-    """
-
-    matrices: list
-    upsample_index: np.ndarray
-    upsample_weight: np.ndarray
-    targets: np.ndarray
-    features: Callable
-    n_params: int
-    t_min: float
-    t_max: float
-    gamma: float
-    levels: int | None
-    dn_per_w_m2: float
-    noise_dn: Callable
-    background_rows: list | None = None
-    background_weights: np.ndarray | None = None
-    fit_noiseless: bool = False
-    error_cap: float | None = None
-
-    def background_irradiance(self, transmissions: list) -> np.ndarray | None:
-        """Irradiance (n_mixels, n_frames) [W/m^2] of each frame's background through the masks ``T_k``."""
-        if self.background_rows is None:
-            return None
-        return np.array([self.background_weights @ (r @ np.asarray(t, dtype=np.float64))
-                         for r, t in zip(self.background_rows, transmissions, strict=True)])
-
-    def sigma_dn(self, irradiance: np.ndarray, transmissions: list) -> np.ndarray:
-        """Noise [DN] of each frame's change for masks ``T_k`` (see ``noise_dn``)."""
-        if self.background_rows is None:
-            return self.noise_dn(irradiance)
-        return self.noise_dn(irradiance, self.background_irradiance(transmissions))
-
-
-def poly_terms(*variables, degree: int = 3) -> list:
-    """All monomials of the variables of total degree <= ``degree``, constant first (NumPy or Dr.Jit arrays)."""
-    from itertools import combinations_with_replacement
-
-    terms = [variables[0] * 0 + 1.0]
-    for d in range(1, degree + 1):
-        for combo in combinations_with_replacement(range(len(variables)), d):
-            t = variables[combo[0]]
-            for i in combo[1:]:
-                t = t * variables[i]
-            terms.append(t)
-    return terms
-
-
-@dataclass
-class DesignResult:
-    """Output of :func:`optimise_masks` (NumPy arrays)."""
-
-    logits: list  # per mixel (G*G,) ndarray
-    transmission: list  # per mixel (D,) ndarray: the printed transmission on the dot grid
-    loss_history: np.ndarray  # (iterations,) training RMS error [fraction of the field]
-    coefficients: np.ndarray  # (2, n_terms) decoder polynomial at the end
-
-
-def masks_from_logits(problem: DesignProblem, logits: list, straight_through: bool = True):
-    """Dr.Jit transmissions of the printed dots from parameter logits (sigmoid -> levels -> film)."""
-    mi = _mi()
-    import drjit as dr
-
-    out = []
-    idx = [mi.UInt32(problem.upsample_index[:, c].astype(np.uint32)) for c in range(4)]
-    wts = [mi.Float(problem.upsample_weight[:, c]) for c in range(4)]
-    for theta in logits:
-        z = wts[0] * dr.gather(mi.Float, theta, idx[0])
-        for c in range(1, 4):
-            z += wts[c] * dr.gather(mi.Float, theta, idx[c])
-        value = 1.0 / (1.0 + dr.exp(-z))  # printer grey value in (0, 1)
-        if problem.levels is not None and straight_through:
-            q = problem.levels - 1
-            value = value + dr.detach(dr.round(value * q) / q - value)
-        out.append(problem.t_min + (problem.t_max - problem.t_min) * dr.power(value, problem.gamma))
-    return out
-
-
-def _matvec(a_flat, t, n_frames: int, d: int):
-    mi = _mi()
-    import drjit as dr
-
-    col = dr.arange(mi.UInt32, n_frames * d) % d
-    return dr.block_sum(a_flat * dr.gather(mi.Float, t, col), d)
-
-
-def optimise_masks(
-    problem: DesignProblem,
-    initial_logits: list,
-    iterations: int = 300,
-    learning_rate: float = 0.1,
-    seed: int = 0,
-    show_progress: bool = False,
-) -> DesignResult:
-    """Adam on the mask logits through the linear forward model, the sensor noise and the film.
-
-    Each iteration: printed dot transmissions (straight-through quantisation to the film's levels) ->
-    irradiances ``A_k @ T_k`` -> DN with Gaussian sensor noise (fresh draws from ``seed`` and the iteration)
-    -> decoder features -> cubic polynomial whose coefficients are the least-squares fit on this batch (the
-    calibration; by the envelope theorem the gradient with coefficients held fixed is the gradient of the
-    calibrated loss), or on its noiseless read-out with ``problem.fit_noiseless`` (then the gradient holds
-    the calibration fixed) -> mean squared position error. Returns the masks and the loss history.
-    """
-    mi = _mi()
-    import drjit as dr
-
-    n_frames = len(problem.targets)
-    d = problem.matrices[0].shape[1]
-    a_flat = [mi.Float(np.asarray(a, dtype=np.float32).ravel()) for a in problem.matrices]
-    opt = mi.ad.Adam(lr=learning_rate)
-    for k, theta in enumerate(initial_logits):
-        opt[f"theta{k}"] = mi.Float(np.asarray(theta, dtype=np.float32))
-    tx, ty = (mi.Float(problem.targets[:, i]) for i in range(2))
-    history = []
-    coef = None
-    with single_threaded():  # reverse passes scatter-add: one thread keeps their order (same seed, same numbers)
-        with bar(iterations, "optimising masks", disable=not show_progress, unit="step") as b:
-            for it in range(iterations):
-                logits = [opt[f"theta{k}"] for k in range(len(initial_logits))]
-                masks = masks_from_logits(problem, logits)
-                irr = [_matvec(a_flat[k], masks[k], n_frames, d) for k in range(len(masks))]
-                irr_np = np.array([np.asarray(dr.detach(e)) for e in irr], dtype=np.float64)
-                sigma = problem.sigma_dn(irr_np, [np.asarray(dr.detach(t)) for t in masks])
-                eps = np.random.default_rng([int(seed), it]).standard_normal(sigma.shape)
-                dn = [problem.dn_per_w_m2 * irr[k] + mi.Float(sigma[k] * eps[k]) for k in range(len(irr))]
-                terms = poly_terms(*problem.features(dn, dr))
-                if problem.fit_noiseless:  # coefficients of the noiseless read-out, scored on the noisy one
-                    clean = [problem.dn_per_w_m2 * e for e in irr_np]
-                    with np.errstate(divide="ignore", invalid="ignore"):
-                        design = np.stack(poly_terms(*problem.features(clean, np)), axis=1)
-                else:
-                    design = np.stack([np.asarray(dr.detach(t), dtype=np.float64) for t in terms], axis=1)
-                ok = np.all(np.isfinite(design), axis=1)
-                coef = np.stack([np.linalg.lstsq(design[ok], problem.targets[ok, i], rcond=None)[0]
-                                 for i in range(2)])
-                c_x, c_y = (mi.Float(c) for c in coef.astype(np.float32))  # arrays, not literals: one kernel
-                px = sum(dr.gather(mi.Float, c_x, i) * t for i, t in enumerate(terms))
-                py = sum(dr.gather(mi.Float, c_y, i) * t for i, t in enumerate(terms))
-                err2 = dr.square(px - tx) + dr.square(py - ty)
-                if problem.error_cap is not None:
-                    cap2 = float(problem.error_cap) ** 2
-                    err2 = dr.select(dr.isfinite(err2), dr.minimum(err2, cap2), cap2)
-                loss = dr.mean(err2)
-                dr.backward(loss)
-                opt.step()
-                history.append(float(np.sqrt(np.asarray(loss, dtype=np.float64).ravel()[0])))
-                b.update(1)
-                b.set_postfix_str(f"rms {100 * history[-1]:.2f} % of field")
-    logits_np = [np.asarray(opt[f"theta{k}"], dtype=np.float64) for k in range(len(initial_logits))]
-    final = masks_from_logits(problem, [mi.Float(t) for t in logits_np])
-    return DesignResult(logits_np, [np.asarray(t, dtype=np.float64) for t in final], np.array(history), coef)
+def __getattr__(name: str):
+    """``poly_terms``: deprecated re-export of :func:`mincam_sim.polynomial.poly_terms`; the mask-design names
+    moved to the design floor (which this layer may not import): say where."""
+    if name == "poly_terms":
+        warnings.warn("mincam_sim.render.differentiable.poly_terms is deprecated and will be removed in the next "
+                      "release: import poly_terms from mincam_sim.polynomial", DeprecationWarning, stacklevel=2)
+        return _polynomial.poly_terms
+    if name in _MOVED:
+        raise ImportError(f"{name} moved from mincam_sim.render.differentiable to {_MOVED[name]} (mask design is "
+                          f"the design floor's): use 'from {_MOVED[name]} import {name}'")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 __all__ = [
-    "DesignProblem",
-    "DesignResult",
     "GradientProbe",
     "Samples",
     "SquareScenes",
@@ -587,9 +395,6 @@ __all__ = [
     "design_matrix",
     "irradiance",
     "lookup",
-    "masks_from_logits",
     "mixel_samples",
-    "optimise_masks",
-    "poly_terms",
     "single_threaded",
 ]

@@ -6,14 +6,18 @@
 * Standard errors: every value is the mean of ``R >= 2`` independent replicate estimates;
   :func:`replicate_mean_stderr` returns the mean and ``std(ddof=1) / sqrt(R)``.
 * Budgets: :func:`samples_for_target` extrapolates a pilot's sample count to a target relative standard error,
-  with one margin and one cap for all forms.
+  with one margin and one cap for all forms; :func:`pilot_to_target` runs the pilots (the ray forms, and with
+  a measured rate and quantised counts the response maps' search).
 """
 
 from __future__ import annotations
 
 import functools
+import itertools
+import math
 import warnings
 import zlib
+from collections.abc import Callable
 
 import numpy as np
 
@@ -77,31 +81,72 @@ UNSEEN_GROWTH = 16  # samples x this when a pilot measured no change significant
 
 
 def pilot_to_target(measure, pilot_samples: int, target_rel: float, cap: int, significance: float = 3.0,
-                    rounds: int = PILOT_ROUNDS) -> tuple[int, list[dict]]:
+                    rounds: int | None = PILOT_ROUNDS, *, exponent: float = 0.5,
+                    measured_exponent: tuple[float, float] | None = None,
+                    growth: tuple[float, float] = (1, math.inf), unseen_growth: int = UNSEEN_GROWTH,
+                    quantize: Callable[[float, int], int] | None = None) -> tuple[int, list[dict]]:
     """Samples with which the pilot measurements reach ``target_rel``, and the trail of pilots.
 
     ``measure(samples)`` returns ``(values, stderr)`` of the pilot frames. A value within ``significance``
     sigma of zero has no measurable relative error, so one pilot can miss a small change that, measured with
     more samples, turns out to be the worst: each later pilot runs at the count the previous one
-    extrapolated (``UNSEEN_GROWTH`` times more when nothing was significant), until a pilot meets the target
-    itself (then that count is used, and the pilot frames are known to meet it: same seed, same numbers) or
-    ``rounds`` pilots have run (then the last extrapolation, or the first count if no pilot measured any
-    change: a change that stays invisible is not worth more samples).
+    extrapolated (:func:`samples_for_target`; ``unseen_growth`` times more when nothing was significant),
+    until a pilot meets the target itself (then that count is used, and the pilot frames are known to meet it:
+    same seed, same numbers) or ``rounds`` pilots have run (then the last extrapolation, or the first count if
+    no pilot measured any change: a change that stays invisible is not worth more samples).
+
+    The keywords fit the rule to estimators whose counts are quantised and converge faster than plain Monte
+    Carlo (response maps: ``replicates x k^2`` samples per texel, stratified); their defaults are the ray forms'.
+
+    Parameters
+    ----------
+    rounds : int or None
+        Most pilots; ``None``: until the target or the cap (every pilot's result is then the final result
+        candidate, e.g. cached maps).
+    exponent : float
+        ``rel ~ samples^-exponent`` of the extrapolation (until measured).
+    measured_exponent : (float, float), optional
+        Measure the exponent on the last two pilots (when both have a relative error and the later one more
+        samples), clipped to these bounds; it stays at the last measured value otherwise.
+    growth : (float, float)
+        The next pilot has at least ``growth[0]`` and at most ``growth[1]`` times the samples of the last one
+        (and at most ``cap``).
+    unseen_growth : int
+        Factor of the next pilot when nothing was significant (1: stop there).
+    quantize : callable, optional
+        ``quantize(wanted, samples)``: the count actually traced for ``wanted`` after a pilot of ``samples``;
+        it must exceed ``samples`` unless the cap allows nothing more (the search ends there).
     """
     samples, trail, extrapolated = int(pilot_samples), [], int(pilot_samples)
-    for _ in range(rounds):
+    rate = exponent
+    for _ in range(rounds) if rounds is not None else itertools.count():
         worst = worst_relative_stderr(*measure(samples), significance=significance)
         trail.append({"samples": samples, "worst_rel_stderr": worst if np.isfinite(worst) else None})
         if np.isfinite(worst):
             if worst <= target_rel:
                 return samples, trail
-            following = extrapolated = samples_for_target(samples, worst, target_rel, cap)
+            if measured_exponent is not None:
+                rate = _measured_exponent(trail, rate, measured_exponent)
+            wanted = samples_for_target(samples, worst, target_rel, cap, rate)
+            wanted = min(cap, max(growth[0] * samples, min(wanted, growth[1] * samples)))
+            following = extrapolated = int(quantize(wanted, samples) if quantize is not None else wanted)
         else:
-            following = min(cap, samples * UNSEEN_GROWTH)
+            following = min(cap, samples * unseen_growth)
         if following <= samples:
             break
         samples = following
     return extrapolated, trail
+
+
+def _measured_exponent(trail: list[dict], previous: float, bounds: tuple[float, float]) -> float:
+    """``a`` of ``rel ~ samples^-a`` through the last two pilots of ``trail``, clipped to ``bounds``; ``previous``
+    when fewer than two pilots measured a relative error, or the later one has no more samples."""
+    if len(trail) < 2:
+        return previous
+    (n_a, r_a), (n_b, r_b) = ((t["samples"], t["worst_rel_stderr"]) for t in trail[-2:])
+    if r_a is None or r_b is None or not (r_a > 0 and r_b > 0 and n_b > n_a):
+        return previous
+    return float(np.clip(np.log(r_a / r_b) / np.log(n_b / n_a), *bounds))
 
 
 def warn_unreached(m: Measurements) -> None:

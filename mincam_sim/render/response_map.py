@@ -22,6 +22,11 @@ not with the samples per texel (close 2 x 3 mm ramp, 4 blocks: relative sigma 5.
 ``k`` random pairs. A *fixed* pairing converges to an integral over a sub-manifold of the product domain,
 and identical pairings across blocks hide that from the standard error. The variance of each weight comes
 from the spread of the independent blocks.
+
+Random numbers: texel ``t`` of mixel ``k`` draws those of launch ``t`` of the mixel's seed
+(:class:`.tracing.LaneSampler`, the launch-seed rule of every loop), and each block's pairing its own stretch of
+one PCG64 stream per mixel. Texels are traced in chunks of at most :data:`.tracing.MAX_LANES` samples, and a
+map is the same bit for bit whatever the chunks.
 """
 
 from __future__ import annotations
@@ -39,15 +44,20 @@ from ..imageio import write_exr
 from ..measurements import Measurements
 from ..optics import Mincam
 from ..progress import progress
-from ..scene.display import Screen
+from ..scene.display import FrameSource, Screen, as_frame_source
 from ..store import ContentCache
-from . import backend
-from .estimation import derive_seed
+from . import backend, tracing
+from .estimation import derive_seed, pilot_to_target
 from .mask_eval import RayWeight, local_to_mask_xy, mask_model_meta, optics_meta
 from .mincam_scene import MincamScene, geometry_meta
 from .mixel_sensor import START_OFFSET_M
 
-MAX_LANES = 1 << 23  # samples per kernel launch
+MAX_SAMPLES_PER_TEXEL = 1 << 14  # cap of the target-noise search
+FIRST_SAMPLES_PER_TEXEL = 16  # the search's first maps
+SEARCH_GROWTH = (2, 8)  # each step of the search traces at least 2x, at most 8x the samples of the last one
+SEARCH_EXPONENT = (0.5, 1.5)  # bounds of the measured convergence rate (stratified: faster than n^-1/2)
+FRAME_CHUNK_BYTES = 1 << 27  # frames measured per chunk: at most 128 MiB of frame data in memory
+RANDOM_NUMBERS = "per texel: launch `texel` of the mixel's seed; pairings: one PCG64 stream per mixel, by block"
 
 
 @dataclass
@@ -87,6 +97,22 @@ class ResponseMaps:
         meta = {**self.meta, "form": "response_map"}
         return Measurements(values, np.sqrt(var), list(self.mixel_names), meta)
 
+    def measure_source(self, frames: FrameSource, indices=None, show_progress: bool = False,
+                       desc: str = "frames") -> Measurements:
+        """Measurements of (some of) a frame source, chunk by chunk (at most :data:`FRAME_CHUNK_BYTES` of frames
+        in memory); a frame with NaN, infinite or negative radiance is refused, by its index."""
+        indices = np.arange(len(frames)) if indices is None else np.asarray(indices)
+        values = np.empty((len(indices), len(self.mixel_names)))
+        errors = np.empty_like(values)
+        step = frames.chunk_size(FRAME_CHUNK_BYTES)
+        for lo in progress(range(0, len(indices), step), desc=desc, disable=not show_progress):
+            idx = indices[lo : lo + step]
+            stack = frames[idx]
+            check_radiance(stack, idx)
+            m = self.measure(stack)
+            values[lo : lo + len(idx)], errors[lo : lo + len(idx)] = m.irradiance_w_m2, m.stderr_w_m2
+        return Measurements(values, errors, list(self.mixel_names), {**self.meta, "form": "response_map"})
+
     def save_exr(self, directory: str | Path) -> list[Path]:
         """One OpenEXR per mixel (channels W and sigma), the picture of what the mixel sees."""
         directory = Path(directory)
@@ -114,8 +140,46 @@ class ResponseMaps:
                        json.loads(str(d["meta_json"])))
 
 
+def check_radiance(stack: np.ndarray, indices: np.ndarray) -> None:
+    """Refuse NaN, infinite or negative radiance, naming the first bad frame."""
+    bad = ~(stack >= 0).all(axis=(1, 2)) | ~np.isfinite(stack.sum(axis=(1, 2)))  # NaN fails ">= 0"
+    if bad.any():
+        i = int(indices[np.argmax(bad)])
+        raise ValueError(f"frame {i} contains NaN, infinite or negative radiance; frames must be finite and >= 0 "
+                         "W m^-2 sr^-1")
+
+
 def _safe(name: str) -> str:
     return "".join(c if c.isalnum() or c in "-_" else "_" for c in name)
+
+
+@dataclass(frozen=True)
+class MapSampling:
+    """How a texel's samples are traced: ``replicates`` independent blocks of ``strata x strata`` samples."""
+
+    strata: int
+    replicates: int
+
+    @classmethod
+    def of(cls, samples_per_texel: int, replicates: int) -> MapSampling:
+        """The sampling of ``samples_per_texel`` (rounded down to ``replicates x k^2``, k >= 1); a clear
+        ``ValueError`` for counts that are not integers or too small."""
+        n = samples_per_texel
+        if isinstance(n, bool) or int(n) != n or n < 2:
+            raise ValueError(f"samples_per_texel must be an integer >= 2, got {n!r}")
+        if isinstance(replicates, bool) or int(replicates) != replicates or not 2 <= replicates <= n:
+            raise ValueError(f"replicates must be an integer in [2, samples_per_texel], got {replicates!r}")
+        return cls(max(1, int(np.sqrt(n / replicates))), int(replicates))
+
+    @property
+    def block(self) -> int:
+        """Samples per block (``strata^2``)."""
+        return self.strata * self.strata
+
+    @property
+    def samples_per_texel(self) -> int:
+        """Samples traced per texel and mixel."""
+        return self.replicates * self.block
 
 
 def response_maps(
@@ -124,7 +188,6 @@ def response_maps(
     samples_per_texel: int = 64,
     seed: int = 0,
     mixel_indices: Sequence[int] | None = None,
-    max_lanes: int = MAX_LANES,
     replicates: int = 4,
     show_progress: bool = False,
     cache: ContentCache | None = None,
@@ -145,75 +208,166 @@ def response_maps(
         traced: an interrupted tracing resumes mixel by mixel, and any run that needs the same map reuses it.
     """
     backend.require_jit("Response maps")
-    if isinstance(samples_per_texel, bool) or int(samples_per_texel) != samples_per_texel or samples_per_texel < 2:
-        raise ValueError(f"samples_per_texel must be an integer >= 2, got {samples_per_texel!r}")
-    if isinstance(replicates, bool) or int(replicates) != replicates or not 2 <= replicates <= samples_per_texel:
-        raise ValueError(f"replicates must be an integer in [2, samples_per_texel], got {replicates!r}")
-    user_mincam, user_screen = mincam, screen
-    world = MincamScene.display(mincam, screen)
-    mincam, screen = world.mincam, world.screen  # moved around the mincam (float32 precision far from the origin)
-    scene = world.fast_scene  # screen + the mixels' bodies: the visibility rays' scene
-    mi = backend.mitsuba()
-    import drjit as dr
-
-    strata = max(1, int(np.sqrt(samples_per_texel / replicates)))  # k
-    block = strata * strata
-    spt = replicates * block
-    rows, cols = screen.shape
-    n_tex = rows * cols
-    texels_per_chunk = max(1, min(n_tex, max_lanes // spt))
-    right, up, normal = (np.asarray(a).tolist() for a in screen.pose.axes())
-    center = [float(c) for c in screen.pose.position_m]
-    texel_area = screen.texel_area_m2
+    sampling = MapSampling.of(samples_per_texel, replicates)
+    world = MincamScene.display(mincam, screen)  # moved around the mincam (float32 precision far from the origin)
     indices = list(range(len(mincam))) if mixel_indices is None else list(mixel_indices)
-
+    rows, cols = world.screen.shape
+    n_tex = rows * cols
+    keys = {k: _mixel_key(world.mincam, k, world.screen, sampling, seed) for k in indices} if cache is not None else {}
     weights = np.zeros((len(indices), n_tex))
     variance = np.zeros((len(indices), n_tex))
-    sampler = mi.load_dict({"type": "independent"})
-    keys = {k: _mixel_key(mincam, k, screen, spt, replicates, seed, max_lanes) for k in indices} if cache else {}
-    cached = {}
-    if cache is not None:
-        for k in indices:
-            entry = cache.get(keys[k])
-            if entry is not None and entry.arrays["weights_sr"].shape == (n_tex,):
-                cached[k] = entry.arrays
+    todo = _load_cached(cache, keys, indices, weights, variance)
+    tracer = _MapTracer(world, sampling, seed)
+    texels_per_chunk = max(1, min(n_tex, tracing.MAX_LANES // sampling.samples_per_texel))
+    launches = [(out_k, k, start) for out_k, k in todo for start in range(0, n_tex, texels_per_chunk)]
+    for out_k, k, start in progress(launches, desc=f"response maps ({sampling.samples_per_texel} samples/texel)",
+                                    disable=not show_progress, unit="chunk"):
+        count = min(texels_per_chunk, n_tex - start)
+        weights[out_k, start : start + count], variance[out_k, start : start + count] = tracer.trace(k, start, count)
+        if cache is not None and start + count == n_tex:  # this mixel is complete
+            cache.put(keys[k], {"weights_sr": weights[out_k], "variance_sr2": variance[out_k]},
+                      {"mixel": world.mincam[k].name, "samples_per_texel": sampling.samples_per_texel})
+    meta = _maps_meta(world.mincam, mincam, screen, indices, sampling, seed, keys)
+    return ResponseMaps(weights.reshape(len(indices), rows, cols), variance.reshape(len(indices), rows, cols),
+                        [world.mincam[k].name for k in indices], meta)
+
+
+def response_maps_to_target(
+    mincam: Mincam, screen: Screen, frames, target_rel_stderr: float, seed: int = 0,
+    max_samples_per_texel: int = MAX_SAMPLES_PER_TEXEL, cache: ContentCache | None = None,
+    show_progress: bool = False, replicates: int = 4,
+) -> tuple[ResponseMaps, list[dict]]:
+    """Response maps whose measurements of ``frames`` all reach ``target_rel_stderr`` (if the cap allows).
+
+    The budget rule of every solver (:func:`.estimation.pilot_to_target`), fitted to maps: from 16 samples
+    per texel, each attempt's maps measure the frames and the count is extrapolated with the convergence rate
+    ``rel ~ n^-a`` measured on the last two attempts (``a`` in [0.5, 1.5]: stratified sampling converges
+    faster than ``n^-1/2``; 0.5 until two attempts exist), by 2x to 8x per step, and traced as ``replicates x
+    k^2`` (at least one stratum per axis more each step), until an attempt reaches the target or the cap.
+    Every attempt's maps go to ``cache`` (so a rerun or a resumed run repeats the search in milliseconds).
+    Returns the last attempt's maps and the trail of (samples_per_texel, worst relative stderr) tried.
+    """
+    frames = as_frame_source(frames)
+
+    def trace(n: int) -> ResponseMaps:
+        return response_maps(mincam, screen, n, seed, cache=cache, show_progress=show_progress, replicates=replicates)
+
+    last: list = [None, None]  # (samples per texel, maps) of the latest attempt only: maps can be large
+
+    def measure(n: int):
+        last[:] = n, trace(n)
+        m = last[1].measure_source(frames, show_progress=show_progress, desc=f"target search ({n} samples/texel)")
+        return m.irradiance_w_m2, m.stderr_w_m2
+
+    first = MapSampling.of(max(FIRST_SAMPLES_PER_TEXEL, replicates), replicates).samples_per_texel
+    n, trail = pilot_to_target(measure, first, target_rel_stderr, max_samples_per_texel, significance=0.0,
+                               rounds=None, measured_exponent=SEARCH_EXPONENT, growth=SEARCH_GROWTH, unseen_growth=1,
+                               quantize=_stratum_steps(replicates, max_samples_per_texel))
+    maps = last[1] if n == last[0] else trace(n)  # the quantised search ends on its latest attempt
+    return maps, [{"samples_per_texel": t["samples"], "worst_rel_stderr": t["worst_rel_stderr"]} for t in trail]
+
+
+def _stratum_steps(replicates: int, cap: int):
+    """The search's quantisation: ``wanted`` samples per texel after maps of ``samples`` are traced as
+    ``replicates x k^2`` with at least one stratum per axis more (rounding 2x back down to the same ``k`` would
+    repeat an attempt forever), at most the cap's strata, never fewer than ``samples``."""
+    max_strata = max(1, int(np.sqrt(cap / replicates)))
+
+    def quantize(wanted: float, samples: int) -> int:
+        strata = int(round(np.sqrt(samples / replicates)))
+        strata = min(max_strata, max(strata + 1, int(np.sqrt(wanted / replicates))))
+        return max(samples, replicates * strata * strata)
+
+    return quantize
+
+
+def _load_cached(cache: ContentCache | None, keys: dict, indices: list[int], weights: np.ndarray,
+                 variance: np.ndarray) -> list[tuple[int, int]]:
+    """Fill the rows of the mixels whose maps ``cache`` holds; return ``(row, mixel)`` of those left to trace."""
+    todo = []
     for out_k, k in enumerate(indices):
-        if k in cached:
-            weights[out_k], variance[out_k] = cached[k]["weights_sr"], cached[k]["variance_sr2"]
-    launches = [(out_k, k, start) for out_k, k in enumerate(indices) if k not in cached
-                for start in range(0, n_tex, texels_per_chunk)]
-    evaluators = {k: RayWeight(mincam[k]) for k in indices if k not in cached}
-    for out_k, k, start in progress(launches, desc=f"response maps ({spt} samples/texel)", disable=not show_progress,
-                                    unit="chunk"):
-        mixel = mincam[k]
+        entry = cache.get(keys[k]) if cache is not None else None
+        if entry is not None and entry.arrays["weights_sr"].shape == weights.shape[1:]:
+            weights[out_k], variance[out_k] = entry.arrays["weights_sr"], entry.arrays["variance_sr2"]
+        else:
+            todo.append((out_k, k))
+    return todo
+
+
+class _MapTracer:
+    """Traces chunks of consecutive texels of one mixel's map (the estimator of the module docstring)."""
+
+    def __init__(self, world: MincamScene, sampling: MapSampling, seed: int) -> None:
+        self.mi = backend.mitsuba()
+        self.mincam, self.screen, self.sampling, self.seed = world.mincam, world.screen, sampling, int(seed)
+        self.scene = world.fast_scene  # screen + the mixels' bodies: the visibility rays' scene
+        self._evaluators: dict[int, RayWeight] = {}
+
+    def trace(self, k: int, start: int, count: int) -> tuple[np.ndarray, np.ndarray]:
+        """Weights and their variances [sr] of texels ``start .. start + count - 1`` for mixel ``k``."""
+        import drjit as dr
+
+        texel, s_det, s_screen = self._samples(k, start, count)
+        g = self._pair_weight(k, s_det, self._screen_point(texel, s_screen))
+        block, replicates = self.sampling.block, self.sampling.replicates
+        blocks = np.asarray(dr.block_sum(g, block), dtype=np.float64).reshape(count, replicates) / block
+        return blocks.mean(axis=1), blocks.var(axis=1, ddof=1) / replicates
+
+    def _samples(self, k: int, start: int, count: int):
+        """Each lane's texel, detector sample and texel sample (unit square), stratified and paired in blocks.
+
+        Every texel draws its own random numbers (those of launch ``texel`` of the mixel's seed,
+        :class:`.tracing.LaneSampler`) and its own pairings: a chunk's numbers do not depend on where the chunk
+        starts, so the maps do not depend on the lane limit.
+        """
+        mi = self.mi
+        import drjit as dr
+
+        strata, block, spt = self.sampling.strata, self.sampling.block, self.sampling.samples_per_texel
+        replicates = self.sampling.replicates
+        lane = dr.arange(mi.UInt32, count * spt)
+        texel = lane // spt + dr.opaque(mi.UInt32, start)
+        sampler = tracing.LaneSampler(derive_seed(self.seed, "response", k), texel, lane % spt)
+        j = lane % block  # detector stratum within the block
+        jx, jy = j % strata, j // strata
+        pi_x, pi_y = _block_permutations(derive_seed(self.seed, "pairing", k), start * replicates,
+                                         count * replicates, strata)
+        local_block = lane // block
+        mx = dr.gather(mi.UInt32, pi_x, local_block * strata + jy)  # texel stratum paired with (jx, jy)
+        my = dr.gather(mi.UInt32, pi_y, local_block * strata + jx)
+        jitter_det = sampler.next_2d()
+        jitter_screen = sampler.next_2d()
+        s_det = mi.Point2f((mi.Float(jx) + jitter_det.x) / strata, (mi.Float(jy) + jitter_det.y) / strata)
+        s_screen = mi.Point2f((mi.Float(mx) + jitter_screen.x) / strata, (mi.Float(my) + jitter_screen.y) / strata)
+        return texel, s_det, s_screen
+
+    def _screen_point(self, texel, s_screen):
+        """World point [m] of the texel sample ``s_screen`` in texel ``texel`` (row-major, row 0 at the top)."""
+        mi, screen = self.mi, self.screen
+        rows, cols = screen.shape
+        right, up, _ = (np.asarray(a).tolist() for a in screen.pose.axes())
+        center = [float(c) for c in screen.pose.position_m]
+        col = mi.Float(texel % cols)
+        row = mi.Float(texel // cols)
+        xs = ((col + s_screen.x) / cols - 0.5) * screen.width_m
+        ys = (0.5 - (row + s_screen.y) / rows) * screen.height_m
+        return mi.Point3f(*(center[i] + xs * right[i] + ys * up[i] for i in range(3)))
+
+    def _pair_weight(self, k: int, s_det, p_screen):
+        """``T cos_d cos_s / r^2 A_texel`` of each (detector point, screen point) pair, 0 where the mask, the
+        housing, a back-facing screen or a mixel's body stops it."""
+        mi = self.mi
+        import drjit as dr
+
+        mixel = self.mincam[k]
+        if k not in self._evaluators:
+            self._evaluators[k] = RayWeight(mixel)
         to_world = mixel.pose.matrix()
         rot = mi.Matrix3f(to_world[:3, :3].tolist())
         origin = mi.Point3f(*(float(c) for c in to_world[:3, 3]))
         rot_t = mi.Matrix3f(to_world[:3, :3].T.tolist())
         d_f, det = mixel.d_f_m, mixel.detector_size_m
-        count = min(texels_per_chunk, n_tex - start)
-        sampler.seed(derive_seed(seed, "response", k, start), count * spt)
-        lane = dr.arange(mi.UInt32, count * spt)
-        texel = lane // spt + start
-        j = lane % block  # detector stratum within the block
-        jx, jy = j % strata, j // strata
-        pi_x, pi_y = _block_permutations(derive_seed(seed, "pairing", k, start), count * replicates, strata)
-        local_block = lane // block
-        mx = dr.gather(mi.UInt32, pi_x, local_block * strata + jy)  # texel stratum paired with (jx, jy)
-        my = dr.gather(mi.UInt32, pi_y, local_block * strata + jx)
-        col = mi.Float(texel % cols)
-        row = mi.Float(texel // cols)
-        jitter_det = sampler.next_2d()
-        jitter_screen = sampler.next_2d()
-        s_det = mi.Point2f((mi.Float(jx) + jitter_det.x) / strata, (mi.Float(jy) + jitter_det.y) / strata)
-        s_screen = mi.Point2f((mi.Float(mx) + jitter_screen.x) / strata, (mi.Float(my) + jitter_screen.y) / strata)
-        xs = ((col + s_screen.x) / cols - 0.5) * screen.width_m
-        ys = (0.5 - (row + s_screen.y) / rows) * screen.height_m
-        p_screen = mi.Point3f(
-            center[0] + xs * right[0] + ys * up[0],
-            center[1] + xs * right[1] + ys * up[1],
-            center[2] + xs * right[2] + ys * up[2],
-        )
+        normal = [float(c) for c in np.asarray(self.screen.pose.axes()[2])]
         x_d = mi.Vector3f((s_det.x - 0.5) * det, (s_det.y - 0.5) * det, 0.0)
         p_det = origin + rot @ x_d
         delta = p_screen - p_det
@@ -221,34 +375,34 @@ def response_maps(
         direction = delta * dr.rsqrt(r2)
         d_local = rot_t @ direction
         cos_d = d_local.z
-        cos_s = -dr.dot(direction, mi.Vector3f(*(float(c) for c in normal)))
+        cos_s = -dr.dot(direction, mi.Vector3f(*normal))
         valid = (cos_d > 0) & (cos_s > 0)
         t_mask = d_f / dr.maximum(cos_d, 1e-12)
         x_m = x_d + d_local * t_mask
-        transmission = evaluators[k](*local_to_mask_xy(x_m.x, x_m.y), -d_local.x / cos_d, d_local.y / cos_d,
-                                     valid)
+        transmission = self._evaluators[k](*local_to_mask_xy(x_m.x, x_m.y), -d_local.x / cos_d, d_local.y / cos_d,
+                                           valid)
         valid &= transmission > 0
         p_start = p_det + direction * (t_mask + START_OFFSET_M)
         dist_after = dr.sqrt(r2) - t_mask - START_OFFSET_M
         shadow = mi.Ray3f(p_start, direction, dist_after * (1 - 1e-5), 0.0, [])
-        valid &= ~scene.ray_test(shadow, valid)
-        g = dr.select(valid, transmission * cos_d * cos_s / r2 * texel_area, 0.0)
-        blocks = np.asarray(dr.block_sum(g, block), dtype=np.float64).reshape(count, replicates) / block
-        weights[out_k, start : start + count] = blocks.mean(axis=1)
-        variance[out_k, start : start + count] = blocks.var(axis=1, ddof=1) / replicates
-        if cache is not None and start + count == n_tex:  # this mixel is complete
-            cache.put(keys[k], {"weights_sr": weights[out_k], "variance_sr2": variance[out_k]},
-                      {"mixel": mincam[k].name, "samples_per_texel": spt})
-    names = [mincam[k].name for k in indices]
+        valid &= ~self.scene.ray_test(shadow, valid)
+        return dr.select(valid, transmission * cos_d * cos_s / r2 * self.screen.texel_area_m2, 0.0)
+
+
+def _maps_meta(mincam: Mincam, user_mincam: Mincam, user_screen: Screen, indices: list[int], sampling: MapSampling,
+               seed: int, keys: dict) -> dict:
+    """What the maps are: estimator, sampling, seed, units, masks, optics, backend, geometry, cache keys."""
+    strata = sampling.strata
     meta = {
         "form": "response_map",
         "estimator": "texel_area_sampling_with_visibility_rays",
-        "samples_per_texel": spt,
-        "replicate_blocks": replicates,
+        "samples_per_texel": sampling.samples_per_texel,
+        "replicate_blocks": sampling.replicates,
         "strata_per_block": f"{strata}x{strata}",
         "pairing": "detector stratum (jx, jy) with texel stratum (pi_x(jy), pi_y(jx)), pi random permutations of "
                    "0..k-1 per block",
         "seed": seed,
+        "random_numbers": RANDOM_NUMBERS,
         "units": "sr (W/m^2 on the detector per W m^-2 sr^-1 of texel radiance)",
         "masks": {mincam[k].name: mask_model_meta(mincam[k].mask) for k in indices},
         "optics": {mincam[k].name: optics_meta(mincam[k]) for k in indices},
@@ -258,23 +412,30 @@ def response_maps(
     }
     if keys:
         meta["cache_keys"] = {mincam[k].name: keys[k] for k in indices}
-    return ResponseMaps(weights.reshape(len(indices), rows, cols), variance.reshape(len(indices), rows, cols),
-                        names, meta)
+    return meta
 
 
-def _block_permutations(seed: int, n_blocks: int, strata: int):
-    """Two random permutations of ``0..strata-1`` per block, flattened (block-major) as Dr.Jit UInt32 arrays."""
+def _block_permutations(seed: int, first_block: int, n_blocks: int, strata: int):
+    """Two random permutations of ``0..strata-1`` for each of blocks ``first_block .. first_block + n_blocks - 1``
+    of a mixel, flattened (block-major) as Dr.Jit UInt32 arrays.
+
+    Block ``b`` sorts the doubles ``2 b strata .. 2 (b + 1) strata - 1`` of one PCG64 stream seeded ``seed``
+    (the stream is advanced to its block): a block's pairing is the same in whichever chunk it is traced.
+    """
     mi = backend.mitsuba()
     if strata == 1:
         zeros = mi.UInt32(np.zeros(n_blocks, dtype=np.uint32))
         return zeros, zeros
-    rng = np.random.default_rng(seed)
-    perms = rng.random((2 * n_blocks, strata)).argsort(axis=1).astype(np.uint32)
-    return mi.UInt32(perms[:n_blocks].ravel()), mi.UInt32(perms[n_blocks:].ravel())
+    bits = np.random.PCG64(seed)
+    bits.advance(int(first_block) * 2 * strata)  # one 64-bit draw per double
+    perms = np.random.Generator(bits).random((n_blocks, 2, strata)).argsort(axis=-1).astype(np.uint32)
+    return mi.UInt32(perms[:, 0].ravel()), mi.UInt32(perms[:, 1].ravel())
 
 
-def _mixel_key(mincam: Mincam, k: int, screen: Screen, spt: int, replicates: int, seed: int, max_lanes: int) -> str:
+def _mixel_key(mincam: Mincam, k: int, screen: Screen, sampling: MapSampling, seed: int) -> str:
     """Content key of one mixel's map: everything its numbers depend on."""
     return fingerprint({"kind": "response_map", "mincam": mincam, "mixel_index": k, "screen": screen,
-                        "samples_per_texel": spt, "replicates": replicates, "seed": int(seed),
-                        "max_lanes": int(max_lanes), "variant": backend.variant(), "versions": library_versions()})
+                        "samples_per_texel": sampling.samples_per_texel, "replicates": sampling.replicates,
+                        "seed": int(seed),
+                        "random_numbers": RANDOM_NUMBERS, "variant": backend.variant(),
+                        "versions": library_versions()})

@@ -35,14 +35,20 @@ from .estimation import (
     derive_seed,
     pilot_to_target,
     replicate_mean_stderr,
-    samples_for_target,
     warn_target_missed,
     warn_unreached,
 )
 from .estimation import worst_relative_stderr as _worst
 from .mask_eval import mask_model_meta
 from .mincam_scene import MincamScene, geometry_meta
-from .response_map import ResponseMaps, response_maps
+from .response_map import (
+    FRAME_CHUNK_BYTES,
+    MAX_SAMPLES_PER_TEXEL,
+    ResponseMaps,
+    check_radiance,
+    response_maps,
+    response_maps_to_target,
+)
 
 __all__ = [
     "ResponseMaps",
@@ -145,80 +151,14 @@ class ScreenRenderer:
         return Measurements(np.array(values), np.array(errors), self.mincam.names, meta)
 
 
-MAX_SAMPLES_PER_TEXEL = 1 << 14
 DEFAULT_MAP_BLOCKS = 4  # response maps: independent blocks of samples per texel
 MAX_SPP = 1 << 28
-FRAME_CHUNK_BYTES = 1 << 27  # frames measured per chunk: at most 128 MiB of frame data in memory
 
 
 def measure_stream(maps: ResponseMaps, frames: FrameSource, indices=None, show_progress: bool = False,
                    desc: str = "frames") -> Measurements:
     """Measurements of (some of) a frame source through response maps, chunk by chunk (bounded memory)."""
-    indices = np.arange(len(frames)) if indices is None else np.asarray(indices)
-    n_mix = len(maps.mixel_names)
-    values = np.empty((len(indices), n_mix))
-    errors = np.empty_like(values)
-    step = frames.chunk_size(FRAME_CHUNK_BYTES)
-    for lo in progress(range(0, len(indices), step), desc=desc, disable=not show_progress):
-        idx = indices[lo : lo + step]
-        stack = frames[idx]
-        _check_radiance(stack, idx)
-        m = maps.measure(stack)
-        values[lo : lo + len(idx)], errors[lo : lo + len(idx)] = m.irradiance_w_m2, m.stderr_w_m2
-    return Measurements(values, errors, list(maps.mixel_names), {**maps.meta, "form": "response_map"})
-
-
-def _check_radiance(stack: np.ndarray, indices: np.ndarray) -> None:
-    """Refuse NaN, infinite or negative radiance, naming the first bad frame."""
-    bad = ~(stack >= 0).all(axis=(1, 2)) | ~np.isfinite(stack.sum(axis=(1, 2)))  # NaN fails ">= 0"
-    if bad.any():
-        i = int(indices[np.argmax(bad)])
-        raise ValueError(f"frame {i} contains NaN, infinite or negative radiance; frames must be finite and >= 0 "
-                         "W m^-2 sr^-1")
-
-
-def response_maps_to_target(
-    mincam: Mincam, screen: Screen, frames, target_rel_stderr: float, seed: int = 0,
-    max_samples_per_texel: int = MAX_SAMPLES_PER_TEXEL, cache: ContentCache | None = None,
-    show_progress: bool = False, replicates: int = 4,
-) -> tuple[ResponseMaps, list[dict]]:
-    """Response maps whose measurements of ``frames`` all reach ``target_rel_stderr`` (if the cap allows).
-
-    Starting from 16 samples per texel, each attempt extrapolates the sample count from the convergence rate
-    ``rel ~ n^-a`` measured on the last two attempts (stratified sampling converges faster than ``n^-1/2``;
-    ``a = 1/2`` until two attempts exist), by at most 8x per step, until the target is reached. Every
-    attempt's maps go to ``cache`` (so a rerun or a resumed run repeats the search in milliseconds). Returns
-    the maps and the trail of (samples_per_texel, worst relative stderr) tried.
-    """
-    frames = as_frame_source(frames)
-    trail: list[dict] = []
-
-    def attempt(n: int) -> tuple[ResponseMaps, float]:
-        maps = response_maps(mincam, screen, max(n, replicates), seed, cache=cache, show_progress=show_progress,
-                             replicates=replicates)
-        m = measure_stream(maps, frames, show_progress=show_progress, desc=f"target search ({n} samples/texel)")
-        rel = worst_relative_stderr(m)
-        trail.append({"samples_per_texel": int(maps.meta["samples_per_texel"]), "worst_rel_stderr": rel})
-        return maps, rel
-
-    maps, rel = attempt(16)
-    n, step_cap = int(maps.meta["samples_per_texel"]), 8
-    strata = int(round(np.sqrt(n / replicates)))  # traced: replicates blocks of strata^2 samples per texel
-    max_strata = max(1, int(np.sqrt(max_samples_per_texel / replicates)))
-    rate = 0.5  # plain Monte Carlo until two attempts measure the stratified rate
-    while rel > target_rel_stderr and strata < max_strata:
-        if len(trail) >= 2:
-            (n_a, r_a), (n_b, r_b) = ((t["samples_per_texel"], t["worst_rel_stderr"]) for t in trail[-2:])
-            if r_a > 0 and r_b > 0 and n_b > n_a:
-                rate = float(np.clip(np.log(r_a / r_b) / np.log(n_b / n_a), 0.5, 1.5))
-        need = samples_for_target(n, rel, target_rel_stderr, max_samples_per_texel, rate)
-        want = min(max_samples_per_texel, max(2 * n, min(need, step_cap * n)))  # at least x2, at most x8 per step
-        # the count is traced as replicates x strata^2: every step adds at least one stratum per axis (2 x n
-        # could round back down to n, and the search would never end)
-        strata = min(max_strata, max(strata + 1, int(np.sqrt(want / replicates))))
-        maps, rel = attempt(replicates * strata * strata)
-        n = int(maps.meta["samples_per_texel"])
-    return maps, trail
+    return maps.measure_source(frames, indices, show_progress=show_progress, desc=desc)
 
 
 def worst_relative_stderr(m: Measurements) -> float:
@@ -235,7 +175,7 @@ def frames_identity(frames: FrameSource, screen: Screen) -> dict:
     step = frames.chunk_size(FRAME_CHUNK_BYTES)
     for lo in range(0, len(frames), step):
         chunk = frames[lo : lo + step]
-        _check_radiance(chunk, np.arange(lo, lo + len(chunk)))
+        check_radiance(chunk, np.arange(lo, lo + len(chunk)))
         digest.update(chunk)
     return {"n": len(frames), "content_sha256": digest.hexdigest()}
 

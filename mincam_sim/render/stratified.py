@@ -37,9 +37,9 @@ from typing import NamedTuple
 import numpy as np
 
 from ..optics import Mincam
-from . import backend, guided_path
+from . import backend, guided_path, tracing
 from .change_region import ApertureRegions
-from .tracing import MAX_LANES, lane_sampler, launch_seed
+from .tracing import LaneSampler, launch_seed
 
 DETECTOR_SHRINK = 1 - 2e-6  # as mixel_sensor.mixel_position_sample: keeps x strictly inside the mixel's film cell
 
@@ -160,7 +160,7 @@ def stratified_lanes(scene, sensor, mincam: Mincam, regions: ApertureRegions, re
     spheres = guided_path.opaque_spheres(guide) if guided else []
     boxes = [tuple(mi.Point3f(*(dr.opaque(mi.Float, float(x)) for x in corner)) for corner in box)
              for box in (watch or [])]
-    groups_per_launch = max(1, MAX_LANES // per)
+    groups_per_launch = max(1, tracing.MAX_LANES // per)
     trace = _launch if freeze is None else _frozen_launch(scene)
     values, touched, traced = [], ([] if watch is not None else None), 0
     for launch, g0 in enumerate(range(0, n_groups, groups_per_launch)):
@@ -221,7 +221,7 @@ def _launch(scene, sensor, coeffs, seed, g0, lanes, spheres, boxes, shape: _Laun
     counts = shape.counts
     per = sum(counts)
     if shape.guided_depth:
-        sampler = lane_sampler(seed, lanes)  # any subset of lanes draws what a full launch draws there
+        sampler = LaneSampler.for_launch(seed, lanes)  # any subset of lanes draws what a full launch draws there
     else:
         sampler = mi.load_dict({"type": "independent"})
         sampler.seed(seed, shape.lanes)

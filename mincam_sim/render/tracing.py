@@ -14,7 +14,7 @@ import numpy as np
 
 from . import backend
 
-MAX_LANES = 1 << 22  # rays traced per kernel launch
+MAX_LANES = 1 << 22  # lanes (rays, samples) per kernel launch: the one limit of every launch loop of the package
 
 
 def launch_seed(seed: int, launch: int) -> int:
@@ -30,34 +30,52 @@ def seeded_sampler(seed: int, launch: int, lanes: int):
     return sampler
 
 
-class LaneSampler:
-    """Mitsuba's ``independent`` sampler for any set of lanes of a launch: lane ``l`` draws exactly what lane
-    ``l`` of ``independent`` seeded ``seed`` over the whole launch draws (PCG32 streams from the Tiny Encryption
-    Algorithm of seed and lane, as Mitsuba seeds them), so a subset of lanes can be traced again alone.
-    Unmasked: every lane advances on every draw (as the guided path draws)."""
+def launch_seeds(seed: int, launches):
+    """:func:`launch_seed` lane by lane, for a Dr.Jit ``UInt32`` array of launch indices (the same arithmetic
+    modulo 2^31)."""
+    mi = backend.mitsuba()
+    import drjit as dr
 
-    def __init__(self, seed, lanes) -> None:
+    return (dr.opaque(mi.UInt32, (int(seed) * 1_000_003) & 0xFFFFFFFF) + launches) & 0x7FFFFFFF
+
+
+class LaneSampler:
+    """Mitsuba's ``independent`` sampler lane by lane: the lane of ``index`` in launch ``launch`` (``UInt32``
+    arrays, one entry per lane) draws exactly what lane ``index`` of ``seeded_sampler(seed, launch, lanes)``
+    draws (the TEA-scrambled PCG32 stream Mitsuba gives that lane). Unmasked: every lane advances on every draw.
+
+    So a loop that gives every *group* of samples (a texel, a replicate) a launch index of its own draws the
+    same numbers however many groups a kernel launch packs (up to :data:`MAX_LANES`), and any subset of a
+    launch's lanes can be traced again alone (:meth:`for_launch`).
+    """
+
+    def __init__(self, seed: int, launch, index) -> None:
+        self._seed(launch_seeds(seed, launch), index)
+
+    @classmethod
+    def for_launch(cls, launch_seed_u32, index) -> LaneSampler:
+        """The lanes ``index`` (a ``UInt32`` array) of one launch whose seed (:func:`launch_seed`) is given as a
+        Dr.Jit ``UInt32`` (opaque in a frozen launch)."""
+        sampler = cls.__new__(cls)
+        sampler._seed(launch_seed_u32, index)
+        return sampler
+
+    def _seed(self, launch_seed_u32, index) -> None:
         mi = backend.mitsuba()
-        v0, v1 = mi.sample_tea_32(seed, lanes)
+        v0, v1 = mi.sample_tea_32(launch_seed_u32, index)
+        self._point = mi.Point2f
         self._rng = mi.PCG32()
-        self._rng.seed(mi.UInt64(v0), mi.UInt64(v1))
-        self._mi = mi
+        self._rng.seed(mi.UInt64(v0), mi.UInt64(v1))  # as the independent sampler seeds its lane ``index``
 
     def next_1d(self, active=True):
-        """One uniform float in [0, 1) per lane."""
+        """One uniform number in [0, 1) per lane."""
         return self._rng.next_float32()
 
     def next_2d(self, active=True):
-        """A uniform point in [0, 1)^2 per lane (x drawn first, as Mitsuba's)."""
+        """A uniform point of [0, 1)^2 per lane (x drawn first, as the independent sampler's ``next_2d``)."""
         x = self._rng.next_float32()
         y = self._rng.next_float32()
-        return self._mi.Point2f(x, y)
-
-
-def lane_sampler(seed, lanes) -> LaneSampler:
-    """A :class:`LaneSampler` for launch seed ``seed`` (a ``UInt32``: :func:`launch_seed`) and lane indices
-    ``lanes`` (a ``UInt32`` array)."""
-    return LaneSampler(seed, lanes)
+        return self._point(x, y)
 
 
 def trace_groups(
