@@ -33,7 +33,7 @@ lint: setup
 
 # Runs ~80 bad (and a few good) inputs through the CLI in fresh processes and counts the clear one-line errors.
 bad-inputs: setup
-	$(PY) tests/test_cli_errors.py
+	$(PY) tests/cli/test_cli_errors.py
 
 # The documentation site with its gallery executed: warnings are errors, cross references nitpicky, no network
 # (no intersphinx). Output: docs/_build/html/index.html. One example at a time while writing one:
@@ -53,7 +53,7 @@ docs: $(DOCS_STAMP)
 crosscheck:
 	$(PYTHON) -m venv .venv-crosscheck
 	.venv-crosscheck/bin/python -m pip install --quiet -e '.[crosscheck]'
-	.venv-crosscheck/bin/python -m pytest -q tests/test_wave.py -k diffractio
+	.venv-crosscheck/bin/python -m pytest -q tests/wave/test_wave.py -k diffractio
 
 clean:
 	rm -rf $(VENV) .venv-crosscheck out build *.egg-info docs/_build docs/generated docs/gallery docs/sg_execution_times.rst

@@ -223,14 +223,21 @@ def _moving_object_stratified(world, frames, background, plain) -> dict:
     # the same budget without guided bounces (Mitsuba's path samples the inter-reflection from the BSDF alone)
     unguided, _ = world.measure_changes(frames, background, spp=spp, seed=22, estimator="stratified",
                                         guide_bounces=False)
-    seconds, worst, z_max, runs = 0.0, 0.0, 0.0, 3
-    for seed in range(runs):
-        t = time.perf_counter()
-        dp, _ = world.measure_changes(frames, background, spp=spp, seed=30 + seed, estimator="stratified")
-        seconds += time.perf_counter() - t
-        worst = max(worst, float(np.max(np.abs(dp.stderr_w_m2 / dp.irradiance_w_m2))))
-        z = (dp.irradiance_w_m2 - plain.irradiance_w_m2) / np.hypot(dp.stderr_w_m2, plain.stderr_w_m2)
-        z_max = max(z_max, float(np.max(np.abs(z))))
+    runs, raised = 3, []
+    while True:  # the worst sigma of all timed runs must be <= 1 %: raise the rays and time again if it is not
+        seconds, worst, z_max = 0.0, 0.0, 0.0
+        for seed in range(runs):
+            t = time.perf_counter()
+            dp, _ = world.measure_changes(frames, background, spp=spp, seed=30 + seed, estimator="stratified")
+            seconds += time.perf_counter() - t
+            worst = max(worst, float(np.max(np.abs(dp.stderr_w_m2 / dp.irradiance_w_m2))))
+            z = (dp.irradiance_w_m2 - plain.irradiance_w_m2) / np.hypot(dp.stderr_w_m2, plain.stderr_w_m2)
+            z_max = max(z_max, float(np.max(np.abs(z))))
+        if worst <= 0.01 or len(raised) == 3:
+            break
+        raised.append([spp, worst])
+        spp = int(np.ceil(spp * (worst / 0.0097) ** (1.0 / beta)))
+        world.measure_changes(frames[:2], background, spp=spp, seed=21, estimator="stratified")  # warm-up
     # the same runs traced every frame with full background passes (the estimator before frozen launches and
     # paired lanes): the same numbers bit for bit, timed in this run beside the frozen, paired ones
     world.freeze_launches = world.pair_lanes = False
@@ -247,6 +254,7 @@ def _moving_object_stratified(world, frames, background, plain) -> dict:
         "frames_per_second": runs * len(frames) / seconds,
         "fps_traced_full_background_same_run": runs * len(frames) / traced_seconds,
         "fps_speedup_frozen_paired_vs_traced": traced_seconds / seconds,
+        "fps_budget_raised_from": raised,
         "fps_frozen_paired_equals_traced_bit_for_bit": identical,
         "fps_traced_rays_per_mixel_per_frame": int(traced.meta["rays_per_mixel_per_frame"]),
         "fps_background_rays_share": dp.meta["background_rays_share"],

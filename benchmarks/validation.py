@@ -1,6 +1,6 @@
 """Measured agreement of the renderer with closed forms and invariants (value +/- sigma), for the README and
 the changelog: ``python benchmarks/validation.py`` writes ``benchmarks/validation.json``.
-The pass/fail versions of these checks are ``tests/test_physics.py``; this script reports the numbers at
+The pass/fail versions of these checks are ``tests/oracles/test_physics.py``; this script reports the numbers at
 higher sample counts."""
 
 from __future__ import annotations
@@ -100,7 +100,7 @@ def _row(value: float, sigma: float, expected: float) -> dict:
 
 def coupled_geometry_and_shadows() -> dict:
     """The render-core checks against the independent float64 oracles (:mod:`mincam_sim.quadrature`), at the
-    sample counts of ``tests/test_render_core.py``: tilted mixel and rotated screen, mixels that shadow each
+    sample counts of ``tests/render/test_render_core.py``: tilted mixel and rotated screen, mixels that shadow each
     other (occluder 1 cm away), the 0.2 mm-period sinusoid at a trough."""
     from test_render_core import SINUSOID_30, SQUARE_M, TILT_SCREEN, _shadow_oracle, _shadowing_pair, _tilted_mixel
 

@@ -91,4 +91,4 @@ __all__ = [
     "single",
     "white_square",
 ]
-__version__ = "0.2.0"
+__version__ = "0.3.0"

@@ -12,7 +12,7 @@ built with :func:`mincam_sim.identity.build_identity`); the table says which fra
   lock.
 
 The solvers (``mincam_sim.render``) reach persistence only through this module (and content caches they are
-handed): they never open a store or take a lock (``tests/test_layering.py`` checks it). The deprecated ``out_dir=``
+handed): they never open a store or take a lock (``tests/core/test_layering.py`` checks it). The deprecated ``out_dir=``
 of the old entry points is :func:`resolve_sink`'s one call into :mod:`mincam_sim.store`.
 """
 

@@ -1,6 +1,6 @@
 """Scenes with rare light paths for the per-run honesty of the stratified estimator's standard error: two movers
 far apart and out of view (all of their change is light they throw onto the table), and a mover seen only in a
-mirror. Shared by tests/test_world_trust.py and the per-run tail measurement (``python tests/rare_paths.py``)."""
+mirror. Shared by tests/render/test_world_trust.py and the per-run tail measurement (``python tests/rare_paths.py``)."""
 
 from __future__ import annotations
 

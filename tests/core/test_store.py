@@ -34,7 +34,7 @@ from mincam_sim.identity import (
 from mincam_sim.optics import Mixel
 from mincam_sim.store import CacheWarning, ContentCache, ResultStore, check_identity, clear_store
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 # ------------------------------------------------------------------------------------------------ identity

@@ -18,7 +18,7 @@ from mincam_sim import Screen
 from mincam_sim.closed_forms import open_aperture_irradiance, point_to_parallel_rect
 from mincam_sim.sensor import SensorModel
 
-PRIMER = Path(__file__).resolve().parents[1] / "docs" / "primer.md"
+PRIMER = Path(__file__).resolve().parents[2] / "docs" / "primer.md"
 
 # The worked example's inputs, as the page states them.
 RADIANCE_W_M2_SR = 1.0

@@ -21,7 +21,7 @@ from mincam_sim.render.world import vertex_update
 from mincam_sim.world_config import load_world_config, world_example_toml
 from mincam_sim.world_job import run_world_config
 
-ROOM = Path(__file__).resolve().parents[1] / "scenes" / "world"
+ROOM = Path(__file__).resolve().parents[2] / "scenes" / "world"
 CAM = ms.pair_layout(center=ms.Pose((0.0, 0.0, 0.4), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)))
 
 

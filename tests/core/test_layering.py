@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-PACKAGE = Path(__file__).resolve().parents[1] / "mincam_sim"
+PACKAGE = Path(__file__).resolve().parents[2] / "mincam_sim"
 UPPER = ("render", "run", "render_job", "world_job", "experiments", "design", "studies", "cli", "plots", "figures")
 
 

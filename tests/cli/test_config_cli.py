@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 from mincam_sim.cli import app
 from mincam_sim.config import EXAMPLE_TOML, ConfigError, load_config
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_example_schema_is_the_default():

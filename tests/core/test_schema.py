@@ -27,7 +27,7 @@ from mincam_sim.schema import Schema, field_comment, plain, read_section, toml_v
 from mincam_sim.studies.spec import StudySection, load_study, study_example_toml, study_schema
 from mincam_sim.world_config import WORLD_SCHEMA, load_world_config, world_example_toml
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 SCHEMAS = {
     "render": (RENDER_SCHEMA, EXAMPLE_TOML),

@@ -2,7 +2,7 @@
 
 ``CASES`` is a table of bad (and a few good) inputs a new user might give. The fast tests run a selection
 in-process (typer's CliRunner) and a few through the real ``mincam-sim`` executable; the whole table runs as a
-slow test. ``python tests/test_cli_errors.py [--pythonpath DIR]`` counts the outcomes for the code at ``DIR``
+slow test. ``python tests/cli/test_cli_errors.py [--pythonpath DIR]`` counts the outcomes for the code at ``DIR``
 (default: this checkout), e.g. to compare with an older version extracted elsewhere.
 """
 
@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 BASE = {"run": {"samples_per_texel": "16", "out_dir": '"out"'}, "frames": {"n": "2"},
         "screen": {"resolution": "[32, 18]"}}

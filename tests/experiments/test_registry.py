@@ -26,7 +26,7 @@ from mincam_sim.experiments import REGISTRY, Setup, reproduce
 from mincam_sim.experiments.spacing import Spacing, SpacingParams
 from mincam_sim.studies import load_study, run_study, study_target, target_names
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 # the smallest runs each experiment accepts (seconds each); every key is a declared study parameter
 TINY = {

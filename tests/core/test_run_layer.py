@@ -27,7 +27,7 @@ from mincam_sim.render import world as wr
 from mincam_sim.render_job import config_identity, run_render_config
 from mincam_sim.scene.display import line_sweep
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SCREEN = ms.Screen(resolution=(32, 18))
 FIXED_VERSIONS = {"mincam_sim method": "M", "mitsuba": "m", "drjit": "d", "numpy": "n"}
 PARK = np.array([5.0, 5.0, 0.0])

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PAGE = ROOT / "docs" / "python_api.md"
 BLOCK = re.compile(r"^```python\n(.*?)^```$", re.S | re.M)
 

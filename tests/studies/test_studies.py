@@ -17,7 +17,7 @@ from mincam_sim.studies import load_study, plot_study, run_study
 from mincam_sim.studies import runner as runner_mod
 from mincam_sim.studies.plots import display_scale
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 TINY = {
     "study": {"name": "tiny", "experiment": "spacing", "seed": 3},
     "grid": {"spacing_m": [0.0, 0.05], "depth_m": [0.5, 0.8]},
