@@ -23,7 +23,8 @@ class RunInfo:
         ``"plain"`` or ``"stratified"``.
     seed, replicates : int
     rays_per_mixel_per_frame : int
-        Rays traced per mixel per frame (both passes of a stratified pair).
+        Rays traced per mixel per frame, the mean over the frames (a stratified pair: the frame pass and the
+        lanes of the background pass traced again, those whose frame paths met a moving shape).
     spp_per_mixel_per_frame : int
         The budget's ray count per pass (after any target search).
     target_rel_stderr : float
@@ -38,6 +39,8 @@ class RunInfo:
         What the estimator could not bound or guide, and what it did instead.
     guided_frames : int or None
         Stratified runs: frames whose bounces were guided.
+    launches : str or None
+        Stratified runs: ``"frozen"`` (recorded once, replayed) or ``"traced..."`` with the reason.
     """
 
     estimator: str
@@ -51,6 +54,7 @@ class RunInfo:
     heavy_tailed: tuple[tuple[int, int], ...] = ()
     fallbacks: tuple[str, ...] = ()
     guided_frames: int | None = None
+    launches: str | None = None
 
     @classmethod
     def from_meta(cls, meta: dict) -> RunInfo:
@@ -63,7 +67,7 @@ class RunInfo:
             retried_frames=tuple(int(i) for i in meta.get("retried_frames", ())),
             heavy_tailed=tuple((int(i), int(k)) for i, k in meta.get("heavy_tailed", ())),
             fallbacks=tuple(meta.get("fallbacks", ())),
-            guided_frames=meta.get("guided_frames"))
+            guided_frames=meta.get("guided_frames"), launches=meta.get("launches"))
 
 
 @dataclass
