@@ -66,6 +66,7 @@ class MincamScene:
         self.mi = backend.mitsuba()
         self._fast = None
         self._fast_params = None
+        self._own_vertices: set[str] = set()  # vertex buffers this scene allocated itself (safe to write in place)
         self._reference: list | None = None
         self._reference_params: list = []
         self._frame: np.ndarray | None = None
@@ -160,8 +161,11 @@ class MincamScene:
         for key, value in updates.items():
             if key not in params:
                 raise KeyError(f"unknown scene parameter {key!r}; see the scene's params.keys()")
-            if not _write_in_place(params, key, value):
-                params[key] = _as_param(self.mi, params[key], value, key)
+            if key in self._own_vertices and _write_in_place(params, key, value):
+                continue
+            params[key] = _as_param(self.mi, params[key], value, key)
+            if key.endswith(".vertex_positions"):
+                self._own_vertices.add(key)  # a private copy from now on: never a caller's array
         params.update()
 
     # ------------------------------------------------------------------------------------------ solvers
@@ -223,10 +227,12 @@ def geometry_meta(mincam: Mincam, screen: Screen | None = None) -> dict:
 
 
 def _write_in_place(params, key: str, value) -> bool:
-    """Write new vertex positions into the mesh's own buffer (LLVM: host memory) and mark them changed; False
-    (nothing written) where that does not apply. The buffer keeps its address, so a frozen launch that read the
-    vertices from there replays with the new ones (Dr.Jit replays a recording with the addresses it was
-    recorded with); Mitsuba's update then refits the mesh and rebuilds the acceleration structure as usual."""
+    """Write new vertex positions into the mesh's buffer (LLVM: host memory; one this scene allocated, never a
+    caller's array) and mark them changed; False (nothing written) where that does not apply.
+
+    The buffer keeps its address, so a frozen launch that read the vertices from there replays with the new ones
+    (Dr.Jit replays a recording with the addresses it was recorded with); Mitsuba's update then refits the mesh
+    and rebuilds the acceleration structure as usual."""
     import drjit as dr
 
     if not (key.endswith(".vertex_positions") and isinstance(value, np.ndarray)
@@ -255,7 +261,8 @@ def _as_param(mi, current, value, key: str = "parameter"):
         return mi.Transform4f(value.tolist())
     if value.shape == (3, 3) and "Transform3" in type(current).__name__:  # a texture's to_uv
         return type(current)(np.ascontiguousarray(value, dtype=np.float32))
-    flat = np.asarray(value, dtype=np.float32).ravel()
+    # a copy: Dr.Jit maps a float32 numpy array without copying, and the scene must never alias the caller's
+    flat = np.array(value, dtype=np.float32).ravel()
     if dr.is_tensor_v(current):
         shape = tuple(current.shape)
         if flat.size != int(np.prod(shape)):

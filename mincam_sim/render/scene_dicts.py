@@ -204,8 +204,9 @@ def mesh_object(name: str, vertices_m: np.ndarray, faces: np.ndarray, albedo: fl
     props["bsdf"] = mi.load_dict({"type": "diffuse", "reflectance": {"type": "spectrum", "value": float(albedo)}})
     mesh = mi.Mesh(name, len(vertices_m), len(faces), props=props)
     params = mi.traverse(mesh)
-    params["vertex_positions"] = mi.Float(vertices_m.ravel())
-    params["faces"] = mi.UInt32(faces.ravel())
+    # copies: Dr.Jit maps float32 / uint32 numpy arrays without copying, and the mesh must not alias the caller's
+    params["vertex_positions"] = mi.Float(vertices_m.ravel().copy())
+    params["faces"] = mi.UInt32(faces.ravel().copy())
     params.update()
     return mesh
 

@@ -238,3 +238,20 @@ def test_a_turning_smooth_mesh_on_a_far_tilted_rig_gives_the_traced_numbers():
     assert meta["launches"].startswith(("frozen", "traced from frame")), meta["launches"]
     assert meta["background_rays_share"] < 1.0
     assert np.all(np.abs(runs[False][0].irradiance_w_m2) > 3 * runs[False][0].stderr_w_m2), "changes must show"
+
+
+def test_vertex_updates_never_write_into_the_callers_arrays():
+    """Dr.Jit maps a float32 numpy array without copying, and vertex updates are written in place: the scene
+    holds a private copy, so the arrays a caller built (the scene's and every frame's) stay as they were."""
+    from mincam_sim.render.mincam_scene import MincamScene
+
+    placed = [np.asarray(TOY.vertices + [0.01 * k, 0.0, 0.0], dtype=np.float32) for k in range(4)]
+    kept = [p.copy() for p in placed]
+    built = np.asarray(TOY.vertices + [5.0, 5.0, 0.0], dtype=np.float32)
+    scene = MincamScene.world(cross_layout(), {"toy": sd.mesh_object("toy", built, TOY.faces, 0.9)})
+    built_kept = built.copy()
+    for p in placed + placed[::-1]:
+        scene.update({"toy.vertex_positions": p.ravel()})
+    assert all(np.array_equal(p, k) for p, k in zip(placed, kept, strict=True))
+    assert np.array_equal(built, built_kept)
+    assert np.array_equal(np.asarray(scene.params["toy.vertex_positions"]), placed[0].ravel())
