@@ -132,7 +132,7 @@ def guided_radiance_watched(scene, sampler, ray, max_depth: int, guide, boxes, s
     delta_prev = mi.Bool(True)
     spheres = opaque_spheres(guide) if share > 0 else []
     watched = [mi.BoundingBox3f(lo, hi) for lo, hi in boxes]
-    met = dr.zeros(mi.Bool, dr.width(ray.o))
+    met = mi.Bool(False)  # no width literal: a frozen launch replays with other lane counts
     for depth in range(int(max_depth)):
         si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=depth == 0, active=active)
         if watched:

@@ -187,6 +187,7 @@ def stratified_lanes(scene, sensor, mincam: Mincam, regions: ApertureRegions, re
             else:
                 value[np.asarray(lanes, dtype=np.int64)] = out
         if touched is not None:
+            met = dr.zeros(mi.Bool, ng * per) | met  # no box (nothing differs): no lane met one
             dr.eval(met)
             touched.append(met)
         values.append(value)
@@ -250,7 +251,7 @@ def _launch(scene, sensor, coeffs, seed, g0, lanes, spheres, boxes, shape: _Laun
                                                             boxes)
     else:
         radiance, _, _ = scene.integrator().sample(scene, sampler, ray, None, True)
-        met = dr.zeros(mi.Bool, dr.width(radiance))
+        met = mi.Bool(False)
     return scale * weight * radiance, met
 
 

@@ -255,3 +255,24 @@ def test_vertex_updates_never_write_into_the_callers_arrays():
     assert all(np.array_equal(p, k) for p, k in zip(placed, kept, strict=True))
     assert np.array_equal(built, built_kept)
     assert np.array_equal(np.asarray(scene.params["toy.vertex_positions"]), placed[0].ravel())
+
+
+def test_frozen_paired_launches_of_several_sizes_equal_the_traced_ones(monkeypatch):
+    """With a lane limit that splits a pass into launches of unequal sizes (the last one shorter), and a frame
+    that moves nothing, frozen paired launches still give the traced, full numbers bit for bit."""
+    from mincam_sim.render import tracing
+
+    world, frames, background = _world(ball=False)
+    frames = [*frames[:2], dict(background), frames[2]]  # the third frame is the background itself
+    monkeypatch.setattr(tracing, "MAX_LANES", 7 * 72)  # 7 groups of 72 lanes per launch: 32 groups, 5 launches
+    runs = {}
+    for fast in (False, True, True):
+        world.freeze_launches = world.pair_lanes = fast
+        runs.setdefault(fast, []).append(world.measure_changes(frames, background, spp=8 * 72, seed=4,
+                                                               estimator="stratified"))
+    (dp0, p0), = runs[False]
+    for dp, p in runs[True]:
+        assert np.array_equal(dp0.irradiance_w_m2, dp.irradiance_w_m2)
+        assert np.array_equal(dp0.stderr_w_m2, dp.stderr_w_m2)
+        assert np.array_equal(p0.irradiance_w_m2, p.irradiance_w_m2)
+    assert np.all(dp0.irradiance_w_m2[2] == 0.0), "a frame equal to the background changes nothing"
