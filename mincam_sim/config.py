@@ -1,8 +1,8 @@
 """TOML configuration of a render: its sections, defaults and validation (pure Python/numpy).
 
 Every key carries its unit in its name (``_m`` metres, ``_rad`` radians, ``_w_m2_sr`` radiance ...). The
-sections are dataclasses of :mod:`mincam_sim.schema` (:class:`RunSection`, :class:`MincamSection`,
-:class:`ScreenSection`, :class:`FramesSection`, :class:`MixelTable`, :class:`SinusoidMask`): each field holds
+sections are dataclasses of :mod:`mincam_sim.schema` (``RunSection``, ``MincamSection``,
+``ScreenSection``, ``FramesSection``, ``MixelTable``, ``SinusoidMask``): each field holds
 its default, its comment and its check, and :data:`EXAMPLE_TOML` (``mincam-sim config-example``) is written
 from them. Unknown sections or keys are refused with the closest allowed name.
 

@@ -336,7 +336,7 @@ def read_section(section: str, given: Any, cls: type, base: Any = None) -> Any:
 
 def dataclass_from_section(section: str, table_: Any, defaults_: Any) -> Any:
     """A copy of the dataclass instance ``defaults_`` with the keys of a TOML ``[section]`` table applied
-    (:func:`read_section` with the instance as the base)."""
+    (:func:`mincam_sim.schema.read_section` with the instance as the base)."""
     return read_section(section, table_, type(defaults_), defaults_)
 
 
@@ -448,7 +448,7 @@ class Schema:
         return [p.name.split(".", 1)[1] for p in self.parts if p.name.startswith(name + ".")]
 
     def read(self, name: str, given: dict, base: Any = None) -> Any:
-        """:func:`read_section` of part ``name`` (its sub-parts' keys set aside)."""
+        """:func:`mincam_sim.schema.read_section` of part ``name`` (its sub-parts' keys set aside)."""
         part = self.part(name)
         subs = self.subparts(name)
         own = {k: v for k, v in table(part.header, given).items() if k not in subs}

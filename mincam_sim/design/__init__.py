@@ -9,8 +9,8 @@ renderer itself).
   planes, 12-bit sensor) and its training distribution.
 * :mod:`.parameterization`: logits on a coarse grid -> printer dots -> film transmission.
 * :mod:`.optimise`: builds the linear forward model from traced samples and optimises the masks.
-* :mod:`.problem`: the design problem as plain arrays (linear models, film, noise, targets) and the result.
-* :mod:`.optimiser`: Adam on the mask logits through the film, the noise and a decoder fitted in the loop.
+* ``problem``: the design problem as plain arrays (linear models, film, noise, targets) and the result.
+* ``optimiser``: Adam on the mask logits through the film, the noise and a decoder fitted in the loop.
 * :mod:`.evaluate`: the old held-out draw (squares 2-5 cm on black) in the physical simulator (response maps).
 * ``suite``: the held-out suite of every report (sizes, shapes, backgrounds, two objects, depths, tilt,
   contrast), the baseline (ramps of ``cross_layout``, Eq. 7, cubic calibration) beside the design.

@@ -1,6 +1,6 @@
 """What an experiment is: a name, the paper section and numbers it reproduces, a parameters dataclass (every
 default in one place, quick-mode overrides beside it), ``calibrate`` / ``scene`` / ``run`` returning a typed
-:class:`ExperimentResult`, and how one point of a study of it runs (:meth:`Experiment.study_target`: its
+:class:`ExperimentResult`, and how one point of a study of it runs (``Experiment.study_target``: its
 parameters, metrics and typical seconds, declared here once beside the reproduction)."""
 
 from __future__ import annotations

@@ -1,10 +1,10 @@
 """The one registry of what ``reproduce``, ``study`` and ``demo`` run, and the runner that writes
 ``results.json``.
 
-:data:`REGISTRY` holds the experiments. Each declares, once, both how it runs as a reproduction (its parameters
-dataclass, quick-mode overrides and :meth:`~.base.Experiment.run`) and how one study point of it runs (its
-study parameters, metrics and typical seconds: :meth:`~.base.Experiment.study_target`). :data:`STUDY_ONLY`
-holds the two study targets that are no experiment: a render config and the mask design. :func:`study_target`
+``REGISTRY`` holds the experiments. Each declares, once, both how it runs as a reproduction (its parameters
+dataclass, quick-mode overrides and ``Experiment.run``) and how one study point of it runs (its
+study parameters, metrics and typical seconds: ``Experiment.study_target``). ``STUDY_ONLY``
+holds the two study targets that are no experiment: a render config and the mask design. ``study_target``
 looks any of them up by name; :mod:`mincam_sim.studies` reads nothing else.
 
 A reproduce config is TOML with a ``[setup]`` section and one section per experiment, each validated against

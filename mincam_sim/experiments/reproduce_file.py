@@ -2,7 +2,7 @@
 
 A ``[setup]`` section (:class:`~mincam_sim.experiments.setup.Setup`) and one section per registered experiment
 (its parameters dataclass); each key is a field, checked like the default's type, documented by the
-dataclass's ``Attributes``. :func:`reproduce_example_toml` (``mincam-sim config-example --reproduce``, and the
+dataclass's ``Attributes``. ``reproduce_example_toml`` (``mincam-sim config-example --reproduce``, and the
 shipped ``scenes/experiments/reproduce.toml``) is written from the same dataclasses.
 """
 

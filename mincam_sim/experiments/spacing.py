@@ -11,7 +11,7 @@ it, not even by rounding), and the study isolates geometry: field-of-view offset
 detector's blur.
 
 As a study target (``[study] experiment = "spacing"``) one point is one (spacing, calibration depth, depth,
-sensor) of this same code: the calibration of :meth:`Spacing.calibrate`, the errors of :meth:`Spacing.score`
+sensor) of this same code: the calibration of ``Spacing.calibrate``, the errors of ``Spacing.score``
 on the noiseless read-out, and the same errors on a noisy read-out (``noisy_`` metrics, with the sensor's
 read noise ``read_noise_e``; :func:`~mincam_sim.readout.read_out`: the dark frame is measured with the same
 sensor, its mean subtracted, and frames whose change stays within its noise carry no position).

@@ -4,7 +4,7 @@ A study target (:class:`StudyExperiment`) is a point function ``point(params, se
 (plain floats; a pure function of its parameters and seed, so a point gives the same numbers on any worker, in
 any order), its parameters with their defaults (units from the names), the metrics it returns and a rough
 wall time per point (for the grid-size refusal). Every experiment of the registry declares its own target
-(:meth:`~mincam_sim.experiments.base.Experiment.study_target`); :mod:`.registry` adds the two below and is the
+(``Experiment.study_target``); :mod:`.registry` adds the two below and is the
 one place a target is looked up by name:
 
 * ``render`` -- a render config (``[study] config = "file.toml"``): any numeric key as ``section.key``

@@ -99,7 +99,7 @@ class ResponseMaps:
 
     def measure_source(self, frames: FrameSource, indices=None, show_progress: bool = False,
                        desc: str = "frames") -> Measurements:
-        """Measurements of (some of) a frame source, chunk by chunk (at most :data:`FRAME_CHUNK_BYTES` of frames
+        """Measurements of (some of) a frame source, chunk by chunk (at most ``FRAME_CHUNK_BYTES`` of frames
         in memory); a frame with NaN, infinite or negative radiance is refused, by its index."""
         indices = np.arange(len(frames)) if indices is None else np.asarray(indices)
         values = np.empty((len(indices), len(self.mixel_names)))
@@ -239,7 +239,7 @@ def response_maps_to_target(
 ) -> tuple[ResponseMaps, list[dict]]:
     """Response maps whose measurements of ``frames`` all reach ``target_rel_stderr`` (if the cap allows).
 
-    The budget rule of every solver (:func:`.estimation.pilot_to_target`), fitted to maps: from 16 samples
+    The budget rule of every solver (``estimation.pilot_to_target``), fitted to maps: from 16 samples
     per texel, each attempt's maps measure the frames and the count is extrapolated with the convergence rate
     ``rel ~ n^-a`` measured on the last two attempts (``a`` in [0.5, 1.5]: stratified sampling converges
     faster than ``n^-1/2``; 0.5 until two attempts exist), by 2x to 8x per step, and traced as ``replicates x

@@ -194,7 +194,7 @@ class WorldRenderer:
             self._as_built[key] = self.params[key]
 
     def buffers_key(self) -> tuple:
-        """:func:`.stratified.buffers_key` of every shape whose parameters were updated (the whole scene if an
+        """``stratified.buffers_key`` of every shape whose parameters were updated (the whole scene if an
         updated parameter belongs to something else: a shared BSDF, an environment emitter)."""
         names = {key.split(".", 1)[0] for key in self._as_built}
         shapes = {shape.id(): shape for shape in self.scene.shapes()}
