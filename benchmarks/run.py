@@ -381,7 +381,7 @@ def bench_cost_curves() -> dict:
         response_maps(cam, Screen(resolution=res), 16, seed=0)
         maps.append({"resolution": list(res), "texels": res[0] * res[1], "seconds": time.perf_counter() - t})
     curves["response_map_build"] = maps
-    _plot_cost_curves(curves, HERE / "cost_curves.png")
+    _plot_cost_curves(curves, HERE.parent / "scenes" / "figures" / "cost_curves.png")
     return curves
 
 
