@@ -284,5 +284,6 @@ def _summary_extras(seen: _Observed, truths: _Truths, truth: np.ndarray, ok: np.
         "spp_per_mixel_per_frame": rays,
         "dP_estimator": seen.dp.meta["estimator"],
         "rays_per_mixel_per_frame": seen.dp.meta["rays_per_mixel_per_frame"],
+        "launches": seen.dp.meta.get("launches"),
         "exposure_s": seen.readout.sensor.exposure_s,
     }
