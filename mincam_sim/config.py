@@ -381,66 +381,97 @@ def parse_mask(spec: Any, size_m: float, resolution: int, where: str, base_dir: 
     height = size_m if height_m is None else height_m
     res = (max(1, round(resolution * height / width_m)), resolution)
     if isinstance(spec, str):
-        kind, _, arg = spec.partition(":")
-        if kind == "ramp":
-            try:
-                return masks_mod.ramp(arg, res, width_m, height)
-            except ValueError as err:
-                raise ConfigError(f"{where}: {err}") from None
-        if kind == "constant":
-            try:
-                value = float(arg) if arg.strip() else 1.0
-            except ValueError:
-                raise ConfigError(f"{where}: constant mask needs a transmission in [0, 1] like 'constant:0.5', "
-                                  f"got {spec!r}") from None
-            if not 0.0 <= value <= 1.0:
-                raise ConfigError(f"{where}: constant mask needs a transmission in [0, 1], got {spec!r}")
-            try:
-                return masks_mod.constant(value, 1, width_m, height)
-            except ValueError as err:
-                raise ConfigError(f"{where}: {err}") from None
-        if kind == "file":
-            if not arg.strip():
-                raise ConfigError(f"{where}: 'file:' needs a path, e.g. mask = \"file:masks/ramp_x.exr\"")
-            if "\x00" in arg:
-                raise ConfigError(f"{where}: mask file path contains a NUL character")
-            path = Path(arg).expanduser()
-            if not path.is_absolute() and base_dir is not None:
-                path = Path(base_dir) / path
-            if not path.is_file():
-                rel = " (relative paths are relative to the config file)" if base_dir is not None else ""
-                raise ConfigError(f"{where}: mask file {str(path)!r} does not exist or is not a file{rel}")
-            try:
-                mask = masks_mod.load(path, width_m, height, encoding=encoding)
-            except Exception as err:  # a user's file: any failure to read it is a config error
-                raise ConfigError(f"{where}: cannot use mask file {str(path)!r}: {err}") from None
-            rows, cols = mask.shape
-            if abs((cols / rows) / (width_m / height) - 1) > 0.01:
-                fix = (f"give mask_size_m = [{width_m:g}, {width_m * rows / cols:.6g}] (width, height in metres) "
-                       "in its [[mixel]] table" if height_m is None else "give mask_size_m with the image's aspect "
-                       "ratio")
-                raise ConfigError(f"{where}: mask file {str(path)!r} is {cols} x {rows} texels but the mask is "
-                                  f"{1e3 * width_m:g} x {1e3 * height:g} mm; it would be stretched: {fix}, or "
-                                  "use an image of the mask's shape")
-            return mask
-        raise ConfigError(
-            f"{where}: mask {spec!r} not understood; use 'ramp:x|1-x|y|1-y', 'constant:<t>', 'file:<path>' or a "
-            "table {kind = \"sinusoid\", omega_rad_per_m = ...}"
-        )
+        return _string_mask(spec, res, width_m, height, where, base_dir, height_m, encoding)
     if isinstance(spec, dict):
-        kind = spec.get("kind")
-        if kind != "sinusoid":
-            raise ConfigError(f"{where}: mask tables support kind = \"sinusoid\" (got {kind!r})")
-        table = read_section(f"{where} mask", spec, SinusoidMask)
-        if table.omega_rad_per_m is None:
-            raise ConfigError(f"{where}: a sinusoid mask needs omega_rad_per_m (angular frequency on the mask)")
-        try:
-            return masks_mod.sinusoid(resolution=res, width_m=width_m, height_m=height, omega_rad_per_m=
-                                      table.omega_rad_per_m, a0=table.a0, a1=table.a1, phase_rad=table.phase_rad,
-                                      direction_deg=table.direction_deg)
-        except (TypeError, ValueError) as err:
-            raise ConfigError(f"{where}: {err}") from None
+        return _sinusoid_table_mask(spec, res, width_m, height, where)
     raise ConfigError(f"{where}: mask must be a string like \"ramp:x\" or a sinusoid table, got {describe(spec)}")
+
+
+def _string_mask(spec: str, res: tuple[int, int], width_m: float, height: float, where: str,
+                 base_dir: str | Path | None, height_m: float | None, encoding: str) -> Mask:
+    """A mask from ``"ramp:<dir>"``, ``"constant:<t>"`` or ``"file:<path>"`` (``res``: rows, cols; sizes [m])."""
+    kind, _, arg = spec.partition(":")
+    if kind == "ramp":
+        try:
+            return masks_mod.ramp(arg, res, width_m, height)
+        except ValueError as err:
+            raise ConfigError(f"{where}: {err}") from None
+    if kind == "constant":
+        return _constant_mask(spec, arg, width_m, height, where)
+    if kind == "file":
+        path = _mask_file_path(arg, where, base_dir)
+        return _file_mask(path, width_m, height, where, height_m, encoding)
+    raise ConfigError(
+        f"{where}: mask {spec!r} not understood; use 'ramp:x|1-x|y|1-y', 'constant:<t>', 'file:<path>' or a "
+        "table {kind = \"sinusoid\", omega_rad_per_m = ...}"
+    )
+
+
+def _constant_mask(spec: str, arg: str, width_m: float, height: float, where: str) -> Mask:
+    """``"constant:<t>"``: one transmission ``t`` in [0, 1] (default 1) over a ``width_m`` x ``height`` [m] mask."""
+    try:
+        value = float(arg) if arg.strip() else 1.0
+    except ValueError:
+        raise ConfigError(f"{where}: constant mask needs a transmission in [0, 1] like 'constant:0.5', "
+                          f"got {spec!r}") from None
+    if not 0.0 <= value <= 1.0:
+        raise ConfigError(f"{where}: constant mask needs a transmission in [0, 1], got {spec!r}")
+    try:
+        return masks_mod.constant(value, 1, width_m, height)
+    except ValueError as err:
+        raise ConfigError(f"{where}: {err}") from None
+
+
+def _mask_file_path(arg: str, where: str, base_dir: str | Path | None) -> Path:
+    """The existing file a ``"file:<path>"`` mask names (``~`` expanded; relative to ``base_dir`` if given)."""
+    if not arg.strip():
+        raise ConfigError(f"{where}: 'file:' needs a path, e.g. mask = \"file:masks/ramp_x.exr\"")
+    if "\x00" in arg:
+        raise ConfigError(f"{where}: mask file path contains a NUL character")
+    path = Path(arg).expanduser()
+    if not path.is_absolute() and base_dir is not None:
+        path = Path(base_dir) / path
+    if not path.is_file():
+        rel = " (relative paths are relative to the config file)" if base_dir is not None else ""
+        raise ConfigError(f"{where}: mask file {str(path)!r} does not exist or is not a file{rel}")
+    return path
+
+
+def _file_mask(path: Path, width_m: float, height: float, where: str, height_m: float | None,
+               encoding: str) -> Mask:
+    """The mask in an image file, at ``width_m`` x ``height`` [m]; refused if the image has another aspect ratio.
+
+    ``height_m`` is the height the config gave (None: square by default), which chooses the fix the error names.
+    """
+    try:
+        mask = masks_mod.load(path, width_m, height, encoding=encoding)
+    except Exception as err:  # a user's file: any failure to read it is a config error
+        raise ConfigError(f"{where}: cannot use mask file {str(path)!r}: {err}") from None
+    rows, cols = mask.shape
+    if abs((cols / rows) / (width_m / height) - 1) > 0.01:
+        fix = (f"give mask_size_m = [{width_m:g}, {width_m * rows / cols:.6g}] (width, height in metres) "
+               "in its [[mixel]] table" if height_m is None else "give mask_size_m with the image's aspect "
+               "ratio")
+        raise ConfigError(f"{where}: mask file {str(path)!r} is {cols} x {rows} texels but the mask is "
+                          f"{1e3 * width_m:g} x {1e3 * height:g} mm; it would be stretched: {fix}, or "
+                          "use an image of the mask's shape")
+    return mask
+
+
+def _sinusoid_table_mask(spec: dict, res: tuple[int, int], width_m: float, height: float, where: str) -> Mask:
+    """A mask from a ``{kind = "sinusoid", omega_rad_per_m = ...}`` table (``res``: rows, cols; sizes [m])."""
+    kind = spec.get("kind")
+    if kind != "sinusoid":
+        raise ConfigError(f"{where}: mask tables support kind = \"sinusoid\" (got {kind!r})")
+    table = read_section(f"{where} mask", spec, SinusoidMask)
+    if table.omega_rad_per_m is None:
+        raise ConfigError(f"{where}: a sinusoid mask needs omega_rad_per_m (angular frequency on the mask)")
+    try:
+        return masks_mod.sinusoid(resolution=res, width_m=width_m, height_m=height, omega_rad_per_m=
+                                  table.omega_rad_per_m, a0=table.a0, a1=table.a1, phase_rad=table.phase_rad,
+                                  direction_deg=table.direction_deg)
+    except (TypeError, ValueError) as err:
+        raise ConfigError(f"{where}: {err}") from None
 
 
 def _build_mincam(m: MincamSection, mixel_tables: list, base: Path) -> Mincam:

@@ -40,14 +40,8 @@ def _to_transmission(arr: np.ndarray, channels: list[str], src: str) -> np.ndarr
     )
 
 
-def load(
-    path: str | Path,
-    width_m: float | None = None,
-    height_m: float | None = None,
-    invert: bool = False,
-    name: str | None = None,
-    encoding: str = "linear",
-) -> Mask:
+def load(path: str | Path, width_m: float | None = None, height_m: float | None = None, invert: bool = False,
+         name: str | None = None, encoding: str = "linear") -> Mask:
     """Load a mask from a PNG (8/16-bit) or OpenEXR file.
 
     Parameters
@@ -90,42 +84,69 @@ def load(
     passes 21.6 %). RGB images are reduced to luminance with the Rec. 709 weights 0.2126 R + 0.7152 G + 0.0722 B
     applied to the (decoded) values. An alpha channel is accepted only if fully opaque.
     """
+    p, fmt = _source(path, encoding)
+    t, info, stored = _read_exr(p) if fmt == "exr" else _read_png(p, encoding)
+    width_m, height_m = _physical_size(p, t.shape, width_m, height_m, stored, info)
+    t = 1.0 - t if invert else t
+    label = name if name is not None else str(stored.get("name") or p.stem)
+    return Mask(t, width_m, height_m, label, _file_meta(p, fmt, invert, encoding, stored, info))
+
+
+def _source(path: str | Path, encoding: str) -> tuple[Path, str]:
+    """The file and its format (``"png"`` / ``"exr"``, from its content), checked against ``encoding``."""
     if encoding not in ("linear", "srgb"):
         raise ValueError(f"encoding must be 'linear' or 'srgb', got {encoding!r}")
     p = Path(path)
     fmt = imageio.sniff_format(p, "mask file")
-    stored: dict = {}
     if fmt == "exr" and encoding == "srgb":
         raise ValueError(f"mask file {str(p)!r} is OpenEXR, whose values are linear transmission; the sRGB "
                          "encoding applies to PNG files only (use mask_encoding = \"linear\")")
-    if fmt == "exr":
-        arr, info = imageio.read_exr(p)
-        arr = np.asarray(arr, dtype=np.float64)
-        stored = info
-        t = _to_transmission(arr, info["channels"], str(p))
-        bad = ~np.isfinite(t)
-        if bad.any():
-            raise ValueError(
-                f"mask file {str(p)!r}: {int(bad.sum())} pixel(s) are NaN or infinite;"
-                " transmission must be finite numbers in [0, 1]"
-            )
-        lo, hi = float(t.min()), float(t.max())
-        if lo < 0.0 or hi > 1.0:
-            raise ValueError(
-                f"mask file {str(p)!r}: values span [{lo:.4g}, {hi:.4g}] but transmission must lie in [0, 1];"
-                " rescale the image (e.g. divide by its maximum) or clip it before loading"
-            )
-    else:
-        arr, info = imageio.read_png(p)
-        if encoding == "srgb":
-            arr = np.asarray(arr, dtype=np.float64).copy()
-            colour = [k for k, c in enumerate(info["channels"]) if c != "A"] if arr.ndim == 3 else None
-            if colour is None:
-                arr = srgb_to_linear(arr)
-            else:
-                arr[..., colour] = srgb_to_linear(arr[..., colour])
-        t = _to_transmission(arr, info["channels"], str(p))
-    h, w = t.shape
+    return p, fmt
+
+
+def _read_exr(p: Path) -> tuple[np.ndarray, dict, dict]:
+    """An OpenEXR mask's transmission (finite, in [0, 1]), its header and the stored metadata (the same dict)."""
+    arr, info = imageio.read_exr(p)
+    arr = np.asarray(arr, dtype=np.float64)
+    t = _to_transmission(arr, info["channels"], str(p))
+    bad = ~np.isfinite(t)
+    if bad.any():
+        raise ValueError(
+            f"mask file {str(p)!r}: {int(bad.sum())} pixel(s) are NaN or infinite;"
+            " transmission must be finite numbers in [0, 1]"
+        )
+    lo, hi = float(t.min()), float(t.max())
+    if lo < 0.0 or hi > 1.0:
+        raise ValueError(
+            f"mask file {str(p)!r}: values span [{lo:.4g}, {hi:.4g}] but transmission must lie in [0, 1];"
+            " rescale the image (e.g. divide by its maximum) or clip it before loading"
+        )
+    return t, info, info
+
+
+def _read_png(p: Path, encoding: str) -> tuple[np.ndarray, dict, dict]:
+    """A PNG mask's transmission (value / 255 or / 65535, sRGB-decoded if asked), its info and no stored metadata."""
+    arr, info = imageio.read_png(p)
+    if encoding == "srgb":
+        arr = np.asarray(arr, dtype=np.float64).copy()
+        colour = [k for k, c in enumerate(info["channels"]) if c != "A"] if arr.ndim == 3 else None
+        if colour is None:
+            arr = srgb_to_linear(arr)
+        else:
+            arr[..., colour] = srgb_to_linear(arr[..., colour])
+    return _to_transmission(arr, info["channels"], str(p)), info, {}
+
+
+def _physical_size(p: Path, shape: tuple[int, int], width_m: float | None, height_m: float | None, stored: dict,
+                   info: dict) -> tuple[float, float]:
+    """The mask's width and height [m]: given, else stored (EXR), else (height) square texels.
+
+    Raises
+    ------
+    ValueError
+        No width given or stored (naming the width the file's dpi implies, if it records one).
+    """
+    h, w = shape
     if width_m is None:
         width_m = stored.get("width_m")
     if width_m is None:
@@ -139,16 +160,18 @@ def load(
         height_m = stored.get("height_m") if same_width else None
     if height_m is None:
         height_m = float(width_m) * h / w
-    if invert:
-        t = 1.0 - t
-    label = name if name is not None else str(stored.get("name") or p.stem)
+    return width_m, height_m
+
+
+def _file_meta(p: Path, fmt: str, invert: bool, encoding: str, stored: dict, info: dict) -> dict:
+    """The mask's ``meta``: the stored one (EXR), then the source file, format, invert (encoding, PNG bit depth)."""
     meta = dict(stored.get("meta", {})) if isinstance(stored.get("meta"), dict) else {}
     meta.update({"source": str(p), "format": fmt, "invert": bool(invert)})
     if encoding != "linear":  # recorded only when not the default (older records stay the same)
         meta["encoding"] = encoding
     if fmt == "png":
         meta["bit_depth"] = info["bit_depth"]
-    return Mask(t, width_m, height_m, label, meta)
+    return meta
 
 
 def srgb_to_linear(v: np.ndarray) -> np.ndarray:

@@ -13,8 +13,9 @@ a dot (21 um at 600 dpi).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -60,15 +61,9 @@ def _film_text(film: PrintedFilm | None, dpi: float) -> str:
             f"* v^{film.gamma:g}, v = printer grey in [0, 1] (0 = full ink)")
 
 
-def write_print_sheet(
-    masks: Sequence[Mask],
-    positions_m: Sequence[Sequence[float]],
-    dpi: float,
-    film: PrintedFilm | None,
-    path: str | Path,
-    names: Sequence[str] | None = None,
-    title: str = "",
-) -> tuple[Path, Path]:
+def write_print_sheet(masks: Sequence[Mask], positions_m: Sequence[Sequence[float]], dpi: float,
+                      film: PrintedFilm | None, path: str | Path, names: Sequence[str] | None = None,
+                      title: str = "") -> tuple[Path, Path]:
     """Write a print sheet (PNG at ``dpi`` or a PDF of that page) of every mask at its place, and its notes.
 
     Parameters
@@ -102,6 +97,27 @@ def write_print_sheet(
         No masks, a position per mask missing, masks that overlap on the sheet, a sheet too large for ``dpi``,
         or a file name that is neither ``.png`` nor ``.pdf``.
     """
+    path, kind, masks, pos, labels = _checked_inputs(path, masks, positions_m, dpi, names)
+    film, bit_depth = _film_at(film, dpi)
+    _check_overlaps(masks, pos, labels)
+    notes = _sheet_notes(title, film, dpi, labels, pos, masks)
+    layout = _layout(notes, masks, pos, dpi)
+    sheet, placements = _draw_sheet(layout, notes, labels, pos, masks, film, dpi)
+    _write_sheet(sheet, kind, path, bit_depth, dpi)
+    notes_path = atomic_write_text(path.with_suffix(".txt"), _notes_text(notes, placements, layout, dpi))
+    return path, notes_path
+
+
+def _checked_inputs(path: str | Path, masks: Sequence[Mask], positions_m: Sequence[Sequence[float]], dpi: float,
+                    names: Sequence[str] | None) -> tuple[Path, str, list[Mask], np.ndarray, list[str]]:
+    """The sheet's path, its kind (``".png"`` / ``".pdf"``), the masks, their centres [m] and labels, checked.
+
+    Raises
+    ------
+    ValueError
+        A name neither ``.png`` nor ``.pdf``, no masks, a position per mask missing, a dpi out of range, or a
+        label per mask missing.
+    """
     path = Path(path)
     kind = path.suffix.lower()
     if kind not in (".png", ".pdf"):
@@ -118,13 +134,26 @@ def write_print_sheet(
     labels = [m.name for m in masks] if names is None else [str(n) for n in names]
     if len(labels) != len(masks):
         raise ValueError(f"{len(labels)} names for {len(masks)} masks")
+    return path, kind, masks, pos, labels
+
+
+def _film_at(film: PrintedFilm | None, dpi: float) -> tuple[PrintedFilm | None, int]:
+    """The film printed at the sheet's ``dpi`` [dots per inch] (None stays None) and the PNG bit depth it needs."""
     bit_depth = png_bit_depth(film)
     if film is not None and film.dpi != dpi:
-        from dataclasses import replace
-
         film = replace(film, dpi=float(dpi))
+    return film, bit_depth
+
+
+def _mask_boxes(masks: Sequence[Mask], pos: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each mask's half size and its lower-left and upper-right corners [m] around its centre ``pos`` [m]."""
     half = np.array([[m.width_m / 2, m.height_m / 2] for m in masks])
-    lo, hi = pos - half, pos + half
+    return half, pos - half, pos + half
+
+
+def _check_overlaps(masks: Sequence[Mask], pos: np.ndarray, labels: Sequence[str]) -> None:
+    """Refuse (ValueError) two masks whose areas overlap on the sheet (touching edges are allowed)."""
+    half, lo, hi = _mask_boxes(masks, pos)
     for i in range(len(masks)):
         for j in range(i + 1, len(masks)):
             if np.all(lo[i] < hi[j] - 1e-12) and np.all(lo[j] < hi[i] - 1e-12):
@@ -132,6 +161,10 @@ def write_print_sheet(
                                  f"{pos[i].tolist()} and {pos[j].tolist()} m, sizes {2e3 * half[i]} and "
                                  f"{2e3 * half[j]} mm): space the mixels at least a mask width apart")
 
+
+def _sheet_notes(title: str, film: PrintedFilm | None, dpi: float, labels: Sequence[str], pos: np.ndarray,
+                 masks: Sequence[Mask]) -> list[str]:
+    """The lines printed under the masks (and first in the text file): title, film mapping, how to print, places."""
     notes = [title or "mincam mask print sheet",
              _film_text(film, dpi),
              "PRINT AT 100 % (no fit to page). This face towards the detectors: the text reads correctly from the "
@@ -141,36 +174,82 @@ def write_print_sheet(
     for name, (x, y), m in zip(labels, pos, masks, strict=True):
         notes.append(f"{name}: centre ({1e3 * x:+.2f}, {1e3 * y:+.2f}) mm, {1e3 * m.width_m:g} x "
                      f"{1e3 * m.height_m:g} mm")
+    return notes
 
-    from PIL import Image, ImageDraw, ImageFont
+
+@dataclass(frozen=True)
+class _Layout:
+    """The sheet's size [dots], the masks' area (``inner_h`` rows, then the notes), margin, text line and font."""
+
+    width: int
+    height: int
+    inner_h: int
+    margin: int
+    line_h: int
+    font: Any
+
+
+def _layout(notes: Sequence[str], masks: Sequence[Mask], pos: np.ndarray, dpi: float) -> _Layout:
+    """Size the sheet: the masks around the page's reference centre, the margins, then the notes below.
+
+    Raises
+    ------
+    ValueError
+        A sheet of more than ``MAX_TEXELS`` dots at ``dpi``.
+    """
+    from PIL import ImageFont
 
     font = ImageFont.load_default(size=max(6, round(TEXT_PT / 72 * dpi)))
     line_h = int(font.getbbox("Ag")[3] * 1.35) + 1
     text_w = max(int(font.getlength(t)) for t in notes)
 
     margin = _px(MARGIN_M, dpi)
+    _, lo, hi = _mask_boxes(masks, pos)
     span_lo, span_hi = lo.min(axis=0), hi.max(axis=0)
     half_span = np.maximum(np.abs(span_lo), np.abs(span_hi))  # the reference centre is the page's centre
     inner_w = 2 * _px(half_span[0], dpi) + 2 * margin
     inner_h = 2 * _px(half_span[1], dpi) + 2 * margin
     width = max(inner_w, text_w + 2 * margin)
-    text_top = inner_h
     height = inner_h + line_h * (len(notes) + 1) + margin
     if width * height > MAX_TEXELS:
         raise ValueError(f"print sheet of {width} x {height} dots at {dpi:g} dpi is too large (max {MAX_TEXELS}); "
                          "lower the dpi or print the masks on separate sheets")
-    cx, cy = width / 2, inner_h / 2
-    sheet = np.ones((height, width))
+    return _Layout(width, height, inner_h, margin, line_h, font)
+
+
+def _mask_dots(m: Mask, shape: tuple[int, int], film: PrintedFilm | None) -> np.ndarray:
+    """A mask's printer dots: the film's printer input, or (no film) its transmission on the ``shape`` grid."""
+    return film.printer_input(m) if film is not None else resample(m, shape)
+
+
+def _draw_sheet(layout: _Layout, notes: Sequence[str], labels: Sequence[str], pos: np.ndarray,
+                masks: Sequence[Mask], film: PrintedFilm | None, dpi: float
+                ) -> tuple[np.ndarray, list[SheetPlacement]]:
+    """The sheet's grey values in [0, 1] (masks, crop marks, marks and text) and where each mask lies."""
+    cx, cy = layout.width / 2, layout.inner_h / 2
+    sheet = np.ones((layout.height, layout.width))
     placements = []
     for name, (x, y), m in zip(labels, pos, masks, strict=True):
         shape = _dot_grid(m.width_m, m.height_m, dpi)
-        dots = film.printer_input(m) if film is not None else resample(m, shape)
         r0 = int(round(cy - _px_f(y, dpi) - shape[0] / 2))
         c0 = int(round(cx + _px_f(x, dpi) - shape[1] / 2))
-        sheet[r0:r0 + shape[0], c0:c0 + shape[1]] = dots
+        sheet[r0:r0 + shape[0], c0:c0 + shape[1]] = _mask_dots(m, shape, film)
         placements.append(SheetPlacement(name, (float(x), float(y)), (r0, c0), shape))
         _crop_marks(sheet, r0, c0, shape, dpi)
-    img = Image.fromarray(np.zeros((height, width), dtype=np.uint8) + 255, mode="L")
+    sheet = np.minimum(sheet, _marks_and_text(layout, notes, placements, dpi))
+    for p, m in zip(placements, masks, strict=True):  # the masks' own dots win over any mark or text
+        (r0, c0), (h, w) = p.top_left_px, p.shape_px
+        sheet[r0:r0 + h, c0:c0 + w] = _mask_dots(m, (h, w), film)
+    return sheet, placements
+
+
+def _marks_and_text(layout: _Layout, notes: Sequence[str], placements: Sequence[SheetPlacement],
+                    dpi: float) -> np.ndarray:
+    """Registration marks, scale bar, notes and mask labels drawn black on white, as grey values in [0, 1]."""
+    from PIL import Image, ImageDraw
+
+    width, inner_h, margin, line_h, font = layout.width, layout.inner_h, layout.margin, layout.line_h, layout.font
+    img = Image.fromarray(np.zeros((layout.height, width), dtype=np.uint8) + 255, mode="L")
     draw = ImageDraw.Draw(img)
     lw = _line_px(dpi)
     reg = _px(REG_RADIUS_M, dpi)
@@ -180,6 +259,7 @@ def write_print_sheet(
         draw.line((rx - reg - lw, ry, rx + reg + lw, ry), fill=0, width=lw)
         draw.line((rx, ry - reg - lw, rx, ry + reg + lw), fill=0, width=lw)
     bar = _px(SCALE_BAR_M, dpi)
+    text_top = inner_h
     y_bar = text_top + line_h // 4
     draw.line((margin, y_bar, margin + bar, y_bar), fill=0, width=2 * lw)
     for k, text in enumerate(notes):
@@ -187,23 +267,26 @@ def write_print_sheet(
     for p in placements:  # each mask's label just above its crop marks, outside the aperture
         r0, c0 = p.top_left_px
         draw.text((c0, max(0, r0 - _px(CROP_GAP_M + CROP_LEN_M, dpi) - line_h)), p.name, fill=0, font=font)
-    sheet = np.minimum(sheet, np.asarray(img, dtype=np.float64) / 255.0)
-    for p, m in zip(placements, masks, strict=True):  # the masks' own dots win over any mark or text
-        (r0, c0), (h, w) = p.top_left_px, p.shape_px
-        sheet[r0:r0 + h, c0:c0 + w] = film.printer_input(m) if film is not None else resample(m, (h, w))
+    return np.asarray(img, dtype=np.float64) / 255.0
 
+
+def _write_sheet(sheet: np.ndarray, kind: str, path: Path, bit_depth: int, dpi: float) -> None:
+    """Write the sheet atomically: a PNG of ``bit_depth`` bits recording ``dpi``, or a one-page PDF."""
     if kind == ".png":
         with atomic_path(path) as tmp:
             imageio.write_png(tmp, sheet, bit_depth=bit_depth, dpi=dpi)
     else:
         _write_pdf(sheet, dpi, path)
-    text = "\n".join(notes) + "\n" + "\n".join(
+
+
+def _notes_text(notes: Sequence[str], placements: Sequence[SheetPlacement], layout: _Layout, dpi: float) -> str:
+    """The text file beside the sheet: the notes, each mask's dots on the sheet, the sheet's size."""
+    width, height = layout.width, layout.height
+    return "\n".join(notes) + "\n" + "\n".join(
         f"{p.name}: {p.shape_px[1]} x {p.shape_px[0]} dots at column {p.top_left_px[1]}, row {p.top_left_px[0]} "
         "(top left) of the sheet" for p in placements) + (
         f"\nsheet: {width} x {height} dots = {width / dpi * 25.4:.2f} x {height / dpi * 25.4:.2f} mm at {dpi:g} "
         "dpi; each mask centre within half a dot of its place\n")
-    notes_path = atomic_write_text(path.with_suffix(".txt"), text)
-    return path, notes_path
 
 
 def _px_f(length_m: float, dpi: float) -> float:

@@ -200,8 +200,29 @@ def load_study(source: str | Path | dict, quick: bool = False, base_dir: str | P
         One line naming the field and the fix (see the module docstring for what is refused).
     """
     raw, base, _ = read_document(source, base_dir, kind="study")
-    schema = study_schema()
-    tables = schema.tables(raw)
+    tables = study_schema().tables(raw)
+    study, experiment = _study_target(tables, base)
+    name = study.experiment if study.name is None else study.name
+    out_dir = f"out/studies/{name}" if study.out_dir is None else study.out_dir
+    out = Path(out_dir) if Path(out_dir).is_absolute() else base / out_dir
+    if isinstance(max_points, bool) or not isinstance(max_points, int) or max_points < 1:
+        raise ConfigError(f"--max-points must be an integer >= 1, got {max_points!r}")
+    kind, table, fixed_table, quick_table = _sweep_tables(raw, tables, quick)
+    fixed = _fixed_point(experiment, fixed_table, quick_table)
+    size = (experiment, study.replicates, quick, max_points)
+    if kind == "grid":
+        dims, points, indices = _grid_points(table, fixed, quick_table, size)
+    elif kind == "points":
+        dims, points, indices = _listed_points(table, fixed, size)
+    else:
+        dims, points, indices = _random_points(table, fixed, size)
+    keep = _kept_metrics(tables, experiment)
+    return StudySpec(name, experiment, study.seed, out, dims, points, indices, tuple(keep), raw, study.replicates,
+                     study.common_random_numbers)
+
+
+def _study_target(tables: dict, base: Path) -> tuple[StudySection, StudyExperiment]:
+    """The ``[study]`` section and its target (a render target's config resolved against ``base``)."""
     study: StudySection = read_section("study", tables["study"], StudySection)
     if study.experiment is None:
         raise ConfigError(f"[study] experiment is required: one of {', '.join(map(repr, target_names()))}")
@@ -214,14 +235,15 @@ def load_study(source: str | Path | dict, quick: bool = False, base_dir: str | P
     elif study.config is not None:
         raise ConfigError(f"[study] config is for experiment = \"render\" only (experiment is "
                           f"{study.experiment!r})")
-    experiment = study_target(ref)
-    name = study.experiment if study.name is None else study.name
-    seed, replicates, crn = study.seed, study.replicates, study.common_random_numbers
-    out_dir = f"out/studies/{name}" if study.out_dir is None else study.out_dir
-    out = Path(out_dir) if Path(out_dir).is_absolute() else base / out_dir
-    if isinstance(max_points, bool) or not isinstance(max_points, int) or max_points < 1:
-        raise ConfigError(f"--max-points must be an integer >= 1, got {max_points!r}")
+    return study, study_target(ref)
 
+
+def _sweep_tables(raw: dict, tables: dict, quick: bool) -> tuple[str, dict, dict, dict]:
+    """The sweep's kind and table, the ``[fixed]`` table and the ``[quick]`` one (empty without ``quick``), flat.
+
+    With ``quick``, a ``[quick]`` list replaces the sweep's list of that name and a single value replaces (or adds)
+    a ``[fixed]`` one; a ``[random]`` study takes no ``[quick]`` ranges.
+    """
     kinds = [k for k in ("grid", "points", "random") if k in raw]
     if len(kinds) != 1:
         raise ConfigError("a study needs exactly one of [grid], [points] or [random]")
@@ -244,66 +266,92 @@ def load_study(source: str | Path | dict, quick: bool = False, base_dir: str | P
                               "points)")
         else:
             fixed_table[key] = value  # a single value replaces the [fixed] (or default) one
+    return kind, table, fixed_table, quick_table
+
+
+def _fixed_point(experiment: StudyExperiment, fixed_table: dict, quick_table: dict) -> dict:
+    """The experiment's default parameters with the ``[fixed]`` (and ``[quick]``) values checked and put in."""
     fixed = dict(experiment.parameters)
     for key, value in fixed_table.items():
         fixed[key] = _values("fixed" if key not in quick_table else "quick", key, [value], experiment)[0]
+    return fixed
 
+
+# The sweeps' shared arguments for _check_size: (experiment, replicates, quick, max_points).
+_Size = tuple[StudyExperiment, int, bool, int]
+# A sweep: the result's dimensions, every point's parameters and its position along the dimensions.
+_Sweep = tuple[dict[str, list], list[dict], list[tuple[int, ...]]]
+
+
+def _grid_points(table: dict, fixed: dict, quick_table: dict, size: _Size) -> _Sweep:
+    """``[grid]``: the full product of the lists, one dimension per parameter."""
+    experiment = size[0]
+    dims = {key: _values("grid" if key not in quick_table else "quick", key, v, experiment)
+            for key, v in table.items()}
+    if not dims:
+        raise ConfigError("[grid] needs at least one parameter list")
+    _check_size(math.prod(len(v) for v in dims.values()), *size)
     points: list[dict] = []
     indices: list[tuple[int, ...]] = []
-    if kind == "grid":
-        dims = {key: _values("grid" if key not in quick_table else "quick", key, v, experiment)
-                for key, v in table.items()}
-        if not dims:
-            raise ConfigError("[grid] needs at least one parameter list")
-        _check_size(math.prod(len(v) for v in dims.values()), experiment, replicates, quick, max_points)
-        for idx in itertools.product(*(range(len(v)) for v in dims.values())):
-            values = {key: dims[key][i] for key, i in zip(dims, idx, strict=True)}
-            points.append({**fixed, **values})
-            indices.append(idx)
-    elif kind == "points":
-        lists = {key: _values("points", key, v, experiment, unique=False) for key, v in table.items()}
-        if not lists:
-            raise ConfigError("[points] needs at least one parameter list")
-        lengths = {len(v) for v in lists.values()}
-        if len(lengths) != 1:
-            raise ConfigError(f"[points] lists must have equal lengths, got {sorted(lengths)}")
-        n = lengths.pop()
-        _check_size(n, experiment, replicates, quick, max_points)
-        rows = [tuple(v[i] for v in lists.values()) for i in range(n)]
-        if len(set(rows)) != n:
-            raise ConfigError("[points] lists the same point more than once; give each point once (use [study] "
-                              "replicates for repeats)")
-        dims = {"point": list(range(n))}
-        for i in range(n):
-            points.append({**fixed, **{key: v[i] for key, v in lists.items()}})
-            indices.append((i,))
-    else:
-        sample: RandomSample = read_section("random", {k: table.pop(k) for k in ("n", "seed") if k in table},
-                                            RandomSample)
-        if sample.n is None:
-            raise ConfigError("[random] n is required: the number of points to sample (e.g. n = 20)")
-        n, rseed = sample.n, sample.seed
-        if quick:
-            n = min(n, 4)
-        _check_size(n, experiment, replicates, quick, max_points)
-        ranges = {}
-        for key, v in table.items():
-            if key in experiment.integer_parameters():
-                raise ConfigError(f"[random] {key} is an integer parameter; sample it with a [grid] or [points] "
-                                  "list instead")
-            lo_hi = _values("random", key, v, experiment, unique=False)
-            if len(lo_hi) != 2 or lo_hi[0] > lo_hi[1]:
-                raise ConfigError(f"[random] {key} must be [low, high], got {v!r}")
-            ranges[key] = lo_hi
-        rng = np.random.default_rng(rseed)
-        dims = {"point": list(range(n))}
-        for i in range(n):
-            points.append({**fixed, **{k: float(rng.uniform(lo, hi)) for k, (lo, hi) in ranges.items()}})
-            indices.append((i,))
+    for idx in itertools.product(*(range(len(v)) for v in dims.values())):
+        values = {key: dims[key][i] for key, i in zip(dims, idx, strict=True)}
+        points.append({**fixed, **values})
+        indices.append(idx)
+    return dims, points, indices
+
+
+def _listed_points(table: dict, fixed: dict, size: _Size) -> _Sweep:
+    """``[points]``: the i-th value of every list is point i (equal lengths, no point twice), dimension "point"."""
+    experiment = size[0]
+    lists = {key: _values("points", key, v, experiment, unique=False) for key, v in table.items()}
+    if not lists:
+        raise ConfigError("[points] needs at least one parameter list")
+    lengths = {len(v) for v in lists.values()}
+    if len(lengths) != 1:
+        raise ConfigError(f"[points] lists must have equal lengths, got {sorted(lengths)}")
+    n = lengths.pop()
+    _check_size(n, *size)
+    rows = [tuple(v[i] for v in lists.values()) for i in range(n)]
+    if len(set(rows)) != n:
+        raise ConfigError("[points] lists the same point more than once; give each point once (use [study] "
+                          "replicates for repeats)")
+    dims = {"point": list(range(n))}
+    points = [{**fixed, **{key: v[i] for key, v in lists.items()}} for i in range(n)]
+    return dims, points, [(i,) for i in range(n)]
+
+
+def _random_points(table: dict, fixed: dict, size: _Size) -> _Sweep:
+    """``[random]``: ``n`` points drawn uniformly in the ``[low, high]`` ranges (own seed), dimension "point"."""
+    experiment, quick = size[0], size[2]
+    sample: RandomSample = read_section("random", {k: table.pop(k) for k in ("n", "seed") if k in table},
+                                        RandomSample)
+    if sample.n is None:
+        raise ConfigError("[random] n is required: the number of points to sample (e.g. n = 20)")
+    n, rseed = sample.n, sample.seed
+    if quick:
+        n = min(n, 4)
+    _check_size(n, *size)
+    ranges = {}
+    for key, v in table.items():
+        if key in experiment.integer_parameters():
+            raise ConfigError(f"[random] {key} is an integer parameter; sample it with a [grid] or [points] "
+                              "list instead")
+        lo_hi = _values("random", key, v, experiment, unique=False)
+        if len(lo_hi) != 2 or lo_hi[0] > lo_hi[1]:
+            raise ConfigError(f"[random] {key} must be [low, high], got {v!r}")
+        ranges[key] = lo_hi
+    rng = np.random.default_rng(rseed)
+    dims = {"point": list(range(n))}
+    points = [{**fixed, **{k: float(rng.uniform(lo, hi)) for k, (lo, hi) in ranges.items()}} for _ in range(n)]
+    return dims, points, [(i,) for i in range(n)]
+
+
+def _kept_metrics(tables: dict, experiment: StudyExperiment) -> list[str]:
+    """``[metrics] keep`` (default: all the target's metrics), checked against the target's metrics."""
     chosen = read_section("metrics", tables["metrics"], MetricsSection).keep
     keep = list(experiment.metrics) if chosen is None else list(chosen)
     if any(m not in experiment.metrics for m in keep):
         raise ConfigError(f"[metrics] keep must list metrics of {experiment.name!r}: {', '.join(experiment.metrics)}")
     if len(set(keep)) != len(keep):
         raise ConfigError("[metrics] keep lists a metric more than once")
-    return StudySpec(name, experiment, seed, out, dims, points, indices, tuple(keep), raw, replicates, crn)
+    return keep
