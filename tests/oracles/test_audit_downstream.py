@@ -45,9 +45,14 @@ def _ramp_images(shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
     return np.broadcast_to(x, shape), np.broadcast_to(y[:, None], shape)
 
 
+# values below 1e-200 become 0: products of subnormal numbers with the masks lose their relative precision
+# (gradual underflow), which no rounding bound of a physical irradiance covers
+_CHANGE = st.floats(-1.0, 1.0, allow_nan=False).map(lambda v: 0.0 if abs(v) < 1e-200 else v)
+
+
 @settings(deadline=None, max_examples=40)
 @given(
-    disturbance=hnp.arrays(np.float64, (12, 17), elements=st.floats(-1.0, 1.0, allow_nan=False)),
+    disturbance=hnp.arrays(np.float64, (12, 17), elements=_CHANGE),
     sign=st.sampled_from([1.0, -1.0]),
 )
 def test_eq4_eq7_eq8_against_the_forward_model_for_signed_changes(disturbance, sign):
