@@ -242,7 +242,7 @@ def _moving_object_stratified(world, frames, background, plain) -> dict:
     # paired lanes): the same numbers bit for bit, timed in this run beside the frozen, paired ones
     world.freeze_launches = world.pair_lanes = False
     world.measure_changes(frames[:2], background, spp=spp, seed=21, estimator="stratified")  # warm-up
-    traced_seconds, identical = 0.0, True
+    traced_seconds = 0.0
     for seed in range(runs):
         t = time.perf_counter()
         traced, _ = world.measure_changes(frames, background, spp=spp, seed=30 + seed, estimator="stratified")

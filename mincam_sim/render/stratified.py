@@ -175,7 +175,7 @@ def stratified_lanes(scene, sensor, mincam: Mincam, regions: ApertureRegions, re
         shape = _LaunchShape(0 if guided else ng * per, tuple(counts), int(replicates), n,
                              tuple(float(e) for e in expansions), bool(jitter), int(max_depth) if guided else 0,
                              getattr(sensor, "version", 0))
-        met = dr.zeros(mi.Bool, ng * per)
+        met = mi.Bool(False)
         if dr.width(lanes):
             with _no_cyclic_gc():
                 out, met = trace(scene, sensor, coeffs, dr.opaque(mi.UInt32, launch_seed(seed, launch)),

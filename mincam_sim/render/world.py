@@ -25,6 +25,7 @@ Two estimators of ``dP`` (``measure_changes(estimator=...)``):
 from __future__ import annotations
 
 import difflib
+import functools
 import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
@@ -193,11 +194,16 @@ class WorldRenderer:
         if key not in self._as_built and key in self.params:
             self._as_built[key] = self.params[key]
 
+    @functools.cached_property
+    def shapes_by_id(self) -> dict:
+        """The scene's shapes by their id (fixed once the scene is loaded)."""
+        return {shape.id(): shape for shape in self.scene.shapes()}
+
     def buffers_key(self) -> tuple:
         """``stratified.buffers_key`` of every shape whose parameters were updated (the whole scene if an
         updated parameter belongs to something else: a shared BSDF, an environment emitter)."""
         names = {key.split(".", 1)[0] for key in self._as_built}
-        shapes = {shape.id(): shape for shape in self.scene.shapes()}
+        shapes = self.shapes_by_id
         objects = [shapes[name] for name in sorted(names) if name in shapes]
         return buffers_key(objects if len(objects) == len(names) else [self.scene])
 
@@ -498,7 +504,7 @@ class _Run:
         reports too small a sigma (on a glass block in view, ~10x in one run of 32), which no diagnostic inside
         one run can see."""
         mi = backend.mitsuba()
-        shapes = {s.id(): s for s in self.r.scene.shapes()}
+        shapes = self.r.shapes_by_id
         for name in sorted(moving):
             bsdf = shapes[name].bsdf() if name in shapes else None
             if bsdf is not None and int(bsdf.flags()) & int(mi.BSDFFlags.Delta):
@@ -587,7 +593,7 @@ class _StratifiedRun(_Run):
             for reason in why:
                 self.note_fallback(name, reason)
         self.can_guide = guided and guided_path_supports(renderer.world.max_depth)
-        self.shapes = {shape.id(): shape for shape in renderer.scene.shapes()}
+        self.shapes = renderer.shapes_by_id
         self.bg_boxes = {name: _watch_box(self.shapes[name]) for name in self.moving if name in self.shapes}
         lights_move = _emitters_among(renderer.scene, self.moving)
         # a path that crosses no moving shape's box (in either place) is the same path in both passes
