@@ -39,8 +39,9 @@ from ..plots import plot_spectrum, plot_speed
 from ..progress import progress
 from ..readout import read_out
 from ..render import scene_dicts as sd
-from ..render.elements import road_elements, road_update, transform_update
+from ..render.elements import road_elements
 from ..render.screen_engine import response_maps
+from ..render.sliding_plane import SlidingPlane
 from ..render.world import WorldRenderer
 from ..scene.road import Road
 from .base import Experiment, ExperimentResult, PaperNumbers
@@ -288,13 +289,14 @@ class Speed(Experiment):
         road = Road(objects.road_texture((512, 4096), rng), length, width, sky_radiance_w_m2_sr=1.0)
         world = WorldRenderer(cam, road_elements(road), replicates=4)
         omega_d = float(scene_frequency(2 * np.pi / params.mask_period_m, setup.d_f_m, d))
+        # the vehicle moves +x at v: the road under the mixel (x = 0) moves -x, starting 0.5 m from its end
+        placements = {v: [road.matrix_at(length / 2 - 0.5 - v * i / rate) for i in range(n_frames)] for v in speeds}
+        # the road slides in its plane: its rays traced once, every frame replayed (same seed: correlated frames)
+        replay = SlidingPlane(world, "road", [m for ms in placements.values() for m in ms], params.vehicle_spp,
+                              seed=setup.seed)
         true_v, pred_v, plain_v, spectra = [], [], [], []
         for v in progress(speeds, desc="vehicle speeds", disable=not show_progress):
-            irr = np.empty(n_frames)
-            for i in range(n_frames):
-                # the vehicle moves +x at v: the road under the mixel (x = 0) moves -x, starting 0.5 m from its end
-                world.update(road_update(road, length / 2 - 0.5 - v * i / rate))
-                irr[i] = world.estimates(params.vehicle_spp, seed=setup.seed).mean()  # same seed: correlated
+            irr = np.array([replay.estimates(m).mean() for m in placements[v]])
             signal = read_out(irr[:, None], np.array([irr.min()]), setup.sensor(), rng,
                               setup.exposure_fill).frames_dn[:, 0]
             true_v.append(v)
@@ -334,17 +336,18 @@ class Speed(Experiment):
         world = WorldRenderer(cam, {"road": sd.textured_plane(road, 2.0, 2.0, np.eye(4)), "sky": sd.sky(1.0)},
                               replicates=4)
         omega_d = float(scene_frequency(2 * np.pi / params.mask_period_m, setup.d_f_m, d))
-        irr = np.empty((n_frames, 2))
-        for i in progress(range(n_frames), desc="turning vehicle", disable=not show_progress):
-            t = i / rate
-            heading = v / radius * t
+        placements = []
+        for i in range(n_frames):
+            heading = v / radius * i / rate
             centre = np.array([radius * np.sin(heading), radius * (1 - np.cos(heading))])  # vehicle on its circle
             world_to_vehicle = Pose((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), (-np.sin(-heading), np.cos(-heading), 0.0))
             move = world_to_vehicle.matrix()
             move[:2, 3] = -move[:2, :2] @ centre
             # the textured_plane spans [-1, 1]^2 scaled by 1 here, so road_matrix carries the road's size
-            world.update(transform_update("road", move @ road_matrix))
-            irr[i] = world.estimates(params.turn_spp, seed=setup.seed).mean(axis=0)
+            placements.append(move @ road_matrix)
+        replay = SlidingPlane(world, "road", placements, params.turn_spp, seed=setup.seed)  # turns in its plane
+        irr = np.array([replay.estimates(m).mean(axis=0)
+                        for m in progress(placements, desc="turning vehicle", disable=not show_progress)])
         dn = read_out(irr, irr.min(axis=0), setup.sensor(), rng, setup.exposure_fill).frames_dn
         speeds = [_speed(dn[:, k], rate, omega_d, 0.5 * v, params.difference_order, 1.5 * v) for k in range(2)]
         path = trajectory_from_speeds(np.array([speeds[0]]), np.array([speeds[1]]), width, n_frames / rate)

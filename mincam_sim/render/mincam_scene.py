@@ -171,12 +171,18 @@ class MincamScene:
     # ------------------------------------------------------------------------------------------ solvers
     def fast_estimates(self, spp: int, replicates: int, seed: int, purpose: str = "fast") -> np.ndarray:
         """(replicates, n_mixels) independent estimates [W/m^2] of the fast form, ``spp / replicates`` rays each."""
+        plan = self.fast_plan(spp, replicates, seed, purpose)
+        means = trace_groups(self.fast_scene, self.sensor(), *plan)
+        return means.reshape(len(self.mincam), replicates).T
+
+    def fast_plan(self, spp: int, replicates: int, seed: int, purpose: str = "fast") -> tuple:
+        """The arguments after the sensor of :func:`.tracing.trace_groups` (or :func:`.tracing.sensor_launches`)
+        for :meth:`fast_estimates`: groups (mixel-major, ``replicates`` each), rays per group, seed, and the
+        position-sample map."""
         check_counts(spp, replicates)
         n = len(self.mincam)
         per_rep = max(1, -(-int(spp) // int(replicates)))
-        means = trace_groups(self.fast_scene, self.sensor(), n * replicates, per_rep, derive_seed(seed, purpose),
-                             position_sample=mixel_position_sample(n, replicates))
-        return means.reshape(n, replicates).T
+        return n * replicates, per_rep, derive_seed(seed, purpose), mixel_position_sample(n, replicates)
 
     def reference_estimates(self, spp: int, replicates: int, seed: int) -> np.ndarray:
         """(replicates, n_mixels) independent estimates [W/m^2] of the literal scene."""

@@ -8,7 +8,8 @@ same numbers and no film precision is involved.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -103,10 +104,36 @@ def trace_groups(
     mi = backend.mitsuba()
     if not backend.is_jit():
         return _render_groups_scalar(mi, scene, sensor, n_groups, samples_per_group, seed, position_sample)
-    import drjit as dr
-
     integrator = scene.integrator()
     totals = np.zeros(n_groups, dtype=np.float64)
+    for launch in sensor_launches(sensor, n_groups, samples_per_group, seed, position_sample):
+        radiance, _, _ = integrator.sample(scene, launch.sampler, launch.ray, None, True)
+        totals[launch.groups] += lane_sums(launch.weight * radiance, launch.samples)
+    return totals / samples_per_group
+
+
+@dataclass
+class SensorLaunch:
+    """One kernel launch of :func:`sensor_launches`: ``samples`` lanes for each group of ``groups``, lane ``i``
+    in group ``groups.start + i // samples``; the sampler has drawn the ray's samples and goes on to the
+    integrator."""
+
+    groups: slice
+    samples: int
+    sampler: object
+    ray: object
+    weight: object
+
+
+def sensor_launches(sensor, n_groups: int, samples_per_group: int, seed: int,
+                    position_sample: Callable | None = None) -> Iterator[SensorLaunch]:
+    """The launches of :func:`trace_groups`: at most :data:`MAX_LANES` lanes each, seeded by
+    :func:`launch_seed`, with the sensor's rays drawn (position, aperture, wavelength samples, in that order).
+    Everything that traces the same seed as :func:`trace_groups` goes through here, so that it draws the same
+    rays and the same random numbers after them."""
+    mi = backend.mitsuba()
+    import drjit as dr
+
     groups_per_launch = max(1, MAX_LANES // samples_per_group)
     per_launch = min(samples_per_group, MAX_LANES)
     launch = 0
@@ -123,12 +150,19 @@ def trace_groups(
             aperture = sampler.next_2d()
             wavelength = sampler.next_1d()
             ray, weight = sensor.sample_ray_differential(0.0, wavelength, u, aperture)
-            radiance, _, _ = integrator.sample(scene, sampler, ray, None, True)
-            value = np.asarray(weight * radiance, dtype=np.float64).reshape(-1)
-            if value.size != ng * ns:  # RGB variants: gray scenes, average the channels
-                value = value.reshape(ng * ns, -1).mean(axis=1)
-            totals[g0 : g0 + ng] += value.reshape(ng, ns).sum(axis=1)
-    return totals / samples_per_group
+            yield SensorLaunch(slice(g0, g0 + ng), ns, sampler, ray, weight)
+
+
+def lane_sums(values, samples: int) -> np.ndarray:
+    """Sums of a launch's lane values (a Dr.Jit spectrum per lane) over each run of ``samples`` lanes, in float64
+    and a fixed order; RGB variants (gray scenes) average the channels first."""
+    value = np.asarray(values, dtype=np.float64).reshape(-1)
+    import drjit as dr
+
+    lanes = int(dr.width(values))
+    if value.size != lanes:
+        value = value.reshape(lanes, -1).mean(axis=1)
+    return value.reshape(-1, samples).sum(axis=1)
 
 
 def _render_groups_scalar(mi, scene, sensor, n_groups, samples_per_group, seed, position_sample) -> np.ndarray:
