@@ -476,6 +476,50 @@ def bench_study_scaling() -> dict:
             "includes": "cluster start-up, point computation, Zarr writes"}
 
 
+def bench_sliding_plane() -> dict:
+    """The speed experiment's vehicle road (one sinusoid mixel 0.3 m over a textured road, 2^19 rays a frame):
+    frames traced (the plane moved, Mitsuba's path tracer) and replayed (``SlidingPlane``) side by side, same
+    seed, with the largest relative difference between them."""
+    from mincam_sim import objects
+    from mincam_sim.experiments.layouts import sinusoid_mixel
+    from mincam_sim.experiments.setup import Setup
+    from mincam_sim.geometry import Pose
+    from mincam_sim.optics import Mincam
+    from mincam_sim.render.elements import road_elements
+    from mincam_sim.render.sliding_plane import SlidingPlane
+    from mincam_sim.render.world import WorldRenderer
+    from mincam_sim.scene.road import Road
+
+    setup, spp, n_frames = Setup(), 1 << 19, 64
+    cam = Mincam((sinusoid_mixel(setup, 0.2e-3, Pose((0.0, 0.0, 0.3), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0))),))
+    road = Road(objects.road_texture((512, 4096), np.random.default_rng(0)), 4.0, 0.6)
+    world = WorldRenderer(cam, road_elements(road), replicates=4)
+    placements = [road.matrix_at(1.5 - 3.0 * i / n_frames) for i in range(n_frames)]
+
+    def traced(frames):
+        out = []
+        for m in frames:
+            world.update({"road.to_world": m})
+            out.append(world.estimates(spp, seed=1))
+        return np.array(out)
+
+    traced(placements[:2])  # warm-up
+    SlidingPlane(world, "road", placements[:2], spp, seed=1).estimates(placements[0])  # warm-up
+    t = time.perf_counter()
+    reference = traced(placements)
+    traced_s = time.perf_counter() - t
+    t = time.perf_counter()
+    replay = SlidingPlane(world, "road", placements, spp, seed=1)
+    build_s = time.perf_counter() - t
+    t = time.perf_counter()
+    replayed = np.array([replay.estimates(m) for m in placements])
+    replay_s = time.perf_counter() - t
+    return {"frames": n_frames, "rays_per_frame": spp, "traced_ms_per_frame": 1e3 * traced_s / n_frames,
+            "replay_build_s": build_s, "replayed_ms_per_frame": 1e3 * replay_s / n_frames,
+            "speedup_per_frame": traced_s / replay_s, "speedup_with_build": traced_s / (replay_s + build_s),
+            "max_rel_difference": float(np.abs(replayed / reference - 1).max())}
+
+
 def bench_reproduce_all() -> dict:
     """Wall time of ``reproduce all`` in full mode (intrusion and tracking videos of >= 300 frames).
     Its results.json and plots stay in ``out/bench_reproduce_all`` (the README's experiment table and figures)."""
@@ -505,6 +549,7 @@ BENCHMARKS = {
     "memory_sweep_1080p": bench_memory_sweep_1080p,
     "memory_10k_frames": bench_memory_10k_frames,
     "study_scaling": bench_study_scaling,
+    "sliding_plane": bench_sliding_plane,
     "reproduce_all": bench_reproduce_all,
     "cost_curves": bench_cost_curves,
 }

@@ -4,7 +4,8 @@ Units are SI throughout: metres, radians, W/m^2 (irradiance), W m^-2 sr^-1 (radi
 Only ``mincam_sim.render`` imports mitsuba / drjit; everything else is pure numpy.
 
 The front door: ``Simulation(mincam, screen=... | world=...)`` with a solver (``ResponseMap``, ``Aperture``,
-``Reference``, ``StratifiedChange``, ``PlainChange``) and a ``Budget``; ``Run(out_dir)`` keeps results.
+``Reference``, ``StratifiedChange``, ``PlainChange``, ``PlaneReplay``) and a ``Budget``; ``Run(out_dir)`` keeps
+results.
 These names load the renderer on first use (``import mincam_sim`` itself stays pure numpy).
 """
 
@@ -24,6 +25,7 @@ _LAZY = {
     "ResponseMap": "mincam_sim.render.solvers",
     "PlainChange": "mincam_sim.render.solvers",
     "StratifiedChange": "mincam_sim.render.solvers",
+    "PlaneReplay": "mincam_sim.render.solvers",
     "Run": "mincam_sim.run",
     # building a world: updates by name (world coordinates), scene pieces, the experiments' tabletop and toys
     "vertex_update": "mincam_sim.render.world",
@@ -78,6 +80,7 @@ __all__ = [
     "RunInfo",
     "Simulation",
     "StratifiedChange",
+    "PlaneReplay",
     "Mincam",
     "Mixel",
     "Pose",
@@ -91,4 +94,4 @@ __all__ = [
     "single",
     "white_square",
 ]
-__version__ = "0.3.0"
+__version__ = "0.4.0"

@@ -197,6 +197,8 @@ class Speed(Experiment):
                        "vehicle_frames": 96, "vehicle_speeds_m_s": (4.0, 12.0), "vehicle_spp": 1 << 17,
                        "turn_frames": 128, "turn_spp": 1 << 18}
     seed_offset = 2
+    version = 2  # the vehicles' roads replayed (SlidingPlane): the turn's bounce directions are drawn anew
+    study_version = 2
     study_metrics = ("avg_error_pct", "max_error_pct")
     study_seconds = (120.0, 1800.0)
 

@@ -35,7 +35,7 @@ from ..optics import Mincam
 from ..scene.display import Screen
 from .estimation import replicate_mean_stderr
 from .screen_engine import render_frames
-from .solvers import Aperture, PlainChange, ResponseMap, Solver, StratifiedChange
+from .solvers import Aperture, PlainChange, PlaneReplay, ResponseMap, Solver, StratifiedChange
 from .world import WorldRenderer
 
 DEFAULT_WORLD_REPLICATES = 8
@@ -135,7 +135,8 @@ class Simulation:
 
         Display scenes: ``frames`` are radiance images (an array (n, rows, cols), a list, or a FrameSource);
         default solver :class:`~.solvers.ResponseMap`. World scenes: ``frames`` are parameter updates, each
-        applied to the scene as built; solver :class:`~.solvers.Aperture`. ``sink`` (displays;
+        applied to the scene as built; solver :class:`~.solvers.Aperture`, or :class:`~.solvers.PlaneReplay`
+        for frames that only move one textured plane within its plane. ``sink`` (displays;
         :class:`mincam_sim.frames.FrameSink`) takes the per-frame rows: :meth:`mincam_sim.run.Run.sink` keeps them
         on disk and resumes. ``out_dir`` (deprecated, one release): a store there, locked while it is written.
         """
@@ -152,23 +153,26 @@ class Simulation:
         if out_dir is not None or sink is not None:
             raise InputError("world frames measured absolutely are not stored; use Run.measure_changes(...) or "
                              "measure_changes(..., sink=run.sink(name))")
-        return self._measure_world_frames(frames, budget)
+        return self._measure_world_frames(frames, solver, budget)
 
-    def _measure_world_frames(self, frames, budget: Budget) -> Measurements:
+    def _measure_world_frames(self, frames, solver: Solver, budget: Budget) -> Measurements:
         world = self.renderer
         if isinstance(frames, Mapping) or not isinstance(frames, Sequence):
             raise InputError("frames must be a list of parameter-update dicts (one per frame)")
         replicates = budget.replicates_or(DEFAULT_WORLD_REPLICATES)
         as_built = world.complete_background(frames, {})
-        values, errors = [], []
-        for frame in frames:
+        if isinstance(solver, PlaneReplay):
+            estimates = _plane_replay(world, solver.plane, frames, as_built, budget, replicates)
+        else:
+            estimates = []
+            for frame in frames:
+                world.update(as_built)
+                world.update(frame)
+                estimates.append(world.world.fast_estimates(budget.rays(), replicates, budget.seed))
             world.update(as_built)
-            world.update(frame)
-            mean, err = replicate_mean_stderr(world.world.fast_estimates(budget.rays(), replicates, budget.seed))
-            values.append(mean)
-            errors.append(err)
-        world.update(as_built)
-        meta = {"solver": "aperture", "form": "fast_world", "seed": budget.seed, "replicates": replicates,
+        pairs = [replicate_mean_stderr(e) for e in estimates]
+        values, errors = [mean for mean, _ in pairs], [err for _, err in pairs]
+        meta = {"solver": solver.name, "form": "fast_world", "seed": budget.seed, "replicates": replicates,
                 "spp_per_mixel_per_frame": budget.rays()}
         return Measurements(np.array(values).reshape(len(frames), -1), np.array(errors).reshape(len(frames), -1),
                             self.mincam.names, meta)
@@ -223,3 +227,25 @@ class Simulation:
                                       **kw)
         dp.meta["target_rel_stderr"] = budget.target_rel_stderr
         return Changes(dp, p, RunInfo.from_meta(dp.meta))
+
+
+def _plane_replay(world: WorldRenderer, plane: str, frames, as_built: Mapping, budget: Budget,
+                  replicates: int) -> list[np.ndarray]:
+    """Each frame's (replicates, n_mixels) estimates by :class:`.sliding_plane.SlidingPlane`: the frames may set
+    only ``plane``'s ``to_world``."""
+    from .sliding_plane import SlidingPlane
+
+    key = f"{plane}.to_world"
+    if key not in world.params:
+        raise InputError(f"PlaneReplay(plane={plane!r}): the scene has no parameter {key!r}; name the textured "
+                         "rectangle's element")
+    for i, frame in enumerate(frames):
+        other = sorted(k for k in frame if k != key)
+        if other:
+            raise InputError(f"frames[{i}] sets {other}: the PlaneReplay solver replays frames that move only "
+                             f"{key!r}; measure other frames with solver=ms.Aperture()")
+    placements = [frame.get(key, as_built.get(key, world.params[key])) for frame in frames]
+    if not placements:
+        return []
+    replay = SlidingPlane(world, plane, placements, budget.rays(), budget.seed, replicates=replicates)
+    return [replay.estimates(m) for m in placements]

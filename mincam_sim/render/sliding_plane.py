@@ -27,7 +27,8 @@ from ..errors import InputError
 from . import backend
 from .tracing import lane_sums, sensor_launches
 
-PLANE_TOLERANCE = 1e-9  # [m] and [rad]: placements off the first one's plane by more are not in-plane motion
+PLANE_TOLERANCE = 1e-6  # [rad], and [m] per metre from the origin: placements off the first one's plane by more
+# are not in-plane motion (the scene holds its matrices in float32, ~1e-7 relative)
 _ABSENT_SCALE = 1e-6  # the plane "removed": its cover shrunk a million times (micrometres), met by no ray (checked)
 
 
@@ -61,6 +62,8 @@ class SlidingPlane:
         Rays per mixel per frame, as :meth:`WorldRenderer.estimates`.
     seed : int
         Seed, as :meth:`WorldRenderer.estimates`: the same seed gives the numbers its trace would give.
+    replicates : int, optional
+        Independent estimates per measurement (default: the renderer's).
 
     Notes
     -----
@@ -69,7 +72,8 @@ class SlidingPlane:
     Frames that also move other shapes must be traced (:meth:`WorldRenderer.estimates`).
     """
 
-    def __init__(self, world, name: str, placements_m: Sequence[np.ndarray], spp: int, seed: int) -> None:
+    def __init__(self, world, name: str, placements_m: Sequence[np.ndarray], spp: int, seed: int,
+                 replicates: int | None = None) -> None:
         backend.require_jit("Replaying a sliding plane")
         self.mi = backend.mitsuba()
         self.world, self.name = world, name
@@ -77,8 +81,9 @@ class SlidingPlane:
         placements = _check_placements(placements_m, name)
         self._origin = np.asarray(world.scene_origin_m, dtype=np.float64)
         self._normal, self._centre, self._cover_m = _cover(placements, self._origin)
-        self.replicates, self.n_mixels = world.replicates, len(world.mincam)
-        self._plan = world.world.fast_plan(spp, world.replicates, seed)
+        self.replicates = world.replicates if replicates is None else replicates
+        self.n_mixels = len(world.mincam)
+        self._plan = world.world.fast_plan(spp, self.replicates, seed)
         self._lanes = self._trace()
 
     def _trace(self) -> list[_Lanes]:
