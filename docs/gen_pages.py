@@ -229,6 +229,14 @@ def performance_tables(data: dict[str, Any]) -> str:
         rows.append(["`fast_vs_plain_max_abs_z`",
                      f"stratified against plain on {mo['fast_vs_plain_comparisons']} values",
                      f"{mo['fast_vs_plain_max_abs_z']:.2f}", "≤ 4.5"])
+    sp = data.get("sliding_plane", {})
+    if sp:
+        rows.append(["`sliding_plane.speedup_per_frame`",
+                     f"the vehicle's road, {sp['rays_per_frame']:,} rays a frame: replayed (`PlaneReplay`) against "
+                     "traced frame by frame, same seed, same run",
+                     f"**{sp['speedup_per_frame']:.1f} ×** ({sp['traced_ms_per_frame']:.1f} → "
+                     f"{sp['replayed_ms_per_frame']:.2f} ms a frame; built in {sp['replay_build_s']:.2f} s; largest "
+                     f"relative difference {sp['max_rel_difference']:.1e})", "report"])
     rep = data.get("reproduce_all", {})
     if rep:
         frames = ", ".join(f"{v} {k}" for k, v in rep.get("frames_per_run", {}).items())

@@ -59,17 +59,19 @@ class SlidingPlane:
         will be replayed at; all must lie in one plane and face one way (rigid motion within the plane: slides,
         turns). Later placements may not reach beyond the rectangle that covers these.
     spp : int
-        Rays per mixel per frame, as :meth:`WorldRenderer.estimates`.
+        Rays per mixel per frame, as :meth:`~mincam_sim.render.world.WorldRenderer.estimates`.
     seed : int
-        Seed, as :meth:`WorldRenderer.estimates`: the same seed gives the numbers its trace would give.
+        Seed, as :meth:`~mincam_sim.render.world.WorldRenderer.estimates`: the same seed gives the numbers its
+        trace would give.
     replicates : int, optional
         Independent estimates per measurement (default: the renderer's).
 
     Notes
     -----
-    Exact for any seed and budget only in the scenes this holds for (checked, :class:`~mincam_sim.errors.
-    InputError` otherwise): every shape but the plane is black, and the plane only moves within its plane.
-    Frames that also move other shapes must be traced (:meth:`WorldRenderer.estimates`).
+    Exact for any seed and budget only in the scenes this holds for (checked,
+    :class:`~mincam_sim.errors.InputError` otherwise): every shape but the plane is black, and the plane only
+    moves within its plane.
+    Frames that also move other shapes must be traced (:meth:`~mincam_sim.render.world.WorldRenderer.estimates`).
     """
 
     def __init__(self, world, name: str, placements_m: Sequence[np.ndarray], spp: int, seed: int,
