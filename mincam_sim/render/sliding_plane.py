@@ -71,7 +71,9 @@ class SlidingPlane:
     Exact for any seed and budget only in the scenes this holds for (checked,
     :class:`~mincam_sim.errors.InputError` otherwise): every shape but the plane is black, and the plane only
     moves within its plane.
-    Frames that also move other shapes must be traced (:meth:`~mincam_sim.render.world.WorldRenderer.estimates`).
+    The plane's texture may change between frames (it is looked up when a frame is replayed); anything else
+    the renderer changes after the replay is built is refused (:meth:`estimates`). Frames that also move
+    other shapes must be traced (:meth:`~mincam_sim.render.world.WorldRenderer.estimates`).
     """
 
     def __init__(self, world, name: str, placements_m: Sequence[np.ndarray], spp: int, seed: int,
@@ -87,6 +89,11 @@ class SlidingPlane:
         self.n_mixels = len(world.mincam)
         self._plan = world.world.fast_plan(spp, self.replicates, seed)
         self._lanes = self._trace()
+        self._own_keys = {f"{name}.to_world", f"{name}.bsdf.reflectance.data"}  # its texture may change: looked up
+        self._revisions = self._scene_revisions()
+
+    def _scene_revisions(self) -> dict[str, int]:
+        return {k: v for k, v in self.world.revisions.items() if k not in self._own_keys}
 
     def _trace(self) -> list[_Lanes]:
         world, name = self.world, self.name
@@ -132,6 +139,10 @@ class SlidingPlane:
         mi = self.mi
         matrix = _check_placements([placement_m], self.name)[0]
         self._check_in_plane(matrix)
+        changed = sorted(k for k, v in self._scene_revisions().items() if self._revisions.get(k) != v)
+        if changed:
+            raise InputError(f"the scene changed since the SlidingPlane of {self.name!r} was built ({changed}); its "
+                             "traced rays no longer hold: build a new SlidingPlane")
         local = np.linalg.inv(matrix[:3, :3])
         shift = local @ (self._centre + self._origin - matrix[:3, 3])  # local coordinates of the cover's centre
         rows = [[dr.opaque(mi.Float, float(v)) for v in row] for row in local[:2]]
@@ -179,6 +190,9 @@ def _check_scene(world, name: str):
     if shape.shape_type() != world.mi.ShapeType.Rectangle:
         raise InputError(f"SlidingPlane: element {name!r} is a {shape.class_name()}, not a rectangle")
     bsdf = shape.bsdf()
+    if shape.emitter() is not None:
+        raise InputError(f"SlidingPlane: element {name!r} also emits light, which its albedo does not scale; "
+                         "replay only a plane that reflects")
     if bsdf.class_name() != "SmoothDiffuse" or f"{name}.bsdf.reflectance.data" not in world.world.params:
         raise InputError(f"SlidingPlane: element {name!r} needs a diffuse BSDF with a bitmap reflectance "
                          "(mincam_sim.render.scene_dicts.textured_plane), got "

@@ -147,6 +147,7 @@ class WorldRenderer:
         self._content_key = self.content_fingerprint()  # before any update: the scene as built
         self._as_built: dict[str, object] = {}  # each updated parameter's value (world coordinates) before updates
         self._last_set: dict[str, np.ndarray] = {}  # the last numpy value each parameter was set to
+        self.revisions: dict[str, int] = {}  # how often each parameter was changed (who replays a scene checks it)
 
     def update(self, updates: Updates) -> None:
         """Set scene parameters (numpy arrays or Mitsuba values; positions in world coordinates [m], as
@@ -161,6 +162,8 @@ class WorldRenderer:
         for key in updates:
             self._remember_as_built(key)
         updates = self._new_values(updates)
+        for key in updates:
+            self.revisions[key] = self.revisions.get(key, 0) + 1
         self.world.update({key: _shift(key, value, -self.scene_origin_m) if key in self._shifted else value
                            for key, value in updates.items()})
         if any(key.split(".", 1)[0] in self._mirrors for key in updates):

@@ -161,6 +161,20 @@ def test_refuses_scenes_where_the_replay_is_not_exact():
         replay.estimates(lifted)
 
 
+def test_a_new_texture_is_replayed_and_any_other_change_refused():
+    world = _road_world()
+    placements = [_placement((x, 0.0), 0.0, (2.0, 0.5), np.eye(4)) for x in (-0.3, 0.4)]
+    replay = SlidingPlane(world, "road", placements, SPP, seed=11)
+    data = np.array(world.params["road.bsdf.reflectance.data"])
+    world.update({"road.bsdf.reflectance.data": (1.0 - data).astype(np.float32)})  # the negative of the road
+    traced = _traced(world, placements)
+    np.testing.assert_allclose([replay.estimates(m) for m in placements], traced, rtol=ROUNDING,
+                               atol=ROUNDING * np.abs(traced).max())
+    world.update({"sky.radiance.value": 2.0})
+    with pytest.raises(InputError, match=r"the scene changed since .*\['sky.radiance.value'\]"):
+        replay.estimates(placements[0])
+
+
 def test_refuses_a_plane_that_is_not_a_textured_rectangle():
     sphere = {"ball": {"type": "sphere", "bsdf": sd.black_bsdf()}}
     world = _road_world(extras=sphere)
@@ -168,6 +182,10 @@ def test_refuses_a_plane_that_is_not_a_textured_rectangle():
     plain = {"type": "rectangle", "bsdf": {"type": "diffuse", "reflectance": {"type": "spectrum", "value": 0.5}}}
     world = WorldRenderer(Mincam((_mixel("a", (0, 0, 0.3)),)), {"road": plain, "sky": sd.sky(1.0)}, replicates=4)
     _refusal(world, [np.eye(4)], "bitmap reflectance")
+    glowing = sd.textured_plane(np.full((4, 4), 0.5), 2.0, 2.0, np.eye(4))
+    glowing["emitter"] = {"type": "area", "radiance": {"type": "spectrum", "value": 1.0}}
+    world = WorldRenderer(Mincam((_mixel("a", (0, 0, 0.3)),)), {"road": glowing, "sky": sd.sky(1.0)}, replicates=4)
+    _refusal(world, [np.eye(4)], "also emits light")
 
 
 def test_the_front_door_replays_what_the_aperture_solver_traces():
