@@ -73,7 +73,8 @@ class SlidingPlane:
     moves within its plane.
     The plane's texture may change between frames (it is looked up when a frame is replayed); anything else
     the renderer changes after the replay is built is refused (:meth:`estimates`). Frames that also move
-    other shapes must be traced (:meth:`~mincam_sim.render.world.WorldRenderer.estimates`).
+    other shapes must be traced (:meth:`~mincam_sim.render.world.WorldRenderer.estimates`). It holds about
+    40 bytes per ray (point, two values, a flag): 2^19 rays for each of 4 mixels take ~80 MiB.
     """
 
     def __init__(self, world, name: str, placements_m: Sequence[np.ndarray], spp: int, seed: int,
@@ -183,9 +184,10 @@ def _any(mask) -> bool:
 def _check_scene(world, name: str):
     """The plane's shape, if the replay is exact in this scene (else :class:`InputError` naming the fix)."""
     shapes = world.shapes_by_id
-    if not isinstance(name, str) or name not in shapes or name in world._own:
-        raise InputError(f"SlidingPlane: no element named {name!r} among the scene's shapes "
-                         f"({sorted(k for k in shapes if k not in world._own)})")
+    named = {key.split(".", 1)[0] for key in world.params}  # the user's elements (the mincam's bodies are hidden)
+    users = sorted(k for k in shapes if k in named)
+    if not isinstance(name, str) or name not in users:
+        raise InputError(f"SlidingPlane: no element named {name!r} among the scene's shapes ({users})")
     shape = shapes[name]
     if shape.shape_type() != world.mi.ShapeType.Rectangle:
         raise InputError(f"SlidingPlane: element {name!r} is a {shape.class_name()}, not a rectangle")
