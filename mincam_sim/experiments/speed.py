@@ -294,7 +294,7 @@ class Speed(Experiment):
         # the vehicle moves +x at v: the road under the mixel (x = 0) moves -x, starting 0.5 m from its end
         placements = {v: [road.matrix_at(length / 2 - 0.5 - v * i / rate) for i in range(n_frames)] for v in speeds}
         # the road slides in its plane: its rays traced once, every frame replayed (same seed: correlated frames)
-        replay = SlidingPlane(world, "road", [m for ms in placements.values() for m in ms], params.vehicle_spp,
+        replay = SlidingPlane(world, "road", [m for frames in placements.values() for m in frames], params.vehicle_spp,
                               seed=setup.seed)
         true_v, pred_v, plain_v, spectra = [], [], [], []
         for v in progress(speeds, desc="vehicle speeds", disable=not show_progress):
