@@ -240,11 +240,14 @@ def _plane_replay(world: WorldRenderer, plane: str, frames, as_built: Mapping, b
         raise InputError(f"PlaneReplay(plane={plane!r}): the scene has no parameter {key!r}; name the textured "
                          "rectangle's element")
     for i, frame in enumerate(frames):
+        if not isinstance(frame, Mapping):
+            raise InputError(f"frames[{i}] must be a parameter-update dict, got {type(frame).__name__}")
         other = sorted(k for k in frame if k != key)
         if other:
             raise InputError(f"frames[{i}] sets {other}: the PlaneReplay solver replays frames that move only "
                              f"{key!r}; measure other frames with solver=ms.Aperture()")
-    placements = [frame.get(key, as_built.get(key, world.params[key])) for frame in frames]
+    unset = as_built[key] if key in as_built else world.params[key]  # a frame that leaves the plane where it is
+    placements = [frame.get(key, unset) for frame in frames]
     if not placements:
         return []
     replay = SlidingPlane(world, plane, placements, budget.rays(), budget.seed, replicates=replicates)

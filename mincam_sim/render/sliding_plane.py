@@ -89,16 +89,17 @@ class SlidingPlane:
         self.replicates = world.replicates if replicates is None else replicates
         self.n_mixels = len(world.mincam)
         self._plan = world.world.fast_plan(spp, self.replicates, seed)
+        self._to_world, self._texture = f"{name}.to_world", f"{name}.bsdf.reflectance.data"
         self._lanes = self._trace()
-        self._own_keys = {f"{name}.to_world", f"{name}.bsdf.reflectance.data"}  # its texture may change: looked up
         self._revisions = self._scene_revisions()
 
     def _scene_revisions(self) -> dict[str, int]:
-        return {k: v for k, v in self.world.revisions.items() if k not in self._own_keys}
+        # the plane's own placement and texture may change (a frame's texture is looked up when it is replayed)
+        return {k: v for k, v in self.world.revisions.items() if k not in (self._to_world, self._texture)}
 
     def _trace(self) -> list[_Lanes]:
         world, name = self.world, self.name
-        to_world, data = f"{self.name}.to_world", f"{self.name}.bsdf.reflectance.data"
+        to_world, data = self._to_world, self._texture
         as_found = {to_world: world.world_value(to_world), data: world.world_value(data)}
         absent = self._cover_m.copy()
         absent[:3, :2] *= _ABSENT_SCALE
