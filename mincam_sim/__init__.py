@@ -28,8 +28,8 @@ _LAZY = {
     "PlaneReplay": "mincam_sim.render.solvers",
     "Run": "mincam_sim.run",
     # building a world: updates by name (world coordinates), scene pieces, the experiments' tabletop and toys
-    "vertex_update": "mincam_sim.render.world",
-    "transform_update": "mincam_sim.render.world",
+    "vertex_update": "mincam_sim.render.updates",
+    "transform_update": "mincam_sim.render.updates",
     "mesh_object": "mincam_sim.render.scene_dicts",
     "area_light": "mincam_sim.render.scene_dicts",
     "textured_plane": "mincam_sim.render.scene_dicts",

@@ -20,7 +20,7 @@ class RunInfo:
     Attributes
     ----------
     estimator : str
-        ``"plain"`` or ``"stratified"``.
+        The change solver's name: ``"plain"`` or ``"stratified"``.
     seed, replicates : int
     rays_per_mixel_per_frame : int
         Rays traced per mixel per frame, the mean over the frames (a stratified pair: the frame pass and the
@@ -55,19 +55,6 @@ class RunInfo:
     fallbacks: tuple[str, ...] = ()
     guided_frames: int | None = None
     launches: str | None = None
-
-    @classmethod
-    def from_meta(cls, meta: dict) -> RunInfo:
-        return cls(
-            estimator=str(meta["estimator"]), seed=int(meta["seed"]), replicates=int(meta["replicates"]),
-            rays_per_mixel_per_frame=int(meta["rays_per_mixel_per_frame"]),
-            spp_per_mixel_per_frame=int(meta["spp_per_mixel_per_frame"]),
-            target_rel_stderr=float(meta.get("target_rel_stderr", 0.0)),
-            reached_rel_stderr=meta.get("reached_rel_stderr"),
-            retried_frames=tuple(int(i) for i in meta.get("retried_frames", ())),
-            heavy_tailed=tuple((int(i), int(k)) for i, k in meta.get("heavy_tailed", ())),
-            fallbacks=tuple(meta.get("fallbacks", ())),
-            guided_frames=meta.get("guided_frames"), launches=meta.get("launches"))
 
 
 @dataclass

@@ -1,10 +1,10 @@
 """Where a solver's per-frame results go: the sink protocol (pure numpy; nothing here touches a file).
 
-A solver measures its frames one row (or one chunk of rows) at a time. Before the first row it opens a
-:class:`FrameTable` from the :class:`FrameSink` it was given, passing what determines its numbers (its identity,
-built with :func:`mincam_sim.identity.build_identity`); the table says which frames are still to do
-(:meth:`FrameTable.pending`: all of them, or those a killed run did not finish) and takes each row as it comes
-(:meth:`FrameTable.write`). :func:`collect` is that loop.
+A solver's plan measures its frames one row (or one chunk of rows) at a time. Before the first row the
+simulation opens a :class:`FrameTable` from the :class:`FrameSink` it was given; the table says which frames are
+still to do (:meth:`FrameTable.pending`: all of them, or those a killed run did not finish) and takes each row as
+it comes (:meth:`FrameTable.write`). :func:`collect` is that loop. The sink is already identified: a store sink
+carries the run's identity (built by :class:`mincam_sim.run.Run`, the one place); the numerics never see it.
 
 * :class:`MemorySink` (the default) keeps rows in memory: no file, no lock, no identity needed.
 * :class:`mincam_sim.store.StoreSink` keeps them in a :class:`~mincam_sim.store.ResultStore` (resumable,
@@ -12,20 +12,15 @@ built with :func:`mincam_sim.identity.build_identity`); the table says which fra
   lock.
 
 The solvers (``mincam_sim.render``) reach persistence only through this module (and content caches they are
-handed): they never open a store or take a lock (``tests/core/test_layering.py`` checks it). The deprecated ``out_dir=``
-of the old entry points is :func:`resolve_sink`'s one call into :mod:`mincam_sim.store`.
+handed): they never open a store or take a lock (``tests/core/test_layering.py`` checks it).
 """
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Iterable, Sequence
-from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
-
-from .errors import InputError
 
 
 @runtime_checkable
@@ -58,8 +53,7 @@ class FrameSink(Protocol):
     Attributes
     ----------
     persistent : bool
-        True if the rows outlive the call: the solver then fingerprints everything its numbers depend on (its
-        frames' content included) for :meth:`open`; False: the identity is not looked at.
+        True if the rows outlive the call (a store, identified by the run that made it).
     cache : ContentCache or None
         Where content-addressed intermediate results (response maps) may be kept and found again.
     """
@@ -67,8 +61,8 @@ class FrameSink(Protocol):
     persistent: bool
     cache: Any
 
-    def open(self, identity: Any, n_frames: int, columns: Sequence[str]) -> FrameTable:
-        """The table for a run with this identity, ``n_frames`` rows and these column names."""
+    def open(self, n_frames: int, columns: Sequence[str]) -> FrameTable:
+        """The table of ``n_frames`` rows and these column names."""
 
 
 class MemoryTable:
@@ -93,13 +87,13 @@ class MemoryTable:
 
 
 class MemorySink:
-    """The default :class:`FrameSink`: rows in memory, no file, no identity, no cache."""
+    """The default :class:`FrameSink`: rows in memory, no file, no cache."""
 
     persistent = False
     cache = None
 
-    def open(self, identity: Any, n_frames: int, columns: Sequence[str]) -> MemoryTable:
-        """A fresh :class:`MemoryTable` (``identity`` is not looked at)."""
+    def open(self, n_frames: int, columns: Sequence[str]) -> MemoryTable:
+        """A fresh :class:`MemoryTable`."""
         return MemoryTable(n_frames, len(columns))
 
 
@@ -116,25 +110,4 @@ def collect(rows: Iterable[tuple[Any, np.ndarray, np.ndarray]], table: FrameTabl
     return values, errors
 
 
-def resolve_sink(sink: FrameSink | None, out_dir: str | Path | None, overwrite: bool, where: str) -> FrameSink:
-    """The sink a solver writes to: ``sink``, or a :class:`MemorySink`; or, for the deprecated ``out_dir=`` of the
-    old entry points (kept for one release), a store in ``out_dir`` that locks it while the rows are written.
-
-    Raises
-    ------
-    InputError
-        Both ``sink`` and ``out_dir`` given.
-    """
-    if out_dir is None:
-        return MemorySink() if sink is None else sink
-    if sink is not None:
-        raise InputError(f"{where}: give sink= or out_dir=, not both (out_dir= is deprecated: use mincam_sim.Run)")
-    warnings.warn(f"{where}(out_dir=...) is deprecated and goes in the next release: keep results with "
-                  "`with mincam_sim.Run(out_dir) as run: run.measure(...)` (or pass sink=run.sink(name))",
-                  DeprecationWarning, stacklevel=3)
-    from .store import StoreSink  # the one store-opening helper, shared with mincam_sim.run
-
-    return StoreSink(out_dir, overwrite=overwrite)
-
-
-__all__ = ["FrameSink", "FrameTable", "MemorySink", "MemoryTable", "collect", "resolve_sink"]
+__all__ = ["FrameSink", "FrameTable", "MemorySink", "MemoryTable", "collect"]

@@ -295,6 +295,8 @@ IDENTITY_KINDS: dict[str, IdentityKind] = {
     # the identity of a study's store (studies.runner)
     "study": IdentityKind(frozenset({"experiment", "dims", "points", "metrics", "seed", "replicates",
                                      "common_random_numbers", "quick"}), variant=False),
+    # the one identity of a run (mincam_sim.run.Run): the scene, the solver, the requested budget, the frames
+    "run": IdentityKind(frozenset({"kind", "scene", "solver", "budget", "frames"})),
     # reproduce_identity.json (experiments.registry)
     "reproduce": IdentityKind(frozenset({"setup"})),
 }
@@ -387,8 +389,11 @@ __all__ = [
     "IDENTITY_KINDS",
     "IdentityKind",
     "StreamingHash",
+    "array_bytes_digest",
     "array_digest",
     "build_identity",
+    "bytes_digest",
+    "display_frames_identity",
     "canonical",
     "canonical_json",
     "diff_identities",
@@ -396,4 +401,91 @@ __all__ = [
     "frames_fingerprint",
     "library_versions",
     "run_key",
+    "scene_file_digests",
+    "updates_fingerprint",
 ]
+
+
+# ---------------------------------------------------------------------------------------- hashers of the runs
+def bytes_digest(data: bytes) -> str:
+    """sha256 hex digest of raw bytes (a mask's transmission, a file's content)."""
+    return hashlib.sha256(data).hexdigest()
+
+
+def array_bytes_digest(array: np.ndarray) -> str:
+    """sha256 hex digest of an array's C-ordered bytes only (no dtype or shape: what ``Mask.fingerprint_parts``
+    records as ``transmission_sha256``)."""
+    return bytes_digest(np.ascontiguousarray(array).tobytes())
+
+
+def updates_fingerprint(updates) -> list:
+    """``[n, digest]`` of a sequence of parameter-update dicts (keys in sorted order, values as float64)."""
+    h = hashlib.sha256()
+    for u in updates:
+        for k in sorted(u):
+            h.update(k.encode())
+            h.update(np.ascontiguousarray(np.asarray(u[k], dtype=np.float64)).tobytes())
+    return [len(updates), h.hexdigest()[:16]]
+
+
+def display_frames_identity(frames, chunk_frames: int, check=None) -> dict:
+    """What determines a display run's frames (a :class:`~mincam_sim.scene.display.FrameSource`): a generated
+    source's description, or the content hashed as it streams, ``chunk_frames`` at a time (``check(chunk,
+    indices)`` validates each chunk on the way)."""
+    if frames.description is not None:
+        return {"n": len(frames), "description": fingerprint(frames.description)}
+    digest = StreamingHash()
+    for lo in range(0, len(frames), chunk_frames):
+        block = frames[lo : lo + chunk_frames]
+        if check is not None:
+            check(block, np.arange(lo, lo + len(block)))
+        digest.update(block)
+    return {"n": len(frames), "content_sha256": digest.hexdigest()}
+
+
+_XML_FILE_ATTRIBUTES = ("filename", "value")
+
+
+def scene_file_digests(path, _seen: dict | None = None) -> dict[str, str]:
+    """sha256 of a Mitsuba XML scene file and of every file it names, recursively: ``<include>``d scene files,
+    and meshes, textures and other files named by a ``filename`` or ``value`` attribute, also through a
+    ``$parameter`` whose ``<default>`` names a file. Paths are resolved as Mitsuba does, from the naming file's
+    folder. A file that does not exist is recorded as ``"missing"``."""
+    import re
+    import xml.etree.ElementTree as ET
+    from pathlib import Path
+
+    path = Path(path)
+    seen = {} if _seen is None else _seen
+    key = str(path.resolve())
+    if key in seen:
+        return seen
+    if not path.is_file():
+        seen[key] = "missing"
+        return seen
+    data = path.read_bytes()
+    seen[key] = bytes_digest(data)
+    if path.suffix.lower() != ".xml":
+        return seen
+    try:
+        root = ET.fromstring(data)
+    except ET.ParseError:
+        return seen
+    defaults = {e.get("name"): e.get("value") for e in root.iter("default") if e.get("name")}
+
+    def resolve(text: str) -> str:
+        return re.sub(r"\$(\w+)", lambda m: defaults.get(m.group(1), m.group(0)), text)
+
+    for element in root.iter():
+        if element.tag == "default":  # resolved where a $parameter names it
+            continue
+        for attribute in _XML_FILE_ATTRIBUTES:
+            text = element.get(attribute)
+            if not text:
+                continue
+            named = resolve(text)
+            candidate = Path(named) if Path(named).is_absolute() else path.parent / named
+            names_a_file = element.tag == "include" or attribute == "filename" or element.get("name") == "filename"
+            if names_a_file or candidate.is_file():
+                scene_file_digests(candidate, seen)
+    return seen

@@ -10,6 +10,7 @@ import csv
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -29,12 +30,16 @@ class Measurements:
     mixel_names : list of str
     meta : dict
         Variant, seed, samples, form, geometry ... (JSON-serialisable).
+    maps : ResponseMaps or None
+        The response maps a :class:`~mincam_sim.render.solvers.ResponseMap` solver measured through (None for
+        other solvers, and once saved: not written to the npz).
     """
 
     irradiance_w_m2: np.ndarray
     stderr_w_m2: np.ndarray
     mixel_names: list[str]
     meta: dict = field(default_factory=dict)
+    maps: Any = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         self.irradiance_w_m2 = np.atleast_2d(np.asarray(self.irradiance_w_m2, dtype=np.float64))

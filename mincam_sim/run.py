@@ -1,5 +1,6 @@
-"""Runs kept outside the numerics: :class:`Run` owns an output directory -- its one lock, its identity records,
-its per-frame stores (resume) and its atomic outputs -- and hands the solvers a sink; the solvers never import it.
+"""Runs kept outside the numerics: :class:`Run` owns an output directory -- its one lock, the one identity of
+each run, its per-frame stores (resume) and its atomic outputs -- and hands the simulation an identified sink;
+the solvers never import it.
 
 ::
 
@@ -7,10 +8,14 @@ its per-frame stores (resume) and its atomic outputs -- and hands the solvers a 
         m = run.measure(sim, frames, solver=ms.ResponseMap(), budget=ms.Budget(samples_per_texel=256))
         ch = run.measure_changes(world_sim, frames, solver=ms.StratifiedChange())
 
-Per-frame results go to ``OUT/<name>/`` as they are computed (a killed run resumes where it stopped; a run with
-anything else changed is refused, naming what changed, unless ``overwrite``); the finished result is written
-atomically as ``OUT/<name>.npz`` (and ``.csv``). The directory holds one lock file (``OUT/.mincam.lock``)
-whatever the number of stores in it.
+A run's identity is built here only (:func:`run_identity`): the simulation's :meth:`identity` (for a world from a
+file, every file it names, recursively), the solver's :meth:`identity`, the budget as requested
+(:meth:`Budget.describe`), the frames (a display's content hash; a world's updates and background), the Mitsuba
+variant and the library versions. Per-frame results go to ``OUT/<name>/`` as they are computed (a killed run
+resumes where it stopped; a run with anything else changed is refused, naming what changed, unless
+``overwrite``); the finished result is written atomically as ``OUT/<name>.npz`` (and ``.csv``), and a rerun of
+the same run returns it without rendering. The directory holds one lock file (``OUT/.mincam.lock``) whatever
+the number of stores in it. An in-memory measurement (``sim.measure(...)`` without a run) builds no identity.
 """
 
 from __future__ import annotations
@@ -22,10 +27,21 @@ from typing import Any
 from .budget import Budget
 from .changes import Changes
 from .errors import InputError
+from .identity import build_identity, run_key
 from .measurements import Measurements
 from .render.simulation import Simulation
 from .render.solvers import Solver
 from .store import DirLock, StoreSink, check_identity, clear_store, lock_out_dir
+
+
+def run_identity(sim: Simulation, frames, solver: Solver, budget: Budget, background=None) -> dict:
+    """The one identity of a run: what determines its numbers (:func:`mincam_sim.identity.build_identity`, kind
+    ``"run"``)."""
+    from .render import backend
+
+    parts = {"scene": sim.identity(), "solver": solver.identity(), "budget": budget.describe(),
+             "frames": sim.frames_identity(frames, background)}
+    return build_identity("run", parts, variant=backend.variant())
 
 
 class Run:
@@ -65,10 +81,11 @@ class Run:
         return self._lock
 
     # ------------------------------------------------------------------------------- identity, store, resume
-    def sink(self, name: str) -> StoreSink:
-        """The per-frame store ``out_dir/name`` for a solver's ``sink=`` (under this run's lock: no lock of its
-        own); its response maps are cached in ``out_dir/name/cache``."""
-        return StoreSink(self.out_dir / name, overwrite=self.overwrite, lock=self._check_open())
+    def sink(self, name: str, identity: Any = None) -> StoreSink:
+        """The per-frame store ``out_dir/name`` of a run with this ``identity`` (under this run's lock: no lock of
+        its own); its response maps are cached in ``out_dir/name/cache``. :meth:`measure` and
+        :meth:`measure_changes` build the identity and the sink themselves."""
+        return StoreSink(self.out_dir / name, identity, overwrite=self.overwrite, lock=self._check_open())
 
     def record_identity(self, identity: Any, name: str = "identity.json") -> bool:
         """Record what the directory's outputs are computed from, or check that it is unchanged
@@ -87,25 +104,54 @@ class Run:
         self._check_open()
         clear_store(self.out_dir / name, extra=extra)
 
+    def _finished(self, name: str, key: str, kind):
+        """The finished result in ``out_dir/name.npz`` if it carries this identity key (else None)."""
+        path = self.out_dir / f"{name}.npz"
+        if self.overwrite or not path.is_file():
+            return None
+        try:
+            done = kind.load_npz(path)
+        except (OSError, ValueError, KeyError):
+            return None
+        meta = done.dp.meta if isinstance(done, Changes) else done.meta
+        return done if meta.get("identity_key") == key else None
+
     # ------------------------------------------------------------------------------------------- measuring
     def measure(self, sim: Simulation, frames, solver: Solver | None = None, budget: Budget | None = None,
                 name: str = "measurements") -> Measurements:
         """:meth:`~mincam_sim.render.simulation.Simulation.measure`, kept in ``out_dir/name`` (resumable) and
-        ``out_dir/name.npz``."""
-        m = sim.measure(frames, solver, budget, sink=self.sink(name), show_progress=self.show_progress)
+        ``out_dir/name.npz`` (returned as it is when this same run finished before)."""
+        lock = self._check_open()
+        solver, budget = sim.solver_for(solver), Budget() if budget is None else budget
+        identity = run_identity(sim, frames, solver, budget)
+        key = run_key(identity)
+        done = self._finished(name, key, Measurements)
+        if done is not None:
+            return done
+        sink = StoreSink(self.out_dir / name, identity, overwrite=self.overwrite, lock=lock)
+        m = sim.measure(frames, solver, budget, sink=sink, show_progress=self.show_progress)
+        m.meta.update(identity_key=key, frames=identity["frames"])
         m.save_csv(self.out_dir / f"{name}.csv")
         m.save_npz(self.out_dir / f"{name}.npz")
         return m
 
     def measure_changes(self, sim: Simulation, frames, background=None, solver: Solver | None = None,
                         budget: Budget | None = None, name: str = "measurements") -> Changes:
-        """:meth:`~mincam_sim.render.simulation.Simulation.measure_changes`, kept in ``out_dir/name`` (resumable) and
-        ``out_dir/name.npz``."""
-        ch = sim.measure_changes(frames, background, solver, budget, sink=self.sink(name),
-                                 show_progress=self.show_progress)
+        """:meth:`~mincam_sim.render.simulation.Simulation.measure_changes`, kept in ``out_dir/name`` (resumable)
+        and ``out_dir/name.npz`` (returned as it is when this same run finished before)."""
+        lock = self._check_open()
+        solver, budget = sim.solver_for(solver, changes=True), Budget() if budget is None else budget
+        identity = run_identity(sim, frames, solver, budget, background)
+        key = run_key(identity)
+        done = self._finished(name, key, Changes)
+        if done is not None:
+            return done
+        sink = StoreSink(self.out_dir / name, identity, overwrite=self.overwrite, lock=lock)
+        ch = sim.measure_changes(frames, background, solver, budget, sink=sink, show_progress=self.show_progress)
+        ch.dp.meta["identity_key"] = ch.p.meta["identity_key"] = key
         ch.save_csv(self.out_dir / f"{name}.csv")
         ch.save_npz(self.out_dir / f"{name}.npz")
         return ch
 
 
-__all__ = ["Run"]
+__all__ = ["Run", "run_identity"]

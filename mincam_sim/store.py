@@ -438,14 +438,17 @@ def _check_covers(lock: DirLock, directory: Path) -> None:
 class StoreSink:
     """Per-frame results kept in a directory: the :class:`~mincam_sim.frames.FrameSink` that a run gives a solver.
 
-    The solver opens it once it knows its identity; the :class:`ResultStore` there then resumes a killed run
-    with the same identity or refuses a different one (naming what changed) unless ``overwrite``. Response maps
+    It carries the identity of the run it belongs to (built by :class:`mincam_sim.run.Run`); the
+    :class:`ResultStore` it opens then resumes a killed run with the same identity or refuses a different one
+    (naming what changed) unless ``overwrite``. Response maps
     and other content-addressed intermediates go to ``directory/cache``.
 
     Parameters
     ----------
     directory : str or Path
         The store's directory (created when opened).
+    identity : object
+        What determines the run's numbers (:func:`mincam_sim.identity.build_identity`).
     overwrite : bool
         Replace the results of a different run.
     lock : DirLock, optional
@@ -460,17 +463,21 @@ class StoreSink:
 
     persistent = True
 
-    def __init__(self, directory: str | Path, overwrite: bool = False, lock: DirLock | None = None) -> None:
-        self.directory = Path(directory)
+    def __init__(self, directory: str | Path, identity: Any, overwrite: bool = False,
+                 lock: DirLock | None = None) -> None:
+        self.directory, self.identity = Path(directory), identity
         self.overwrite = bool(overwrite)
         if lock is not None:
             _check_covers(lock, self.directory)
         self.lock = lock
         self.cache = ContentCache(self.directory / "cache")
 
-    def open(self, identity: Any, n_frames: int, columns: Sequence[str]) -> ResultStore:
-        """The :class:`ResultStore` of a run with this identity (its pending frames are what is left to do)."""
-        return ResultStore(self.directory, n_frames, columns, identity, overwrite=self.overwrite,
+    def open(self, n_frames: int, columns: Sequence[str]) -> ResultStore:
+        """The :class:`ResultStore` of this sink's run (its pending frames are what is left to do)."""
+        if self.identity is None:
+            raise StoreError("a store keeps the rows of one identified run: measure through mincam_sim.Run "
+                             "(run.measure / run.measure_changes), which builds the run's identity")
+        return ResultStore(self.directory, n_frames, columns, self.identity, overwrite=self.overwrite,
                            lock=True if self.lock is None else self.lock)
 
 

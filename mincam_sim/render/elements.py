@@ -10,6 +10,7 @@ from ..geometry import Pose
 from ..scene.road import Road
 from ..scene.tabletop import Placement, Tabletop
 from . import scene_dicts as sd
+from .updates import transform_update, vertex_update
 
 
 def tabletop_elements(table: Tabletop) -> dict:
@@ -46,11 +47,4 @@ def road_update(road: Road, center_x_m: float) -> dict[str, np.ndarray]:
     return transform_update("road", road.matrix_at(center_x_m))
 
 
-def vertex_update(name: str, vertices_m: np.ndarray) -> dict[str, np.ndarray]:
-    """Parameter update moving mesh ``name`` to new vertex positions (n, 3) [m]."""
-    return {f"{name}.vertex_positions": np.asarray(vertices_m, dtype=np.float32).ravel()}
-
-
-def transform_update(name: str, matrix: np.ndarray) -> dict[str, np.ndarray]:
-    """Parameter update setting shape ``name``'s to_world matrix (4 x 4)."""
-    return {f"{name}.to_world": np.asarray(matrix, dtype=np.float64)}
+__all__ = ["road_elements", "road_update", "tabletop_elements", "toy_updates", "transform_update", "vertex_update"]

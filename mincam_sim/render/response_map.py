@@ -44,10 +44,10 @@ from ..imageio import write_exr
 from ..measurements import Measurements
 from ..optics import Mincam
 from ..progress import progress
-from ..scene.display import FrameSource, Screen, as_frame_source
+from ..scene.display import FrameSource, Screen
 from ..store import ContentCache
 from . import backend, tracing
-from .estimation import derive_seed, pilot_to_target
+from .estimation import derive_seed
 from .mask_eval import RayWeight, local_to_mask_xy, mask_model_meta, optics_meta
 from .mincam_scene import MincamScene, geometry_meta
 from .mixel_sensor import START_OFFSET_M
@@ -230,55 +230,6 @@ def response_maps(
     meta = _maps_meta(world.mincam, mincam, screen, indices, sampling, seed, keys)
     return ResponseMaps(weights.reshape(len(indices), rows, cols), variance.reshape(len(indices), rows, cols),
                         [world.mincam[k].name for k in indices], meta)
-
-
-def response_maps_to_target(
-    mincam: Mincam, screen: Screen, frames, target_rel_stderr: float, seed: int = 0,
-    max_samples_per_texel: int = MAX_SAMPLES_PER_TEXEL, cache: ContentCache | None = None,
-    show_progress: bool = False, replicates: int = 4,
-) -> tuple[ResponseMaps, list[dict]]:
-    """Response maps whose measurements of ``frames`` all reach ``target_rel_stderr`` (if the cap allows).
-
-    The budget rule of every solver (``estimation.pilot_to_target``), fitted to maps: from 16 samples
-    per texel, each attempt's maps measure the frames and the count is extrapolated with the convergence rate
-    ``rel ~ n^-a`` measured on the last two attempts (``a`` in [0.5, 1.5]: stratified sampling converges
-    faster than ``n^-1/2``; 0.5 until two attempts exist), by 2x to 8x per step, and traced as ``replicates x
-    k^2`` (at least one stratum per axis more each step), until an attempt reaches the target or the cap.
-    Every attempt's maps go to ``cache`` (so a rerun or a resumed run repeats the search in milliseconds).
-    Returns the last attempt's maps and the trail of (samples_per_texel, worst relative stderr) tried.
-    """
-    frames = as_frame_source(frames)
-
-    def trace(n: int) -> ResponseMaps:
-        return response_maps(mincam, screen, n, seed, cache=cache, show_progress=show_progress, replicates=replicates)
-
-    last: list = [None, None]  # (samples per texel, maps) of the latest attempt only: maps can be large
-
-    def measure(n: int):
-        last[:] = n, trace(n)
-        m = last[1].measure_source(frames, show_progress=show_progress, desc=f"target search ({n} samples/texel)")
-        return m.irradiance_w_m2, m.stderr_w_m2
-
-    first = MapSampling.of(max(FIRST_SAMPLES_PER_TEXEL, replicates), replicates).samples_per_texel
-    n, trail = pilot_to_target(measure, first, target_rel_stderr, max_samples_per_texel, significance=0.0,
-                               rounds=None, measured_exponent=SEARCH_EXPONENT, growth=SEARCH_GROWTH, unseen_growth=1,
-                               quantize=_stratum_steps(replicates, max_samples_per_texel))
-    maps = last[1] if n == last[0] else trace(n)  # the quantised search ends on its latest attempt
-    return maps, [{"samples_per_texel": t["samples"], "worst_rel_stderr": t["worst_rel_stderr"]} for t in trail]
-
-
-def _stratum_steps(replicates: int, cap: int):
-    """The search's quantisation: ``wanted`` samples per texel after maps of ``samples`` are traced as
-    ``replicates x k^2`` with at least one stratum per axis more (rounding 2x back down to the same ``k`` would
-    repeat an attempt forever), at most the cap's strata, never fewer than ``samples``."""
-    max_strata = max(1, int(np.sqrt(cap / replicates)))
-
-    def quantize(wanted: float, samples: int) -> int:
-        strata = int(round(np.sqrt(samples / replicates)))
-        strata = min(max_strata, max(strata + 1, int(np.sqrt(wanted / replicates))))
-        return max(samples, replicates * strata * strata)
-
-    return quantize
 
 
 def _load_cached(cache: ContentCache | None, keys: dict, indices: list[int], weights: np.ndarray,

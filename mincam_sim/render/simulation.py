@@ -13,32 +13,49 @@
 
 Display scenes measure frames (radiance images, row 0 at the top); world scenes measure parameter updates
 (``"name.parameter" -> value``, positions in world coordinates [m], as :attr:`Simulation.params` reads them),
-absolutely (:meth:`Simulation.measure`, the aperture solver) or as changes against a background
-(:meth:`Simulation.measure_changes`). Persistence (identity, lock, resume) is the business of
-:class:`mincam_sim.run.Run`, which wraps a simulation.
+absolutely (:meth:`Simulation.measure`) or as changes against a background (:meth:`Simulation.measure_changes`).
+Each measurement is ``solver.plan(self, frames, budget)`` run through a sink (:mod:`mincam_sim.frames`).
+Persistence (the identity, the lock, resume) is the business of :class:`mincam_sim.run.Run`; a simulation
+builds no identity, it only says what determines its scene's numbers (:meth:`Simulation.identity`).
+
+A world scene is built around the mincam: Mitsuba offsets every secondary ray by ~1e-4 x (1 + max|p|) scene
+units, so a table 50 m (1 km) from the origin lost 1.2 % (3.7 %) of a toy's dP to shadow rays that started past
+it. Positions in (updates to) the user's elements are shifted on their way in and out: the API speaks world
+coordinates only (:attr:`Simulation.params`, :meth:`Simulation.update`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import difflib
+import functools
+import os
+from collections.abc import Iterator, Mapping, Sequence
 from os import PathLike
 from pathlib import Path
 
 import numpy as np
 
-from ..budget import DEFAULT_SAMPLES_PER_TEXEL, Budget
-from ..changes import Changes, RunInfo
+from ..budget import Budget
+from ..changes import Changes
 from ..errors import InputError
-from ..frames import FrameSink, resolve_sink
+from ..frames import FrameSink, MemorySink, collect
+from ..identity import display_frames_identity, fingerprint, scene_file_digests, updates_fingerprint
 from ..measurements import Measurements
 from ..optics import Mincam
-from ..scene.display import Screen
-from .estimation import replicate_mean_stderr
-from .screen_engine import render_frames
-from .solvers import Aperture, PlainChange, PlaneReplay, ResponseMap, Solver, StratifiedChange
-from .world import WorldRenderer
+from ..scene.display import FrameSource, Screen, as_frame_source
+from . import backend
+from .change_geometry import change_points_of, delta_surfaces
+from .change_region import ApertureRegions, mixel_regions
+from .guided_path import guide_spheres, spheres_of
+from .mincam_scene import CAMERA_KEY, SENSOR_KEY, MincamScene
+from .response_map import FRAME_CHUNK_BYTES, check_radiance
+from .scene_dicts import mincam_body_shapes
+from .solvers import Aperture, ResponseMap, Solver, StratifiedChange
+from .stratified import buffers_key
+from .world_input import check_radiant_params, check_update, expand_elements
 
-DEFAULT_WORLD_REPLICATES = 8
+Updates = Mapping[str, np.ndarray]
+DEFAULT_SOLVERS = {"display": ResponseMap, "world": Aperture}  # Simulation.measure's solver by scene kind
 
 
 class Simulation:
@@ -69,55 +86,225 @@ class Simulation:
             raise InputError(f"screen must be a mincam_sim.Screen, got {type(screen).__name__}")
         self.mincam, self.screen = mincam, screen
         self.kind = "display" if screen is not None else "world"
-        self._world: WorldRenderer | None = None
         self.source: Path | None = None
+        self._display_scene: MincamScene | None = None
         if world is not None:
             if isinstance(world, (str, PathLike)):
                 from .scene_files import load_scene_file
 
                 self.source = Path(world)
                 world = {"scene": load_scene_file(self.source)}
-            self._world = WorldRenderer(mincam, world, replicates=DEFAULT_WORLD_REPLICATES, max_depth=max_depth,
-                                        camera=camera)
+            self._build_world(world, max_depth, camera)
 
     # ------------------------------------------------------------------------------------------ world state
-    @property
-    def renderer(self) -> WorldRenderer:
-        """The world's renderer (world scenes only)."""
-        if self._world is None:
-            raise InputError("this Simulation holds a display; parameters and updates belong to world scenes")
-        return self._world
+    def _build_world(self, elements, max_depth: int, camera: dict | None) -> None:
+        backend.require_jit("The fast mixel sensor (a Python Mitsuba plugin)")
+        # replay the stratified launches (dr.freeze) instead of tracing them per frame: on LLVM, where the moving
+        # meshes' vertices are written in place and their buffers' addresses key the recordings
+        self.freeze_launches = backend.variant().startswith("llvm")
+        self.pair_lanes = True  # background pass: trace again only the lanes whose frame paths met a moving shape
+        elements = expand_elements(elements)
+        self.scene_origin_m = self.mincam.centre_m
+        self.scene_mincam = self.mincam.translated(-self.scene_origin_m)
+        try:
+            self.mincam_scene = MincamScene.world(self.scene_mincam, elements, max_depth, camera)
+        except ValueError as exc:
+            raise InputError(str(exc)) from None
+        try:
+            self.scene = self.mincam_scene.fast_scene
+        except RuntimeError as exc:  # Mitsuba's own message names the plugin and the parameter
+            raise InputError(f"Mitsuba could not build the scene: {str(exc).strip()}") from None
+        self.sensor = self.mincam_scene.sensor(SENSOR_KEY)
+        self.camera = self.mincam_scene.sensor(CAMERA_KEY)
+        self._own = set(mincam_body_shapes(self.scene_mincam)) | {SENSOR_KEY}  # built in scene coordinates
+        scene_params = self.mincam_scene.params
+        check_radiant_params(scene_params)
+        self._shifted = _shifted_keys(self.scene, scene_params, self._own)
+        self.mincam_scene.update({key: _shift(key, scene_params[key], -self.scene_origin_m) for key in self._shifted})
+        self._params = WorldParameters(self)
+        self._mirrors = delta_surfaces(self.scene)
+        self._content_key: str | None = None
+        self._content_key = self._content_fingerprint()  # before any update: the scene as built
+        self._as_built: dict[str, object] = {}  # each updated parameter's value (world coordinates) before updates
+        self._last_set: dict[str, np.ndarray] = {}  # the last numpy value each parameter was set to
+        self.revisions: dict[str, int] = {}  # how often each parameter was changed (who replays a scene checks it)
+
+    def _require_world(self, what: str) -> None:
+        if self.kind != "world":
+            raise InputError(f"this Simulation holds a display; {what} belong to world scenes")
 
     @property
-    def params(self):
-        """The world's parameters in world coordinates (read-only mapping; see :class:`.world.WorldParameters`)."""
-        return self.renderer.params
+    def params(self) -> WorldParameters:
+        """The world's parameters in world coordinates (read-only mapping; see :class:`WorldParameters`)."""
+        self._require_world("parameters and updates")
+        return self._params
 
-    def update(self, updates: Mapping[str, object]) -> None:
-        """Set world parameters (positions in world coordinates [m]) without reloading."""
-        self.renderer.update(updates)
+    def update(self, updates: Updates) -> None:
+        """Set world parameters (numpy arrays or Mitsuba values; positions in world coordinates [m], as
+        :attr:`params` reads them) and apply them without reloading."""
+        self._require_world("parameters and updates")
+        if not isinstance(updates, Mapping):
+            raise InputError(f"an update must be a dict 'name.parameter' -> value, got {type(updates).__name__}")
+        scene_params = self.mincam_scene.params
+        for key, value in updates.items():
+            if key not in scene_params or key.split(".", 1)[0] in self._own:
+                raise InputError(_unknown_parameter(key, self._params.keys(), key.split(".", 1)[0] in self._own))
+            check_update(key, scene_params[key], value)
+        for key in updates:
+            self._remember_as_built(key)
+        updates = self._new_values(updates)
+        for key in updates:
+            self.revisions[key] = self.revisions.get(key, 0) + 1
+        self.mincam_scene.update({key: _shift(key, value, -self.scene_origin_m) if key in self._shifted else value
+                                  for key, value in updates.items()})
+        if any(key.split(".", 1)[0] in self._mirrors for key in updates):
+            self._mirrors = delta_surfaces(self.scene)
+
+    def _new_values(self, updates: Updates) -> dict:
+        """The updates that change something: a numpy value equal to the one set last is left out, so a frame
+        that re-parks every idle toy moves only the toy that moves (its shapes keep their buffers, and a frozen
+        launch keeps its recordings)."""
+        out = {}
+        for key, value in updates.items():
+            if isinstance(value, np.ndarray):
+                last = self._last_set.get(key)
+                if last is not None and last.dtype == value.dtype and np.array_equal(last, value):
+                    continue
+                self._last_set[key] = value.copy()
+            else:
+                self._last_set.pop(key, None)
+            out[key] = value
+        return out
+
+    def complete_background(self, frames: Sequence[Updates], background: Updates) -> dict:
+        """``background`` plus, for every parameter the frames set and it leaves out, that parameter's value in the
+        scene as built (so that restoring the background undoes every frame)."""
+        missing = sorted({key for f in frames for key in f} - set(background))
+        for key in missing:
+            self._remember_as_built(key)
+        return {**background, **{key: self._as_built[key] for key in missing if key in self._as_built}}
+
+    def _remember_as_built(self, key: str) -> None:
+        if key not in self._as_built and key in self._params:
+            self._as_built[key] = self._params[key]
+
+    @functools.cached_property
+    def shapes_by_id(self) -> dict:
+        """The scene's shapes by their id (fixed once the scene is loaded)."""
+        return {shape.id(): shape for shape in self.scene.shapes()}
+
+    def buffers_key(self) -> tuple:
+        """``stratified.buffers_key`` of every shape whose parameters were updated (the whole scene if an
+        updated parameter belongs to something else: a shared BSDF, an environment emitter)."""
+        names = {key.split(".", 1)[0] for key in self._as_built}
+        shapes = self.shapes_by_id
+        objects = [shapes[name] for name in sorted(names) if name in shapes]
+        return buffers_key(objects if len(objects) == len(names) else [self.scene])
+
+    def world_value(self, key: str):
+        """Parameter ``key`` as :meth:`update` takes it back, in world coordinates: positions (``to_world``
+        as a 4 x 4 matrix, ``vertex_positions`` flat (3 n,), a point light's ``position``) as float64 numpy,
+        anything else as a copy of the Mitsuba value."""
+        value = _param_value(self.mincam_scene.params[key])
+        return _shift(key, value, self.scene_origin_m) if key in self._shifted else value
+
+    def change_regions(self, moving: Sequence[str]) -> ApertureRegions:
+        """Aperture regions (per mixel) that the named shapes, in their current place, their shadows and their
+        images in the scene's planar mirrors reach (and every other delta surface: glass, curved mirrors): the
+        bounding rectangle of each shape's own region; the whole aperture if one of them is unbounded."""
+        return self.change_reach(moving)[0]
+
+    def change_guide(self, moving: Sequence[str]) -> list[tuple[np.ndarray, float]] | None:
+        """Spheres (centre, radius [m], scene coordinates) toward which guided bounces aim: one per group of the
+        named shapes, in their current place, with their shadow volumes; None if a change is unbounded."""
+        return self.change_reach(moving)[1]
+
+    def change_reach(self, moving: Sequence[str]) -> tuple[ApertureRegions, list | None, list[str]]:
+        """:meth:`change_regions`, :meth:`change_guide` and why a change is unbounded, from one look at the
+        scene."""
+        points, reasons = {}, []
+        for name in sorted(moving):
+            points[name], why = change_points_of(self.scene, [name], self._mirrors)
+            if why:
+                reasons.append(why)
+        if reasons:
+            return ApertureRegions.full(self.mincam), None, reasons
+        regions = ApertureRegions.empty(self.mincam)
+        for name, p in points.items():
+            regions = regions.union(mixel_regions(self.scene_mincam, p))
+            for seen in self._mirrors.images(p, exclude=name):
+                regions = regions.union(mixel_regions(self.scene_mincam, seen))
+        spheres = guide_spheres(list(points.values()))
+        if spheres:  # light reaching the change through a mirror: bounces aimed at the lights' images find it
+            spheres = spheres_of(spheres + self._mirrors.light_image_spheres(self.scene))
+        return regions, (spheres or None), []
 
     def camera_image(self, spp: int = 64, seed: int = 0) -> np.ndarray:
-        """The ground-truth camera's image [W m^-2 sr^-1], row 0 at the top."""
-        return self.renderer.camera_image(spp, seed)
+        """The ground-truth camera's image [W m^-2 sr^-1], row 0 at the top (world scenes)."""
+        self._require_world("ground-truth cameras")
+        return self.mincam_scene.camera_image(spp, seed)
+
+    # ------------------------------------------------------------------------------------------ identity
+    def _content_fingerprint(self) -> str:
+        """Content key of the world as Mitsuba holds it: every traversable parameter's value (meshes, textures,
+        transforms, radiances), the element names and plugin types, and the path depth."""
+        if self._content_key is None:
+            params = self._params
+            parts = {key: _param_array(params[key]) for key in sorted(params.keys())
+                     if not key.startswith(SENSOR_KEY)}
+            types = {name: (value.get("type") if isinstance(value, dict) else type(value).__name__)
+                     for name, value in self.mincam_scene.elements.items()}
+            self._content_key = fingerprint({"params": parts, "types": types,
+                                             "max_depth": self.mincam_scene.max_depth})
+        return self._content_key
+
+    def identity(self) -> dict:
+        """What determines this scene's numbers (JSON-able): the mincam and the screen (displays); the mincam,
+        the scene's content as built and, for a world from a file, every file it names, recursively
+        (``<include>``d files, meshes and textures, also through ``$parameter`` defaults)."""
+        if self.kind == "display":
+            return {"kind": "display", "mincam": fingerprint(self.mincam), "screen": fingerprint(self.screen)}
+        out = {"kind": "world", "mincam": fingerprint(self.mincam), "scene": self._content_key}
+        if self.source is not None:
+            top = self.source.resolve().parent
+            out["files"] = {os.path.relpath(k, top): v for k, v in scene_file_digests(self.source).items()}
+        return out
 
     def content_fingerprint(self) -> str:
-        """Content key of the scene (world: every traversed parameter; display: the screen)."""
-        if self._world is not None:
-            return self._world.content_fingerprint()
-        from ..identity import fingerprint
+        """Content key of the scene (world: every traversed parameter as built; display: the screen)."""
+        return self._content_key if self.kind == "world" else fingerprint(self.screen)
 
-        return fingerprint(self.screen)
+    def frames_identity(self, frames, background: Updates | None = None) -> dict:
+        """What determines the frames (for a run's identity): a display source's description or content, hashed
+        as it streams (every frame validated on the way); a world's update dicts and background."""
+        if self.kind == "display":
+            source = self.frame_source(frames)
+            return display_frames_identity(source, source.chunk_size(FRAME_CHUNK_BYTES), check_radiance)
+        return {"frames": updates_fingerprint(frames), "background": updates_fingerprint([background or {}])}
 
     # ------------------------------------------------------------------------------------------ measuring
-    def _solver(self, solver: Solver | None, default: Solver, what: str) -> Solver:
-        solver = default if solver is None else solver
+    def frame_source(self, frames) -> FrameSource:
+        """Display frames as a source of the screen's shape (an array (n, rows, cols), a list, or a source)."""
+        frames = as_frame_source(frames)
+        if tuple(frames.frame_shape) != tuple(self.screen.shape):
+            raise InputError(f"frames have shape {frames.frame_shape} but this screen's frames are "
+                             f"{self.screen.shape} (rows, cols)")
+        return frames
+
+    def display_scene(self, form: str = "fast") -> MincamScene:
+        """The mincam in front of the screen (built on first use, shared by the display ray solvers)."""
+        if self._display_scene is None:
+            self._display_scene = MincamScene.display(self.mincam, self.screen)
+        return self._display_scene
+
+    def solver_for(self, solver: Solver | None, changes: bool = False) -> Solver:
+        """``solver`` (or this scene kind's default), checked against the scene kind and the measurement."""
+        if solver is None:
+            solver = StratifiedChange() if changes else DEFAULT_SOLVERS[self.kind]()
         if not isinstance(solver, Solver):
-            raise InputError(f"solver must be one of mincam_sim's solvers (e.g. ms.{type(default).__name__}()), got "
-                             f"{type(solver).__name__}")
-        if self.kind not in solver.scenes:
-            raise InputError(f"the {solver.name} solver does not solve {self.kind} scenes ({what}); use one of its "
-                             f"kinds: {', '.join(solver.scenes)}")
+            raise InputError(f"solver must be one of mincam_sim's solvers (e.g. ms.ResponseMap(), ms.Aperture(), "
+                             f"ms.StratifiedChange()), got {type(solver).__name__}")
+        solver.check(self.kind, changes)
         return solver
 
     @staticmethod
@@ -128,68 +315,29 @@ class Simulation:
             raise InputError(f"budget must be a mincam_sim.Budget, got {type(budget).__name__}")
         return budget
 
+    def _solve(self, solver: Solver, frames, budget: Budget, background, sink: FrameSink | None,
+               show_progress: bool):
+        sink = MemorySink() if sink is None else sink
+        plan = solver.plan(self, frames, budget, background=background, cache=sink.cache,
+                           show_progress=show_progress)
+        table = sink.open(plan.n_rows, plan.columns)
+        return plan.result(*collect(plan.rows(table.pending()), table))
+
     def measure(self, frames, solver: Solver | None = None, budget: Budget | None = None, *,
-                sink: FrameSink | None = None, out_dir: str | Path | None = None, overwrite: bool = False,
-                show_progress: bool = False) -> Measurements:
+                sink: FrameSink | None = None, show_progress: bool = False) -> Measurements:
         """What each mixel measures in each frame, with its standard error [W/m^2], (n_frames, n_mixels).
 
         Display scenes: ``frames`` are radiance images (an array (n, rows, cols), a list, or a FrameSource);
-        default solver :class:`~.solvers.ResponseMap`. World scenes: ``frames`` are parameter updates, each
-        applied to the scene as built; solver :class:`~.solvers.Aperture`, or :class:`~.solvers.PlaneReplay`
-        for frames that only move one textured plane within its plane. ``sink`` (displays;
-        :class:`mincam_sim.frames.FrameSink`) takes the per-frame rows: :meth:`mincam_sim.run.Run.sink` keeps them
-        on disk and resumes. ``out_dir`` (deprecated, one release): a store there, locked while it is written.
+        default solver :class:`~.solvers.ResponseMap` (its result carries the maps as ``m.maps``). World scenes:
+        ``frames`` are parameter updates, each applied to the scene as built; solver :class:`~.solvers.Aperture`,
+        or :class:`~.solvers.PlaneReplay` for frames that only move one textured plane within its plane.
+        ``sink`` (:class:`mincam_sim.frames.FrameSink`) takes the per-frame rows; :class:`mincam_sim.run.Run`
+        hands one that keeps them on disk and resumes.
         """
-        budget = self._budget(budget)
-        if self.kind == "display":
-            solver = self._solver(solver, ResponseMap(), "measure")
-            sink = resolve_sink(sink, out_dir, overwrite, "Simulation.measure")
-            m, _ = render_frames(self.mincam, self.screen, frames, solver.form, budget.rays(),
-                                 budget.samples_per_texel or DEFAULT_SAMPLES_PER_TEXEL, budget.target_rel_stderr,
-                                 budget.seed, budget.replicates, show_progress=show_progress, sink=sink)
-            m.meta["solver"] = solver.name
-            return m
-        solver = self._solver(solver, Aperture(), "measure")
-        if out_dir is not None or sink is not None:
-            raise InputError("world frames measured absolutely are not stored; use Run.measure_changes(...) or "
-                             "measure_changes(..., sink=run.sink(name))")
-        return self._measure_world_frames(frames, solver, budget)
+        return self._solve(self.solver_for(solver), frames, self._budget(budget), None, sink, show_progress)
 
-    def _measure_world_frames(self, frames, solver: Solver, budget: Budget) -> Measurements:
-        world = self.renderer
-        if isinstance(frames, Mapping) or not isinstance(frames, Sequence):
-            raise InputError("frames must be a list of parameter-update dicts (one per frame)")
-        replicates = budget.replicates_or(DEFAULT_WORLD_REPLICATES)
-        as_built = world.complete_background(frames, {})
-        if isinstance(solver, PlaneReplay):
-            estimates = _plane_replay(world, solver.plane, frames, as_built, budget, replicates)
-        else:
-            estimates = []
-            for frame in frames:
-                world.update(as_built)
-                world.update(frame)
-                estimates.append(world.world.fast_estimates(budget.rays(), replicates, budget.seed))
-            world.update(as_built)
-        pairs = [replicate_mean_stderr(e) for e in estimates]
-        values, errors = [mean for mean, _ in pairs], [err for _, err in pairs]
-        meta = {"solver": solver.name, "form": "fast_world", "seed": budget.seed, "replicates": replicates,
-                "spp_per_mixel_per_frame": budget.rays()}
-        return Measurements(np.array(values).reshape(len(frames), -1), np.array(errors).reshape(len(frames), -1),
-                            self.mincam.names, meta)
-
-    def response_maps(self, budget: Budget | None = None, show_progress: bool = False):
-        """Each mixel's response map over the screen (display scenes), at the budget's samples per texel."""
-        from .response_map import response_maps
-
-        if self.kind != "display":
-            raise InputError("response maps are maps over a screen's texels: display scenes only")
-        budget = self._budget(budget)
-        return response_maps(self.mincam, self.screen, budget.samples_per_texel or DEFAULT_SAMPLES_PER_TEXEL,
-                             budget.seed, show_progress=show_progress, replicates=budget.replicates_or(4))
-
-    def measure_changes(self, frames, background: Mapping | None = None, solver: Solver | None = None,
+    def measure_changes(self, frames, background: Updates | None = None, solver: Solver | None = None,
                         budget: Budget | None = None, *, sink: FrameSink | None = None,
-                        out_dir: str | Path | None = None, overwrite: bool = False,
                         show_progress: bool = False) -> Changes:
         """Each frame's change from the background, ``dP = P(frame) - P(background)``, and ``P`` (world scenes).
 
@@ -204,51 +352,114 @@ class Simulation:
         budget : Budget
             ``spp`` rays per mixel per frame and pass (or a target), replicates (default 8), seed.
         sink : FrameSink, optional
-            Takes the per-frame rows (:meth:`mincam_sim.run.Run.sink`: on disk; a rerun of the same run resumes,
-            another one is refused). Default: in memory.
-        out_dir : path, optional
-            Deprecated (one release): a store there, locked while it is written; use :class:`mincam_sim.run.Run`.
+            Takes the per-frame rows (:class:`mincam_sim.run.Run` hands one on disk). Default: in memory.
         """
-        solver = self._solver(solver, StratifiedChange(), "measure_changes")
-        if not isinstance(solver, (PlainChange, StratifiedChange)):
-            raise InputError(f"measure_changes needs a change solver (StratifiedChange or PlainChange), got "
-                             f"{solver.name}")
-        budget = self._budget(budget)
-        sink = resolve_sink(sink, out_dir, overwrite, "Simulation.measure_changes")
-        world = self.renderer
-        world.replicates = budget.replicates_or(DEFAULT_WORLD_REPLICATES)
-        kw = {}
-        if isinstance(solver, StratifiedChange):
-            kw = {"strata_shares": solver.strata_shares, "strata_expansions": solver.strata_expansions,
-                  "guide_bounces": solver.guide_bounces}
-        dp, p = world.measure_changes(frames, {} if background is None else background, spp=budget.rays(),
-                                      seed=budget.seed, show_progress=show_progress,
-                                      target_rel_stderr=budget.target_rel_stderr, estimator=solver.form, sink=sink,
-                                      **kw)
-        dp.meta["target_rel_stderr"] = budget.target_rel_stderr
-        return Changes(dp, p, RunInfo.from_meta(dp.meta))
+        return self._solve(self.solver_for(solver, changes=True), frames, self._budget(budget),
+                           {} if background is None else background, sink, show_progress)
+
+    def response_maps(self, budget: Budget | None = None, *, show_progress: bool = False):
+        """Each mixel's response map over the screen (display scenes), at the budget's samples per texel."""
+        if self.kind != "display":
+            raise InputError("response maps are maps over a screen's texels: display scenes only")
+        maps, _ = ResponseMap().maps(self, self._budget(budget), show_progress=show_progress)
+        return maps
 
 
-def _plane_replay(world: WorldRenderer, plane: str, frames, as_built: Mapping, budget: Budget,
-                  replicates: int) -> list[np.ndarray]:
-    """Each frame's (replicates, n_mixels) estimates by :class:`.sliding_plane.SlidingPlane`: the frames may set
-    only ``plane``'s ``to_world``."""
-    from .sliding_plane import SlidingPlane
+class WorldParameters(Mapping):
+    """The scene's parameters as the user's elements define them, in world coordinates (read-only).
 
-    key = f"{plane}.to_world"
-    if key not in world.params:
-        raise InputError(f"PlaneReplay(plane={plane!r}): the scene has no parameter {key!r}; name the textured "
-                         "rectangle's element")
-    for i, frame in enumerate(frames):
-        if not isinstance(frame, Mapping):
-            raise InputError(f"frames[{i}] must be a parameter-update dict, got {type(frame).__name__}")
-        other = sorted(k for k in frame if k != key)
-        if other:
-            raise InputError(f"frames[{i}] sets {other}: the PlaneReplay solver replays frames that move only "
-                             f"{key!r}; measure other frames with solver=ms.Aperture()")
-    unset = as_built[key] if key in as_built else world.params[key]  # a frame that leaves the plane where it is
-    placements = [frame.get(key, unset) for frame in frames]
-    if not placements:
-        return []
-    replay = SlidingPlane(world, plane, placements, budget.rays(), budget.seed, replicates=replicates)
-    return [replay.estimates(m) for m in placements]
+    Keys are ``"name.parameter"`` (``mi.traverse`` names) of the user's elements; the mincam's own bodies and
+    sensor are not among them. Values are what :meth:`Simulation.update` takes back: positions
+    (``to_world`` 4 x 4, ``vertex_positions`` flat (3 n,), a point light's ``position``) as float64 numpy in
+    world coordinates [m], anything else a copy of the Mitsuba value. Reading a value and writing it back
+    changes nothing.
+    """
+
+    def __init__(self, sim: Simulation) -> None:
+        self._renderer = sim
+
+    def _visible(self, key: str) -> bool:
+        return key.split(".", 1)[0] not in self._renderer._own and "." in key
+
+    def __getitem__(self, key: str):
+        if key not in self._renderer.mincam_scene.params or not self._visible(key):
+            raise KeyError(key)
+        return self._renderer.world_value(key)
+
+    def __contains__(self, key) -> bool:
+        return isinstance(key, str) and key in self._renderer.mincam_scene.params and self._visible(key)
+
+    def __iter__(self) -> Iterator[str]:
+        return (k for k in self._renderer.mincam_scene.params.keys() if self._visible(k))
+
+    def __len__(self) -> int:
+        return sum(1 for _ in self)
+
+
+
+def _param_array(value) -> np.ndarray:
+    """A traversed Mitsuba parameter as a numeric array (transforms by their matrix)."""
+    matrix = _transform_matrix(value)
+    arr = matrix if matrix is not None else np.asarray(value)
+    if arr.dtype.hasobject:
+        arr = np.frombuffer(repr(value).encode(), dtype=np.uint8)
+    return arr
+
+
+def _shifted_keys(scene, params, ours: set[str]) -> set[str]:
+    """Parameters that hold positions, of every element but ``ours``: ``to_world`` (not of environment or
+    directional emitters, whose transforms only turn directions), ``vertex_positions`` and point lights'
+    ``position``."""
+    directional = {e.id() for e in scene.emitters() if e.is_environment() or
+                   int(e.flags()) & int(backend.mitsuba().EmitterFlags.Infinite)}
+    keys = set()
+    for key in params.keys():
+        name, _, rest = key.partition(".")
+        if name not in ours and name not in directional and rest in ("to_world", "vertex_positions", "position"):
+            keys.add(key)
+    return keys
+
+
+def _shift(key: str, value, offset_m: np.ndarray):
+    """A position parameter moved by ``offset_m`` [m] (float64 numpy, the form :meth:`Simulation.update`
+    takes)."""
+    if key.endswith(".to_world"):
+        matrix = _transform_matrix(value)
+        moved = (np.array(value, dtype=np.float64).reshape(4, 4) if matrix is None else matrix).copy()
+        moved[:3, 3] += offset_m
+        return moved
+    points = np.array(value, dtype=np.float64).reshape(-1, 3) + offset_m
+    return points.ravel()
+
+
+def _transform_matrix(value) -> np.ndarray | None:
+    """The matrix of a Mitsuba transform parameter (4 x 4, or 3 x 3 for texture transforms; float64), None for
+    anything else."""
+    if "Transform" not in type(value).__name__:
+        return None
+    matrix = np.array(value.matrix, dtype=np.float64)
+    side = int(round(np.sqrt(matrix.size)))
+    return matrix.reshape(side, side)
+
+
+def _param_value(value):
+    """A copy of a traversed parameter that :meth:`Simulation.update` accepts back (transforms as 4 x 4 numpy
+    matrices, arrays and tensors as Mitsuba values of their own type and shape)."""
+    matrix = _transform_matrix(value)
+    if matrix is not None:
+        return matrix
+    if isinstance(value, (bool, int, float)):
+        return value
+    return type(value)(np.array(value))
+
+
+def _unknown_parameter(key: str, known, own: bool) -> str:
+    if own:
+        return (f"{key!r} belongs to the mincam's own body or sensor; move the mixels through the Mincam, not the "
+                "scene")
+    close = difflib.get_close_matches(str(key), list(known), n=3)
+    hint = f"; did you mean {', '.join(map(repr, close))}?" if close else "; see the renderer's params.keys()"
+    return f"unknown scene parameter {key!r}{hint}"
+
+
+__all__ = ["DEFAULT_SOLVERS", "Simulation", "WorldParameters"]

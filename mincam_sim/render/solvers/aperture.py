@@ -1,0 +1,80 @@
+"""The aperture solver: rays from each detector through its mask aperture, all mixels in one kernel.
+
+Displays: a frame's replicate estimates by the ``mixel_sensor`` plugin (the fast form) over the frame on the
+screen. Worlds: each frame's parameter updates applied to the scene as built, then the same kernel
+(absolute ``P`` per frame; changes against a background are the change solvers').
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from ...budget import Budget
+from ...measurements import Measurements
+from .. import backend
+from ..estimation import replicate_mean_stderr
+from .base import DisplayRaySolver, Plan, Row, check_update_frames
+
+DEFAULT_WORLD_REPLICATES = 8
+
+
+@dataclass(frozen=True)
+class Aperture(DisplayRaySolver):
+    """Rays from the detector through the mask aperture, all mixels in one kernel (the fast form)."""
+
+    name: ClassVar[str] = "aperture"
+    scenes: ClassVar[tuple[str, ...]] = ("display", "world")
+    form: ClassVar[str] = "fast"
+    estimator: ClassVar[str] = "mixel_sensor_path"
+
+    def prepare(self, scene) -> None:
+        backend.require_jit("The fast mixel sensor (a Python Mitsuba plugin)")
+        _ = scene.fast_scene
+
+    def estimates(self, scene, spp: int, replicates: int, seed: int) -> np.ndarray:
+        return scene.fast_estimates(spp, replicates, seed)
+
+    def plan(self, sim, frames, budget: Budget, *, background=None, cache=None, show_progress: bool = False) -> Plan:
+        if sim.kind == "display":
+            return super().plan(sim, frames, budget, show_progress=show_progress)
+        return WorldAperturePlan(self, sim, frames, budget)
+
+
+class WorldAperturePlan(Plan):
+    """Each frame's updates on top of the scene as built, traced with the budget's rays and seed; the scene is
+    left as built."""
+
+    def __init__(self, solver: Aperture, sim, frames, budget: Budget) -> None:
+        self.solver, self.sim, self.frames = solver, sim, check_update_frames(frames)
+        self.budget, self.replicates = budget, budget.replicates_or(DEFAULT_WORLD_REPLICATES)
+        self.as_built = sim.complete_background(self.frames, {})
+        self.n_rows, self.columns = len(self.frames), list(sim.mincam.names)
+
+    def estimates(self, pending: np.ndarray) -> Iterator[tuple[int, np.ndarray]]:
+        """(frame index, (replicates, n_mixels) estimates) of each pending frame."""
+        sim = self.sim
+        try:
+            for i in pending:
+                sim.update(self.as_built)
+                sim.update(self.frames[int(i)])
+                yield int(i), sim.mincam_scene.fast_estimates(self.budget.rays(), self.replicates, self.budget.seed)
+        finally:
+            sim.update(self.as_built)
+
+    def rows(self, pending: np.ndarray) -> Iterator[Row]:
+        for i, estimates in self.estimates(pending):
+            mean, err = replicate_mean_stderr(estimates)
+            yield [i], mean[None], err[None]
+
+    def result(self, values: np.ndarray, errors: np.ndarray) -> Measurements:
+        meta = {"solver": self.solver.name, "form": "fast_world", "seed": self.budget.seed,
+                "replicates": self.replicates, "spp_per_mixel_per_frame": self.budget.rays()}
+        return Measurements(values.reshape(self.n_rows, -1), errors.reshape(self.n_rows, -1), self.sim.mincam.names,
+                            meta)
+
+
+__all__ = ["Aperture", "WorldAperturePlan"]

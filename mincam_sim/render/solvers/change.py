@@ -1,0 +1,458 @@
+"""The change solvers: each frame's change from a background, ``dP = P(frame) - P(background)``, and ``P``.
+
+A frame and its background are traced with the same seed, replicate by replicate, so the Monte Carlo noise of
+the two largely cancels in their difference; the standard error of ``dP`` comes from the spread of the
+per-replicate differences, so it includes that correlation.
+
+* :class:`PlainChange` (the reference): every frame traced over the whole aperture with the background's seed;
+  the background traced once.
+* :class:`StratifiedChange`: per frame and mixel, the aperture region where the frame can differ from the
+  background (``mincam_sim.render.change_geometry``, ``change_region``: the moving shapes' bounds and their shadow
+  volumes from the emitting shapes, for both the frame and the background) gets most rays, the rest of the
+  aperture a few, both strata unbiased (``mincam_sim.render.stratified``). The frame and the background are
+  traced with the same seed, counts and regions, so their rays pair up lane by lane; inter-reflection bounces
+  are guided toward the moving shapes (``mincam_sim.render.guided_path``); the background's whole-aperture
+  value (for ``P``) is traced once per run, on a jittered aperture grid with at least
+  :data:`BACKGROUND_MIN_SPP` rays. Kernels are compiled once and reused; each frame costs one parameter update
+  for the frame and one back to the background.
+
+A target noise is reached by pilots: the solver's own plan on up to 4 frames spread over the run, at the
+budget's rays, extrapolated by :func:`..estimation.pilot_to_target` (no recursion through the front door).
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from ...budget import Budget
+from ...changes import Changes, RunInfo
+from ...errors import InputError
+from ...frames import MemoryTable, collect
+from ...measurements import Measurements
+from ...progress import progress
+from .. import backend
+from ..change_geometry import changed_shapes, emitters_among, moving_shapes, watch_box
+from ..estimation import (
+    check_counts,
+    derive_seed,
+    heavy_tailed,
+    pilot_to_target,
+    warn_target_missed,
+    warn_unreached,
+    worst_relative_stderr,
+)
+from ..guided_path import supports as guided_path_supports
+from ..mask_eval import mask_model_meta
+from ..mincam_scene import geometry_meta
+from ..stratified import check_strata, frozen_recordings, stratified_lanes, whole_aperture_estimates
+from ..world_input import check_frames
+from .base import Plan, Row, Solver
+
+MAX_SPP = 1 << 26  # cap of the target-noise budget, samples per mixel per frame
+STRATA_EXPANSIONS = (1.0, 2.0, 4.0, 8.0)  # nested rectangles: the change region, then scaled about its centre
+STRATA_SHARES = (0.6, 0.1, 0.1, 0.1, 0.1)  # rays per stratum (region, rings, rest): near Neyman, guided, bench scene
+BACKGROUND_MIN_SPP = 1 << 16  # stratified: rays per mixel (at least) for the background's whole-aperture value
+RETRY_FACTOR = 4  # a frame whose replicates are heavy-tailed is measured again with this many times the replicates
+FREEZE_ALLOWANCE = 6  # recordings of a run's frozen launch (passes x buffer addresses) before it must replay
+DEFAULT_REPLICATES = 8
+# per frame, kept with the results
+INFO_COLUMNS = ("retried", "guided", "guide_spheres", "region_area_fraction", "rays_per_mixel")
+Updates = Mapping[str, np.ndarray]
+
+
+class FallbackWarning(UserWarning):
+    """The stratified estimator could not bound a change (a moving emitter or light, an environment light, a
+    parameter of no shape) or guide its bounces, and fell back to a costlier, still unbiased, sampling."""
+
+
+class HeavyTailWarning(UserWarning):
+    """A measurement's replicates are dominated by one of them (a rare, heavy light path): its standard error is
+    itself uncertain. The frame was measured again with more replicates; this warns of what stayed so."""
+
+
+@dataclass(frozen=True)
+class ChangeSolver(Solver):
+    """A solver of changes against a background (world scenes).
+
+    Parameters
+    ----------
+    correlated : bool
+        True: each frame is traced with the background's seed (noise cancels in dP). False: independent seeds.
+    """
+
+    correlated: bool = True
+    scenes: ClassVar[tuple[str, ...]] = ("world",)
+    changes: ClassVar[bool] = True
+
+    def run(self, sim, frames, background, spp: int, seed: int, replicates: int, bg: np.ndarray) -> _Run:
+        """The per-frame machinery of one run at ``spp`` rays per pass (the background's estimates ``bg``)."""
+        raise NotImplementedError
+
+    def background_estimates(self, sim, spp: int, seed: int, replicates: int) -> tuple[int, np.ndarray]:
+        """(rays per mixel, (replicates, n_mixels) estimates) of the background, traced once per run."""
+        raise NotImplementedError
+
+    def plan(self, sim, frames, budget: Budget, *, background=None, cache=None, show_progress: bool = False) -> Plan:
+        background = {} if background is None else background
+        replicates = budget.replicates_or(DEFAULT_REPLICATES)
+        self._check(frames, background, budget.rays(), replicates, budget.target_rel_stderr)
+        background = sim.complete_background(frames, background)
+        spp, resolved = self._resolve_spp(sim, frames, background, budget, replicates)
+        return ChangePlan(self, sim, frames, background, spp, budget, replicates, resolved, show_progress)
+
+    def _check(self, frames, background, spp, replicates, target) -> None:
+        """Refuse, in one line each, what a change run cannot honestly measure."""
+        check_frames(frames, background)
+        try:
+            check_counts(spp, replicates)
+        except ValueError as exc:
+            raise InputError(str(exc)) from None
+        if int(spp) < replicates:
+            raise InputError(f"spp = {spp} rays per mixel per frame is fewer than the {replicates} replicates "
+                             "(each replicate needs rays of its own); raise spp or lower replicates")
+
+    def _resolve_spp(self, sim, frames, background, budget: Budget, replicates: int) -> tuple[int, dict]:
+        """The budget's rays, or (target > 0) the count the pilots extrapolate (:func:`.estimation.pilot_to_target`
+        on up to 4 frames spread over the run), with the pilots' trail."""
+        spp, target = budget.rays(), budget.target_rel_stderr
+        if not target > 0 or not len(frames):
+            return spp, {}
+        pilot_idx = np.unique(np.linspace(0, len(frames) - 1, min(4, len(frames))).astype(int))
+        pilot_frames = [frames[i] for i in pilot_idx]
+
+        def pilot(samples: int):
+            with warnings.catch_warnings():  # a pilot's fallbacks are said by the run itself
+                warnings.simplefilter("ignore", FallbackWarning)
+                warnings.simplefilter("ignore", HeavyTailWarning)
+                plan = ChangePlan(self, sim, pilot_frames, background, samples, budget, replicates, {}, False)
+                table = MemoryTable(plan.n_rows, len(plan.columns))
+                ch = plan.result(*collect(plan.rows(table.pending()), table))
+            return ch.dp.irradiance_w_m2, ch.dp.stderr_w_m2
+
+        resolved, trail = pilot_to_target(pilot, spp, target, MAX_SPP)
+        return int(resolved), {"pilot_spp": spp, "pilot_worst_rel_stderr": trail[0]["worst_rel_stderr"],
+                               "pilot_trail": trail, "target_rel_stderr": target}
+
+
+@dataclass(frozen=True)
+class PlainChange(ChangeSolver):
+    """dP with whole-aperture rays per frame, traced with the background's seed (the reference)."""
+
+    name: ClassVar[str] = "plain"
+
+    def background_estimates(self, sim, spp, seed, replicates):
+        return spp, sim.mincam_scene.fast_estimates(spp, replicates, seed)
+
+    def run(self, sim, frames, background, spp, seed, replicates, bg):
+        return _PlainRun(sim, background, spp, seed, self.correlated, replicates, bg)
+
+
+@dataclass(frozen=True)
+class StratifiedChange(ChangeSolver):
+    """dP with most rays in the aperture region the frame's moving shapes, their shadows and their mirror
+    images can reach; every stratum unbiased, frame and background paired ray by ray, bounces guided.
+
+    Parameters
+    ----------
+    strata_shares : sequence of float
+        Share of rays per stratum (region, each ring, rest), positive.
+    strata_expansions : sequence of float
+        Scale factors of the nested rectangles about the region's centre, from 1 (one fewer than the shares).
+    guide_bounces : bool
+        Draw half the inter-reflection bounces toward spheres around the moving shapes
+        (``mincam_sim.render.guided_path``; unbiased). Ignored at a ``max_depth`` the guided path does not cover.
+    correlated : bool
+        As :class:`ChangeSolver`.
+    """
+
+    strata_shares: Sequence[float] = STRATA_SHARES
+    strata_expansions: Sequence[float] = STRATA_EXPANSIONS
+    guide_bounces: bool = True
+    name: ClassVar[str] = "stratified"
+
+    def _check(self, frames, background, spp, replicates, target) -> None:
+        super()._check(frames, background, spp, replicates, target)
+        self.shares()
+
+    def shares(self) -> np.ndarray:
+        shares = np.asarray(self.strata_shares, dtype=float)
+        if shares.ndim != 1 or not np.all(np.isfinite(shares) & (shares > 0)):
+            raise InputError(f"strata_shares (share of rays per stratum) must be positive numbers, "
+                             f"got {self.strata_shares!r}")
+        return shares
+
+    def background_estimates(self, sim, spp, seed, replicates):
+        # traced once per run, P = background + dP: a jittered aperture, at least BACKGROUND_MIN_SPP rays
+        bg_spp = max(spp, BACKGROUND_MIN_SPP)
+        return bg_spp, whole_aperture_estimates(sim.scene, sim.sensor, sim.mincam, replicates, bg_spp,
+                                                derive_seed(seed, "background"))
+
+    def run(self, sim, frames, background, spp, seed, replicates, bg):
+        return _StratifiedRun(sim, frames, background, spp, seed, self.correlated, replicates, self.shares(),
+                              tuple(self.strata_expansions), bool(self.guide_bounces), bg)
+
+
+class ChangePlan(Plan):
+    """One change run at ``spp`` rays per pass: the background traced once, then a row per frame (dP and P per
+    mixel, then heavy-tailed and unseen flags per mixel and :data:`INFO_COLUMNS`)."""
+
+    def __init__(self, solver: ChangeSolver, sim, frames, background, spp: int, budget: Budget, replicates: int,
+                 resolved: dict, show_progress: bool) -> None:
+        self.solver, self.sim, self.frames, self.background = solver, sim, frames, background
+        self.spp, self.seed, self.replicates, self.resolved = int(spp), budget.seed, replicates, resolved
+        self.target, self.show_progress = budget.target_rel_stderr, show_progress
+        sim.update(background)
+        self.bg_spp, self.bg = solver.background_estimates(sim, self.spp, self.seed, replicates)
+        self.run = solver.run(sim, frames, background, self.spp, self.seed, replicates, self.bg)
+        self.run.note_delta_movers(moving_shapes([background, *frames]))
+        names = sim.mincam.names
+        self.n_rows = len(frames)
+        self.columns = ([f"dP_{m}" for m in names] + [f"P_{m}" for m in names]
+                        + [f"heavy_tailed_{m}" for m in names] + [f"unseen_{m}" for m in names] + list(INFO_COLUMNS))
+
+    def rows(self, pending: np.ndarray) -> Iterator[Row]:
+        # one row per frame: dP and P, then the flags and info (no standard error of their own)
+        for i, row_v, row_e, info in self.run.rows(self.frames, pending, self.show_progress):
+            yield [i], np.concatenate([row_v, info])[None], np.concatenate([row_e, np.zeros_like(info)])[None]
+
+    def result(self, values: np.ndarray, errors: np.ndarray) -> Changes:
+        """(dP, P) with the reached noise in their meta and the run's :class:`RunInfo`, the warnings said."""
+        sim, run, bg = self.sim, self.run, self.bg
+        sim.update(self.background)
+        n, names = len(sim.mincam), sim.mincam.names
+        meta = {"form": "fast_world", "estimator": self.solver.name, "solver": self.solver.name,
+                **run.meta(values[:, 2 * n:]),
+                "spp_per_mixel_per_frame": self.spp, "background_spp_per_mixel": int(self.bg_spp), "seed": self.seed,
+                "correlated_seeds": self.solver.correlated, "replicates": self.replicates,
+                "background_w_m2": bg.mean(0).tolist(), "masks": {m.name: mask_model_meta(m.mask) for m in sim.mincam},
+                "background_stderr_w_m2": (bg.std(0, ddof=1) / np.sqrt(self.replicates)).tolist(),
+                **backend.describe(), **geometry_meta(sim.mincam), **self.resolved}
+        reached = worst_relative_stderr(values[:, :n], errors[:, :n], significance=3.0)
+        meta["reached_rel_stderr"] = reached if np.isfinite(reached) else None
+        meta["target_rel_stderr"] = self.target
+        warn_target_missed(reached, self.target, self.spp, MAX_SPP)
+        run.warn(meta)
+        warn_unreached(Measurements(values[:, n:2 * n], errors[:, n:2 * n], names))
+        dp = Measurements(values[:, :n], errors[:, :n], names, {**meta, "quantity": "dP = P(frame) - P(background)"})
+        p = Measurements(values[:, n:2 * n], errors[:, n:2 * n], names, {**meta, "quantity": "P(frame)"})
+        info = RunInfo(
+            estimator=self.solver.name, seed=int(self.seed), replicates=int(self.replicates),
+            rays_per_mixel_per_frame=int(meta["rays_per_mixel_per_frame"]), spp_per_mixel_per_frame=self.spp,
+            target_rel_stderr=float(self.target), reached_rel_stderr=meta["reached_rel_stderr"],
+            retried_frames=tuple(int(i) for i in meta["retried_frames"]),
+            heavy_tailed=tuple((int(i), int(k)) for i, k in meta["heavy_tailed"]),
+            fallbacks=tuple(meta["fallbacks"]), guided_frames=meta.get("guided_frames"),
+            launches=meta.get("launches"))
+        return Changes(dp, p, info)
+
+
+def _unseen(diff: np.ndarray, changes: np.ndarray) -> np.ndarray:
+    """(n_mixels,) True where a frame changes a shape but every replicate of its dP is the same (no ray met it)."""
+    return changes & np.all(diff == diff[:1], axis=0)
+
+
+class _Run:
+    """The frames of one ``measure_changes`` run: per-frame replicate estimates, the heavy-tail check and its
+    retry, and what the run says about itself (per-frame info kept with the results, so that a resumed run
+    reports every frame; meta and warnings)."""
+
+    def __init__(self, sim, background: Updates, spp: int, seed: int, correlated: bool, replicates: int,
+                 bg: np.ndarray) -> None:
+        self.r, self.background, self.spp, self.seed, self.correlated = sim, background, spp, seed, correlated
+        self.replicates = replicates
+        self.bg = bg
+        self.fallbacks: dict[str, str] = {}
+
+    def note_delta_movers(self, moving) -> None:
+        """Say it when a moving shape is glass or a mirror (a delta BSDF): the light it redirects onto the rest of
+        the scene is found only by unguided delta bounces, and a run that draws none of those rare heavy paths
+        reports too small a sigma (on a glass block in view, ~10x in one run of 32), which no diagnostic inside
+        one run can see."""
+        mi = backend.mitsuba()
+        shapes = self.r.shapes_by_id
+        for name in sorted(moving):
+            bsdf = shapes[name].bsdf() if name in shapes else None
+            if bsdf is not None and int(bsdf.flags()) & int(mi.BSDFFlags.Delta):
+                self.fallbacks[f"delta:{name}"] = (
+                    f"'{name}' is glass or a mirror and moves: the light it refracts or reflects onto the scene is "
+                    "found only by unguided delta bounces, so one run's sigma can be too small when it draws none "
+                    "of those rare paths; raise the replicates or compare a few seeds")
+
+    def rows(self, frames, todo, show_progress: bool):
+        """(frame index, values, stderr, info) per frame of ``todo``: dP then P per mixel; then heavy-tailed and
+        unseen flags per mixel and :data:`INFO_COLUMNS`."""
+        n = len(self.r.mincam)
+        for i in progress(todo, desc="frames", disable=not show_progress):
+            i = int(i)
+            diff, frame_v, frame_e, changes, info = self.frame(frames, i, self.replicates, "")
+            retried = bool((heavy_tailed(diff) | _unseen(diff, changes)).any())
+            heavy = unseen = np.zeros(n, dtype=bool)
+            if retried:
+                diff, frame_v, frame_e, changes, _ = self.frame(frames, i, RETRY_FACTOR * self.replicates, "retry")
+                heavy, unseen = heavy_tailed(diff), _unseen(diff, changes)
+            reps = diff.shape[0]
+            row_v = np.concatenate([diff.mean(0), frame_v])
+            row_e = np.concatenate([diff.std(0, ddof=1) / np.sqrt(reps), frame_e])
+            yield i, row_v, row_e, np.concatenate([heavy, unseen, [retried, *info]]).astype(float)
+
+    def meta(self, info: np.ndarray) -> dict:
+        """What the run did, from the per-frame info of every frame (this process's and a resumed store's)."""
+        n = len(self.r.mincam)
+        done = np.all(np.isfinite(info), axis=1)
+        heavy, unseen, rest = info[:, :n] > 0, info[:, n:2 * n] > 0, info[:, 2 * n:]
+        return {"retried_frames": np.flatnonzero(done & (rest[:, 0] > 0)).tolist(), "retry_factor": RETRY_FACTOR,
+                "heavy_tailed": np.argwhere(done[:, None] & heavy).tolist(),
+                "no_ray_met_the_change": np.argwhere(done[:, None] & unseen).tolist(),
+                "fallbacks": sorted(self.fallbacks.values())}
+
+    def warn(self, meta: dict) -> None:
+        for message in sorted(self.fallbacks.values()):
+            warnings.warn(message, FallbackWarning, stacklevel=4)
+        heavy, unseen = meta["heavy_tailed"], meta["no_ray_met_the_change"]
+        if heavy or unseen:
+            where = heavy[:3] + unseen[:3]
+            warnings.warn(
+                f"{len(heavy)} value(s) stayed dominated by one replicate and {len(unseen)} saw no ray meet a change "
+                f"after {RETRY_FACTOR}x the replicates (first [frame, mixel]: {where}): a rare, heavy light path (a "
+                "mirror, glass, a small bright object far from the change region); their standard errors are "
+                "uncertain. Raise spp or replicates; see meta['heavy_tailed'], meta['no_ray_met_the_change']",
+                HeavyTailWarning, stacklevel=4)
+
+
+class _PlainRun(_Run):
+    """Whole-aperture rays for every frame, with the background's seed (the reference estimator)."""
+
+    def frame(self, frames, i: int, replicates: int, purpose: str):
+        r = self.r
+        frame_seed = self.seed if self.correlated else derive_seed(self.seed, "frame", i)
+        if purpose:
+            frame_seed = derive_seed(frame_seed, purpose, i)
+        spp = self.spp * replicates // self.replicates
+        r.update(self.background)
+        bg = (self.bg if replicates == self.replicates and not purpose
+              else r.mincam_scene.fast_estimates(spp, replicates, frame_seed))
+        r.update(frames[i])
+        est = r.mincam_scene.fast_estimates(spp, replicates, frame_seed)
+        changes = np.full(len(r.mincam), bool(changed_shapes(frames[i], self.background)))
+        info = (0.0, 0.0, 1.0, float(self.spp))  # not guided, no guide sphere, the whole aperture, its rays
+        return est - bg, est.mean(0), est.std(0, ddof=1) / np.sqrt(replicates), changes, info
+
+    def meta(self, info: np.ndarray) -> dict:
+        return {**super().meta(info), "rays_per_mixel_per_frame": int(self.spp)}
+
+
+class _StratifiedRun(_Run):
+    """Most rays in the aperture region the frame's change reaches; frame and background paired lane by lane."""
+
+    def __init__(self, sim, frames, background, spp, seed, correlated, replicates, shares, expansions, guided, bg):
+        super().__init__(sim, background, spp, seed, correlated, replicates, bg)
+        check_strata([1] * len(shares), expansions)
+        self.expansions, self.guided = expansions, guided
+        per_rep = -(-int(spp) // replicates)
+        self.counts = [max(1, int(round(per_rep * s / shares.sum()))) for s in shares]
+        self.moving = moving_shapes([background, *frames])
+        sim.update(background)
+        self.bg_regions = {}
+        for name in self.moving:
+            self.bg_regions[name], _, why = sim.change_reach([name])
+            for reason in why:
+                self.note_fallback(name, reason)
+        self.can_guide = guided and guided_path_supports(sim.mincam_scene.max_depth)
+        self.shapes = sim.shapes_by_id
+        self.bg_boxes = {name: watch_box(self.shapes[name]) for name in self.moving if name in self.shapes}
+        lights_move = emitters_among(sim.scene, self.moving)
+        # a path that crosses no moving shape's box (in either place) is the same path in both passes
+        self.pairs = (sim.pair_lanes and correlated and self.can_guide and not lights_move
+                      and set(self.bg_boxes) == self.moving)
+        self.freeze = sim.freeze_launches and not lights_move
+        self.launches = ("frozen" if self.freeze else
+                         "traced" + (": a moving shape emits light" if sim.freeze_launches else ""))
+        self.recordings_at_start = frozen_recordings(sim.scene)
+        self.frames_traced = 0
+        if guided and not self.can_guide:
+            self.fallbacks["depth"] = (f"bounces are not guided at max_depth {sim.mincam_scene.max_depth} (the "
+                                       "guided path covers 1 .. 5): rays follow Mitsuba's path")
+
+    def note_fallback(self, name: str, reason: str) -> None:
+        self.fallbacks.setdefault(name, f"{reason}; the stratified estimator samples the whole aperture and does not "
+                                        "guide bounces in frames that move it (unbiased, but about as noisy as the "
+                                        "plain estimator at the same rays)")
+
+    def frame(self, frames, i: int, replicates: int, purpose: str):
+        r = self.r
+        changed = changed_shapes(frames[i], self.background)
+        r.update({**self.background, **frames[i]})
+        regions, guide, why = r.change_reach(changed)
+        for reason in why:
+            self.note_fallback(next(iter(sorted(changed))), reason)
+        for name in changed:
+            regions = regions.union(self.bg_regions[name])
+        guide = guide if self.can_guide else None
+        frame_seed = (derive_seed(self.seed, "stratified") if self.correlated
+                      else derive_seed(self.seed, "stratified", i))
+        if purpose:
+            frame_seed = derive_seed(frame_seed, purpose, i)
+        kw = {"expansions": self.expansions, "guide": guide, "max_depth": r.mincam_scene.max_depth}
+        watch = None
+        if self.pairs and guide is not None:
+            watch = [watch_box(self.shapes[name]) for name in sorted(changed)]
+            watch += [self.bg_boxes[name] for name in sorted(changed)]
+        lanes = stratified_lanes(r.scene, r.sensor, r.mincam, regions, replicates, self.counts, frame_seed,
+                                 freeze=self._freeze_key(), watch=watch, **kw)
+        r.update(self.background)
+        bg_seed = frame_seed if self.correlated else derive_seed(self.seed, "stratified-background", i, purpose)
+        bg_lanes = stratified_lanes(r.scene, r.sensor, r.mincam, regions, replicates, self.counts, bg_seed,
+                                    freeze=self._freeze_key(), pair=lanes if watch is not None else None, **kw)
+        diff = lanes.estimates() - bg_lanes.estimates()
+        if not purpose:
+            self.frames_traced += 1
+            self._check_recordings()
+        info = (float(guide is not None), 0.0 if guide is None else float(len(guide)),
+                float(np.mean(regions.area_fraction())), (lanes.traced + bg_lanes.traced) / len(r.mincam))
+        if replicates == self.bg.shape[0]:
+            frame = self.bg + diff  # P(frame): the background traced once over the whole aperture, plus the change
+            frame_v, frame_e = frame.mean(0), frame.std(0, ddof=1) / np.sqrt(replicates)
+        else:  # the background and the change are independent estimates
+            frame_v = self.bg.mean(0) + diff.mean(0)
+            frame_e = np.hypot(self.bg.std(0, ddof=1) / np.sqrt(self.bg.shape[0]),
+                               diff.std(0, ddof=1) / np.sqrt(replicates))
+        changes = np.full(len(r.mincam), bool(changed))
+        return diff, frame_v, frame_e, changes, info
+
+    def _freeze_key(self) -> tuple | None:
+        return self.r.buffers_key() if self.freeze else None
+
+    def _check_recordings(self) -> None:
+        """Trace instead of replaying once the frozen launch keeps recording (the moving meshes' buffers land at
+        new addresses every frame, as large meshes' do): recording costs what tracing does, and replays
+        would never come."""
+        if not self.freeze:
+            return
+        recorded = frozen_recordings(self.r.scene) - self.recordings_at_start
+        if recorded > FREEZE_ALLOWANCE + self.frames_traced // 4:
+            self.freeze = False
+            self.launches = (f"traced from frame {self.frames_traced}: the frozen launch recorded {recorded} times "
+                             "(the moving shapes' buffers move in memory every frame)")
+
+    def meta(self, info: np.ndarray) -> dict:
+        counts, n = self.counts, len(self.r.mincam)
+        rest = info[np.all(np.isfinite(info), axis=1), 2 * n:]
+        full = self.replicates * sum(counts)  # the frame pass's rays per mixel; the background traces <= these
+        rays = float(rest[:, 4].mean()) if len(rest) else 2.0 * full
+        return {**super().meta(info), "strata_expansions": list(self.expansions), "strata_rays_per_replicate": counts,
+                "rays_per_mixel_per_frame": int(round(rays)),
+                "background_rays_share": (rays - full) / full,
+                "paired_lanes_reused": bool(self.pairs), "launches": self.launches,
+                "moving_shapes": sorted(self.moving), "guide_bounces": bool(self.guided),
+                "guided_frames": int(rest[:, 1].sum()),
+                "guide_spheres_per_frame": rest[:, 2].astype(int).tolist(),
+                "region_area_fraction_mean": float(rest[:, 3].mean()) if len(rest) else None}
+
+
+__all__ = ["BACKGROUND_MIN_SPP", "INFO_COLUMNS", "MAX_SPP", "RETRY_FACTOR", "STRATA_EXPANSIONS", "STRATA_SHARES",
+           "ChangePlan", "ChangeSolver", "FallbackWarning", "HeavyTailWarning", "PlainChange", "StratifiedChange"]

@@ -1,0 +1,136 @@
+"""The response-map solver: each mixel's map over the screen's texels (stratified, with its variance), then any
+frame is ``sum(W * frame)``, exact in expectation.
+
+The kernel (:class:`~mincam_sim.render.response_map.ResponseMaps`, the stratified tracer and its content cache)
+is ``mincam_sim.render.response_map``; this module plans a measurement with it: maps at the budget's samples
+per texel, or the quantised search for the samples per texel whose measurements of the frames reach the
+budget's target (:func:`maps_to_target`), then the frames measured through the maps chunk by chunk.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from ...budget import DEFAULT_SAMPLES_PER_TEXEL, Budget
+from ...measurements import Measurements
+from ...progress import progress
+from ..estimation import pilot_to_target
+from ..response_map import (
+    FIRST_SAMPLES_PER_TEXEL,
+    FRAME_CHUNK_BYTES,
+    MAX_SAMPLES_PER_TEXEL,
+    SEARCH_EXPONENT,
+    SEARCH_GROWTH,
+    MapSampling,
+    ResponseMaps,
+    response_maps,
+)
+from .base import Plan, Row, Solver, finish_display
+
+DEFAULT_MAP_BLOCKS = 4  # independent blocks of samples per texel
+FRAME_CHUNK = 64  # frames measured per row chunk (at most FRAME_CHUNK_BYTES of frame data)
+
+
+@dataclass(frozen=True)
+class ResponseMap(Solver):
+    """Per-mixel response maps over the screen's texels (stratified, with their variance); then any frame is
+    a dot product. Displays only; the budget's ``samples_per_texel`` or target sets the work."""
+
+    name: ClassVar[str] = "response_map"
+    scenes: ClassVar[tuple[str, ...]] = ("display",)
+
+    def maps(self, sim, budget: Budget, frames=None, cache=None, show_progress: bool = False):
+        """(maps, provenance): at the budget's samples per texel, or (a target and ``frames``) the search's."""
+        replicates = budget.replicates_or(DEFAULT_MAP_BLOCKS)
+        if budget.target_rel_stderr > 0 and frames is not None:
+            maps, trail = maps_to_target(sim, frames, budget.target_rel_stderr, budget.seed, MAX_SAMPLES_PER_TEXEL,
+                                         cache, show_progress, replicates)
+            return maps, {"budget_trail": trail}
+        return response_maps(sim.mincam, sim.screen, budget.samples_per_texel or DEFAULT_SAMPLES_PER_TEXEL,
+                             budget.seed, cache=cache, show_progress=show_progress, replicates=replicates), {}
+
+    def plan(self, sim, frames, budget: Budget, *, background=None, cache=None, show_progress: bool = False) -> Plan:
+        return MapPlan(self, sim, frames, budget, cache, show_progress)
+
+
+class MapPlan(Plan):
+    """Response maps (to the target noise, or at the budget's samples per texel); frames are then products
+    with them, a chunk at a time."""
+
+    def __init__(self, solver: ResponseMap, sim, frames, budget: Budget, cache, show_progress: bool) -> None:
+        self.solver, self.sim, self.show_progress = solver, sim, show_progress
+        self.frames, self.target = sim.frame_source(frames), budget.target_rel_stderr
+        self.replicates = budget.replicates_or(DEFAULT_MAP_BLOCKS)
+        self.maps, self.provenance = solver.maps(sim, budget, self.frames, cache, show_progress)
+        self.used = int(self.maps.meta["samples_per_texel"])
+        self.n_rows, self.columns = len(self.frames), list(sim.mincam.names)
+
+    def rows(self, pending: np.ndarray) -> Iterator[Row]:
+        step = max(1, min(FRAME_CHUNK, self.frames.chunk_size(FRAME_CHUNK_BYTES)))
+        batches = [pending[i : i + step] for i in range(0, len(pending), step)]
+        for idx in progress(batches, desc="response_map: frames", disable=not self.show_progress,
+                            total=len(batches), unit="chunk" if step > 1 else "frame"):
+            m = self.maps.measure_source(self.frames, idx, show_progress=False, desc="frames")
+            yield idx, m.irradiance_w_m2, m.stderr_w_m2
+
+    def result(self, values: np.ndarray, errors: np.ndarray) -> Measurements:
+        # 4 x 8^2 and 16 x 4^2 samples per texel are different maps: the replicates are part of the budget
+        budget = {"target_rel_stderr": self.target, "samples_per_texel": self.used, "replicates": self.replicates}
+        m = Measurements(values, errors, self.sim.mincam.names, {**self.maps.meta, **budget, **self.provenance})
+        m.maps = self.maps
+        return finish_display(m, self.solver, self.target, self.used, MAX_SAMPLES_PER_TEXEL)
+
+
+def maps_to_target(sim, frames, target_rel_stderr: float, seed: int = 0,
+                   max_samples_per_texel: int = MAX_SAMPLES_PER_TEXEL, cache=None, show_progress: bool = False,
+                   replicates: int = DEFAULT_MAP_BLOCKS) -> tuple[ResponseMaps, list[dict]]:
+    """Response maps whose measurements of ``frames`` all reach ``target_rel_stderr`` (if the cap allows).
+
+    The budget rule of every solver (``estimation.pilot_to_target``), fitted to maps: from 16 samples
+    per texel, each attempt's maps measure the frames and the count is extrapolated with the convergence rate
+    ``rel ~ n^-a`` measured on the last two attempts (``a`` in [0.5, 1.5]: stratified sampling converges
+    faster than ``n^-1/2``; 0.5 until two attempts exist), by 2x to 8x per step, and traced as ``replicates x
+    k^2`` (at least one stratum per axis more each step), until an attempt reaches the target or the cap.
+    Every attempt's maps go to ``cache`` (so a rerun or a resumed run repeats the search in milliseconds).
+    Returns the last attempt's maps and the trail of (samples_per_texel, worst relative stderr) tried.
+    """
+    frames = sim.frame_source(frames)
+
+    def trace(n: int) -> ResponseMaps:
+        return response_maps(sim.mincam, sim.screen, n, seed, cache=cache, show_progress=show_progress,
+                             replicates=replicates)
+
+    last: list = [None, None]  # (samples per texel, maps) of the latest attempt only: maps can be large
+
+    def measure(n: int):
+        last[:] = n, trace(n)
+        m = last[1].measure_source(frames, show_progress=show_progress, desc=f"target search ({n} samples/texel)")
+        return m.irradiance_w_m2, m.stderr_w_m2
+
+    first = MapSampling.of(max(FIRST_SAMPLES_PER_TEXEL, replicates), replicates).samples_per_texel
+    n, trail = pilot_to_target(measure, first, target_rel_stderr, max_samples_per_texel, significance=0.0,
+                               rounds=None, measured_exponent=SEARCH_EXPONENT, growth=SEARCH_GROWTH, unseen_growth=1,
+                               quantize=stratum_steps(replicates, max_samples_per_texel))
+    maps = last[1] if n == last[0] else trace(n)  # the quantised search ends on its latest attempt
+    return maps, [{"samples_per_texel": t["samples"], "worst_rel_stderr": t["worst_rel_stderr"]} for t in trail]
+
+
+def stratum_steps(replicates: int, cap: int):
+    """The search's quantisation: ``wanted`` samples per texel after maps of ``samples`` are traced as
+    ``replicates x k^2`` with at least one stratum per axis more (rounding 2x back down to the same ``k`` would
+    repeat an attempt forever), at most the cap's strata, never fewer than ``samples``."""
+    max_strata = max(1, int(np.sqrt(cap / replicates)))
+
+    def quantize(wanted: float, samples: int) -> int:
+        strata = int(round(np.sqrt(samples / replicates)))
+        strata = min(max_strata, max(strata + 1, int(np.sqrt(wanted / replicates))))
+        return max(samples, replicates * strata * strata)
+
+    return quantize
+
+
+__all__ = ["MapPlan", "ResponseMap", "ResponseMaps", "maps_to_target", "stratum_steps"]
