@@ -296,7 +296,7 @@ IDENTITY_KINDS: dict[str, IdentityKind] = {
     "study": IdentityKind(frozenset({"experiment", "dims", "points", "metrics", "seed", "replicates",
                                      "common_random_numbers", "quick"}), variant=False),
     # the one identity of a run (mincam_sim.run.Run): the scene, the solver, the requested budget, the frames
-    "run": IdentityKind(frozenset({"kind", "scene", "solver", "budget", "frames"})),
+    "run": IdentityKind(frozenset({"scene", "solver", "budget", "frames"})),
     # reproduce_identity.json (experiments.registry)
     "reproduce": IdentityKind(frozenset({"setup"})),
 }
@@ -400,6 +400,7 @@ __all__ = [
     "fingerprint",
     "frames_fingerprint",
     "library_versions",
+    "run_identity",
     "run_key",
     "scene_file_digests",
     "updates_fingerprint",
@@ -489,3 +490,11 @@ def scene_file_digests(path, _seen: dict | None = None) -> dict[str, str]:
             if names_a_file or candidate.is_file():
                 scene_file_digests(candidate, seen)
     return seen
+
+
+def run_identity(scene: Mapping, solver: Mapping, budget: Mapping, frames: Any, variant: str) -> dict:
+    """The one identity of a run (kind ``"run"``), from the simulation's :meth:`identity`, the solver's
+    :meth:`identity`, the budget as requested (:meth:`Budget.describe`), the frames' identity and the Mitsuba
+    variant; built by :class:`mincam_sim.run.Run` only."""
+    return build_identity("run", {"scene": scene, "solver": solver, "budget": budget, "frames": frames},
+                          variant=variant)

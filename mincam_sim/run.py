@@ -24,10 +24,11 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from . import identity
 from .budget import Budget
 from .changes import Changes
 from .errors import InputError
-from .identity import build_identity, run_key
+from .identity import run_key
 from .measurements import Measurements
 from .render.simulation import Simulation
 from .render.solvers import Solver
@@ -35,13 +36,11 @@ from .store import DirLock, StoreSink, check_identity, clear_store, lock_out_dir
 
 
 def run_identity(sim: Simulation, frames, solver: Solver, budget: Budget, background=None) -> dict:
-    """The one identity of a run: what determines its numbers (:func:`mincam_sim.identity.build_identity`, kind
-    ``"run"``)."""
+    """The one identity of a run: what determines its numbers (:func:`mincam_sim.identity.run_identity`)."""
     from .render import backend
 
-    parts = {"scene": sim.identity(), "solver": solver.identity(), "budget": budget.describe(),
-             "frames": sim.frames_identity(frames, background)}
-    return build_identity("run", parts, variant=backend.variant())
+    return identity.run_identity(sim.identity(), solver.identity(), budget.describe(),
+                                 sim.frames_identity(frames, background), backend.variant())
 
 
 class Run:

@@ -11,10 +11,12 @@ from pathlib import Path
 import numpy as np
 
 from ..budget import Budget
+from ..errors import InputError
 from ..frames import FrameSink
 from ..measurements import Measurements
 from ..optics import Mincam
 from ..scene.display import FrameSource, Screen
+from . import backend
 from .estimation import UnseenWarning, derive_seed
 from .estimation import worst_relative_stderr as _worst
 from .mincam_scene import geometry_meta
@@ -110,18 +112,17 @@ def render_frames(mincam: Mincam, screen: Screen, frames, form: str = "response_
     budget = Budget(spp=int(spp), samples_per_texel=int(samples_per_texel), target_rel_stderr=target_rel_stderr,
                     replicates=replicates, seed=int(seed))
     if out_dir is not None:
-        import warnings
-
-        from ..run import Run
-
-        warnings.warn("render_frames(out_dir=...) is deprecated and goes in the next release: keep results with "
-                      "`with mincam_sim.Run(out_dir) as run: run.measure(...)`", DeprecationWarning, stacklevel=2)
-        with Run(out_dir, overwrite=overwrite, show_progress=show_progress) as run:
-            m = run.measure(sim, frames, solver, budget, name="run")
-        return m, m.maps
+        raise InputError("out_dir= is gone: keep results with `with mincam_sim.Run(out_dir) as run: "
+                         "run.measure(...)` (or run.measure_changes)")
     if sink is not None and getattr(sink, "persistent", False) and getattr(sink, "identity", 0) is None:
-        from ..run import run_identity
-
-        sink.identity = run_identity(sim, frames, solver, budget)
+        sink.identity = _identity(sim, frames, solver, budget, None)
     m = sim.measure(frames, solver, budget, sink=sink, show_progress=show_progress)
     return m, m.maps
+
+
+def _identity(sim, frames, solver, budget, background) -> dict:
+    """TEMPORARY: the identity ``mincam_sim.run.Run`` builds, for an old caller's unidentified store sink."""
+    from ..identity import run_identity
+
+    return run_identity(sim.identity(), solver.identity(), budget.describe(), sim.frames_identity(frames, background),
+                        backend.variant())

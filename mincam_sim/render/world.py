@@ -16,6 +16,7 @@ from ..errors import InputError
 from ..frames import FrameSink
 from ..measurements import Measurements
 from ..optics import Mincam
+from . import backend
 from .mincam_scene import CAMERA_KEY, SENSOR_KEY
 from .simulation import Simulation, WorldParameters
 from .solvers import PlainChange, StratifiedChange
@@ -94,19 +95,17 @@ class WorldRenderer:
         budget = Budget(spp=int(spp), target_rel_stderr=float(target_rel_stderr), replicates=self.replicates,
                         seed=int(seed))
         if out_dir is not None:
-            import warnings
-
-            from ..run import Run
-
-            warnings.warn("WorldRenderer.measure_changes(out_dir=...) is deprecated and goes in the next release: "
-                          "keep results with `with mincam_sim.Run(out_dir) as run: run.measure_changes(...)`",
-                          DeprecationWarning, stacklevel=2)
-            with Run(out_dir, overwrite=overwrite, show_progress=show_progress) as run:
-                ch = run.measure_changes(self.sim, frames, background, solver, budget, name="run")
-            return ch.dp, ch.p
+            raise InputError("out_dir= is gone: keep results with `with mincam_sim.Run(out_dir) as run: "
+                             "run.measure(...)` (or run.measure_changes)")
         if sink is not None and getattr(sink, "persistent", False) and getattr(sink, "identity", 0) is None:
-            from ..run import run_identity
-
-            sink.identity = run_identity(self.sim, frames, solver, budget, background)
+            sink.identity = _identity(self.sim, frames, solver, budget, background)
         ch = self.sim.measure_changes(frames, background, solver, budget, sink=sink, show_progress=show_progress)
         return ch.dp, ch.p
+
+
+def _identity(sim, frames, solver, budget, background) -> dict:
+    """TEMPORARY: the identity ``mincam_sim.run.Run`` builds, for an old caller's unidentified store sink."""
+    from ..identity import run_identity
+
+    return run_identity(sim.identity(), solver.identity(), budget.describe(), sim.frames_identity(frames, background),
+                        backend.variant())
