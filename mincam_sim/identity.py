@@ -278,13 +278,6 @@ class IdentityKind:
 #: only (the kind itself is not stored, so that output directories written before this table existed still
 #: resume). Changing a kind's parts changes its identities: results stored before are then refused, never reused.
 IDENTITY_KINDS: dict[str, IdentityKind] = {
-    # per-frame store of render_frames (display scenes)
-    "display_frames": IdentityKind(frozenset({"form", "seed", "budget", "mincam", "screen", "frames"})),
-    # per-frame store of WorldRenderer.measure_changes (world scenes)
-    "world_changes": IdentityKind(
-        frozenset({"spp", "seed", "correlated", "replicates", "n_frames", "frames", "background", "mincam", "scene",
-                   "retry_factor"}),
-        frozenset({"estimator", "strata_shares", "strata_expansions", "guide_bounces"})),
     # identity.json of a render config's output directory (render_job)
     "render_config": IdentityKind(frozenset({"form", "seed", "budget", "mincam", "mixels", "masks", "screen",
                                              "frames"})),

@@ -22,8 +22,9 @@ from mincam_sim.errors import OutDirLockedError, StaleResultError, StoreError
 from mincam_sim.frames import MemorySink, collect
 from mincam_sim.identity import IDENTITY_KINDS, build_identity, run_key
 from mincam_sim.render import scene_dicts as sd
-from mincam_sim.render import screen_engine as se
-from mincam_sim.render import world as wr
+from mincam_sim.render.solvers import aperture, change
+from mincam_sim.render.solvers import response_map as rms
+from mincam_sim.render.updates import vertex_update
 from mincam_sim.render_job import config_identity, run_render_config
 from mincam_sim.scene.display import line_sweep
 
@@ -43,9 +44,13 @@ def _world(replicates: int = 4):
     box.apply_translation((0, 0, 0.025))
     elements = {"table": sd.textured_plane(np.full((4, 4), 0.5), 1.0, 1.0, ms.Pose((0, 0, 0), (0, 0, 1)).matrix()),
                 "sky": sd.sky(2.0), "box": sd.mesh_object("box", box.vertices + PARK, box.faces, 0.9)}
-    world = wr.WorldRenderer(cam, elements, replicates=replicates)
-    frames = [wr.vertex_update("box", box.vertices + [x, 0.02, 0.0]) for x in (-0.08, 0.08)]
-    return world, frames, wr.vertex_update("box", box.vertices + PARK), box
+    world = ms.Simulation(cam, world=elements)
+    frames = [vertex_update("box", box.vertices + [x, 0.02, 0.0]) for x in (-0.08, 0.08)]
+    return world, frames, vertex_update("box", box.vertices + PARK), box
+
+
+def _plain(spp: int, seed: int = 0, replicates: int = 4):
+    return ms.PlainChange(), ms.Budget(spp=spp, seed=seed, replicates=replicates)
 
 
 @pytest.fixture(scope="module")
@@ -86,13 +91,23 @@ def _forbid_files(monkeypatch, tmp_path):
     monkeypatch.chdir(tmp_path)
 
 
-@pytest.mark.parametrize("form", ["response_map", "fast"])
-def test_a_display_solver_run_without_a_sink_writes_no_file(form, tmp_path, monkeypatch):
-    kw = {"spp": 1 << 10, "samples_per_texel": 16, "seed": 1}
-    reference, _ = se.render_frames(ms.pair_layout(), SCREEN, _frames(), form, **kw)  # plugins loaded, kernels built
+def _no_identity(monkeypatch):
+    """An in-memory run builds no identity: the builder fails the test."""
+    def refuse(*args, **kwargs):
+        raise AssertionError("an in-memory run built an identity")
+
+    for name in ("build_identity", "run_identity", "display_frames_identity", "scene_file_digests"):
+        monkeypatch.setattr(idm, name, refuse)
+
+
+@pytest.mark.parametrize("solver", [ms.ResponseMap(), ms.Aperture()], ids=["response_map", "aperture"])
+def test_a_display_solver_run_without_a_sink_writes_no_file(solver, tmp_path, monkeypatch):
+    budget = ms.Budget(spp=1 << 10, samples_per_texel=16, seed=1)
+    reference = ms.Simulation(ms.pair_layout(), screen=SCREEN).measure(_frames(), solver, budget)  # kernels built
     _forbid_files(monkeypatch, tmp_path)
-    m, _ = se.render_frames(ms.pair_layout(), SCREEN, _frames(), form, **kw)
-    m2, _ = se.render_frames(ms.pair_layout(), SCREEN, _frames(), form, sink=MemorySink(), **kw)
+    _no_identity(monkeypatch)
+    m = ms.Simulation(ms.pair_layout(), screen=SCREEN).measure(_frames(), solver, budget)
+    m2 = ms.Simulation(ms.pair_layout(), screen=SCREEN).measure(_frames(), solver, budget, sink=MemorySink())
     monkeypatch.undo()
     assert list(tmp_path.iterdir()) == []
     np.testing.assert_array_equal(m.irradiance_w_m2, reference.irradiance_w_m2)
@@ -101,12 +116,13 @@ def test_a_display_solver_run_without_a_sink_writes_no_file(form, tmp_path, monk
 
 def test_a_world_solver_run_without_a_sink_writes_no_file(world_parts, tmp_path, monkeypatch):
     world, frames, background, _ = world_parts
-    reference, _ = world.measure_changes(frames, background, spp=1 << 10, seed=2)
+    reference = world.measure_changes(frames, background, *_plain(1 << 10, 2))
     _forbid_files(monkeypatch, tmp_path)
-    dp, _ = world.measure_changes(frames, background, spp=1 << 10, seed=2)
+    _no_identity(monkeypatch)
+    ch = world.measure_changes(frames, background, *_plain(1 << 10, 2))
     monkeypatch.undo()
     assert list(tmp_path.iterdir()) == []
-    np.testing.assert_array_equal(dp.irradiance_w_m2, reference.irradiance_w_m2)
+    np.testing.assert_array_equal(ch.dp.irradiance_w_m2, reference.dp.irradiance_w_m2)
 
 
 # ------------------------------------------------------------------------------------ resume through ms.Run
@@ -117,7 +133,7 @@ def test_display_run_killed_mid_run_resumes_through_run_with_the_same_numbers(tm
     frames, budget = _frames(5), ms.Budget(spp=1 << 10, seed=3)
     reference = sim.measure(frames, ms.Aperture(), budget)
     calls = []
-    original = se.ScreenRenderer.render
+    original = aperture.Aperture.estimates
 
     def dying(self, *args, **kwargs):
         calls.append(1)
@@ -125,7 +141,7 @@ def test_display_run_killed_mid_run_resumes_through_run_with_the_same_numbers(tm
             raise KeyboardInterrupt  # killed while measuring the third frame
         return original(self, *args, **kwargs)
 
-    monkeypatch.setattr(se.ScreenRenderer, "render", dying)
+    monkeypatch.setattr(aperture.Aperture, "estimates", dying)
     with pytest.raises(KeyboardInterrupt), ms.Run(tmp_path) as run:
         run.measure(sim, frames, ms.Aperture(), budget)
     assert np.load(tmp_path / "measurements" / "done.npy").tolist() == [True, True, False, False, False]
@@ -135,7 +151,7 @@ def test_display_run_killed_mid_run_resumes_through_run_with_the_same_numbers(tm
         calls.append(1)
         return original(self, *args, **kwargs)
 
-    monkeypatch.setattr(se.ScreenRenderer, "render", counting)
+    monkeypatch.setattr(aperture.Aperture, "estimates", counting)
     with ms.Run(tmp_path) as run:
         resumed = run.measure(sim, frames, ms.Aperture(), budget)
     assert len(calls) == 3  # only the frames the killed run did not finish
@@ -145,9 +161,9 @@ def test_display_run_killed_mid_run_resumes_through_run_with_the_same_numbers(tm
 
 def test_world_run_killed_mid_run_resumes_through_run_with_the_same_numbers(world_parts, tmp_path, monkeypatch):
     world, frames, background, box = world_parts
-    frames = [*frames, wr.vertex_update("box", box.vertices + [0.0, -0.05, 0.0])]
-    reference, ref_p = world.measure_changes(frames, background, spp=1 << 10, seed=4)
-    original = wr._PlainRun.frame
+    frames = [*frames, vertex_update("box", box.vertices + [0.0, -0.05, 0.0])]
+    reference = world.measure_changes(frames, background, *_plain(1 << 10, 4))
+    original = change._PlainRun.frame
     calls = []
 
     kill = [True]
@@ -158,18 +174,39 @@ def test_world_run_killed_mid_run_resumes_through_run_with_the_same_numbers(worl
             raise KeyboardInterrupt  # killed while measuring the last frame
         return original(self, frames_, i, replicates, purpose)
 
-    monkeypatch.setattr(wr._PlainRun, "frame", dying)
+    monkeypatch.setattr(change._PlainRun, "frame", dying)
     with pytest.raises(KeyboardInterrupt), ms.Run(tmp_path) as run:
-        world.measure_changes(frames, background, spp=1 << 10, seed=4, sink=run.sink("changes"))
+        run.measure_changes(world, frames, background, *_plain(1 << 10, 4), name="changes")
     assert np.load(tmp_path / "changes" / "done.npy").tolist() == [True, True, False]
     calls.clear()
     kill[0] = False
     with ms.Run(tmp_path) as run:
-        dp, p = world.measure_changes(frames, background, spp=1 << 10, seed=4, sink=run.sink("changes"))
+        ch = run.measure_changes(world, frames, background, *_plain(1 << 10, 4), name="changes")
     assert set(calls) == {2}  # only the frame the killed run did not finish
-    np.testing.assert_array_equal(dp.irradiance_w_m2, reference.irradiance_w_m2)
-    np.testing.assert_array_equal(dp.stderr_w_m2, reference.stderr_w_m2)
-    np.testing.assert_array_equal(p.irradiance_w_m2, ref_p.irradiance_w_m2)
+    np.testing.assert_array_equal(ch.dp.irradiance_w_m2, reference.dp.irradiance_w_m2)
+    np.testing.assert_array_equal(ch.dp.stderr_w_m2, reference.dp.stderr_w_m2)
+    np.testing.assert_array_equal(ch.p.irradiance_w_m2, reference.p.irradiance_w_m2)
+    assert ch.info == reference.info
+
+
+def test_a_finished_run_is_returned_without_rendering(world_parts, tmp_path, monkeypatch):
+    world, frames, background, _ = world_parts
+    sim = ms.Simulation(ms.pair_layout(), screen=SCREEN)
+    with ms.Run(tmp_path) as run:
+        m = run.measure(sim, _frames(2), ms.Aperture(), ms.Budget(spp=1 << 10))
+        ch = run.measure_changes(world, frames, background, *_plain(1 << 10), name="changes")
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("a finished run was planned again")
+
+    for solver in (ms.Aperture, ms.PlainChange):
+        monkeypatch.setattr(solver, "plan", refuse)
+    with ms.Run(tmp_path) as run:
+        again = run.measure(sim, _frames(2), ms.Aperture(), ms.Budget(spp=1 << 10))
+        ch_again = run.measure_changes(world, frames, background, *_plain(1 << 10), name="changes")
+    np.testing.assert_array_equal(again.irradiance_w_m2, m.irradiance_w_m2)
+    np.testing.assert_array_equal(ch_again.dp.stderr_w_m2, ch.dp.stderr_w_m2)
+    assert ch_again.info == ch.info and again.meta["identity_key"] == m.meta["identity_key"]
 
 
 # ----------------------------------------------------------------------------------- one lock, one store
@@ -192,7 +229,7 @@ def test_a_run_with_several_stores_has_one_lock_file(world_parts, tmp_path):
     sim = ms.Simulation(ms.pair_layout(), screen=SCREEN)
     with ms.Run(tmp_path) as run:
         run.measure(sim, _frames(2), ms.ResponseMap(), ms.Budget(samples_per_texel=16), name="display")
-        world.measure_changes(frames, background, spp=1 << 10, sink=run.sink("world"))
+        run.measure_changes(world, frames, background, *_plain(1 << 10), name="world")
     assert sorted(tmp_path.rglob(store.LOCK_NAME)) == [tmp_path / store.LOCK_NAME]
     assert {p.parent.name for p in tmp_path.rglob("run.json")} == {"display", "world"}
 
@@ -226,12 +263,14 @@ def test_a_store_inside_a_run_another_process_holds_is_refused(tmp_path):
 
 def test_a_sink_needs_the_runs_lock_held_and_over_its_directory(tmp_path):
     with ms.Run(tmp_path / "a") as run:
-        sink = run.sink("x")
+        sink = run.sink("x", {"seed": 0})
         assert sink.lock is run._lock
         with pytest.raises(StoreError, match="does not cover"):
-            store.StoreSink(tmp_path / "b", lock=run._lock)
+            store.StoreSink(tmp_path / "b", {"seed": 0}, lock=run._lock)
+        with pytest.raises(StoreError, match="identified run"):
+            run.sink("y").open(2, ["a"])
     with pytest.raises(StoreError, match="not held"):
-        sink.open({"seed": 0}, 2, ["a"])
+        sink.open(2, ["a"])
     with pytest.raises(ms.InputError, match="with-block"):
         ms.Run(tmp_path / "a").sink("x")
 
@@ -256,7 +295,7 @@ def test_a_changed_identity_refuses_through_run_and_overwrite_replaces(tmp_path)
 
 def test_a_changed_config_refuses_before_anything_is_traced(tmp_path, monkeypatch):
     run_render_config(_small_config(tmp_path))
-    monkeypatch.setattr(se, "response_maps", lambda *a, **k: pytest.fail("traced although refused"))
+    monkeypatch.setattr(rms, "response_maps", lambda *a, **k: pytest.fail("traced although refused"))
     with pytest.raises(StaleResultError, match="seed"):
         run_render_config(_small_config(tmp_path, seed=7))
 
@@ -265,8 +304,7 @@ def test_a_changed_config_refuses_before_anything_is_traced(tmp_path, monkeypatc
 
 
 def test_every_identity_goes_through_the_builder_and_it_checks_its_kind():
-    assert set(IDENTITY_KINDS) == {"display_frames", "world_changes", "render_config", "world_config", "design",
-                                   "study", "reproduce"}
+    assert set(IDENTITY_KINDS) == {"run", "render_config", "world_config", "design", "study", "reproduce"}
     with pytest.raises(ValueError, match="unknown identity kind"):
         build_identity("nope", {})
     with pytest.raises(ValueError, match=r"missing \['files'\], unknown \['path'\]"):
@@ -286,15 +324,16 @@ def test_no_module_builds_versions_into_an_identity_by_hand():
     assert users == ["mincam_sim/identity.py", "mincam_sim/render/response_map.py"]
 
 
-# Keys of identities as the code before the single builder wrote them (library versions pinned): a store
-# written then must resume now, so these must not move unless a kind's parts change on purpose (then a store of
-# the old kind is refused, never reused).
+# Keys of the one identity of a run (kind "run", built by Run; library versions pinned), recorded when Run became
+# the only place that builds it: a store written since must resume, so these must not move unless the identity's
+# parts change on purpose (then an older store is refused, naming what changed, never reused). The per-solver
+# identities written before (kinds "display_frames", "world_changes") are gone: their stores are refused.
 GOLDEN_KEYS = {
-    "display_rm": "0dc757443d78616a3bd4fcd050f95406",
-    "display_rm_target": "be4a023c7ac2c649065140e13110d915",
-    "display_fast": "c564cb1c24b8af75f08d9c52626624e9",
-    "world_plain": "f7def8e95b6591ea30d8e00ee572b5ba",
-    "world_stratified": "0ed0f7efa3a4b1e2cee826151dbdf959",
+    "display_rm": "2f2028886793cdbd1ce88483ad13a6e0",
+    "display_rm_target": "aa7382ca74eb14c902caab7b5e4c9e37",
+    "display_fast": "096a222e4881e3ab415ddb1842fe3056",
+    "world_plain": "5d21991a8868c834471508e43e10cb74",
+    "world_stratified": "c598b323d14275114ecffbc9956f4351",
     "render_config": "f643a51f149a87831f372662a32eda53",
     "render_config_fast": "e7520306e0695c9b310545f3377ddb0e",
 }
@@ -328,11 +367,11 @@ def test_display_identities_equal_those_of_stores_written_before(pinned_versions
 
 def test_world_identities_equal_those_of_stores_written_before(pinned_versions, world_parts, tmp_path):
     world, frames, background, _ = world_parts
+    budget = ms.Budget(spp=1 << 10, seed=5, replicates=4)
     with ms.Run(tmp_path) as run:
-        for est in ("plain", "stratified"):
-            with pytest.warns(wr.FallbackWarning) if est == "stratified" else _nothing():
-                world.measure_changes(frames, background, spp=1 << 10, seed=5, estimator=est,
-                                      sink=run.sink(f"world_{est}"))
+        for est, solver in (("plain", ms.PlainChange()), ("stratified", ms.StratifiedChange())):
+            with pytest.warns(change.FallbackWarning) if est == "stratified" else _nothing():
+                run.measure_changes(world, frames, background, solver, budget, name=f"world_{est}")
     for est in ("plain", "stratified"):
         assert run_key(_stored_identity(tmp_path / f"world_{est}")) == GOLDEN_KEYS[f"world_{est}"], est
 
@@ -382,19 +421,10 @@ def test_collect_writes_every_row_and_closes_the_table_on_an_error():
     assert table.written == [0] and table.closed
 
 
-def test_the_deprecated_out_dir_still_keeps_resumable_results(tmp_path):
-    frames = _frames(3)
-    with pytest.warns(DeprecationWarning, match=r"render_frames\(out_dir=...\) is deprecated.*mincam_sim.Run"):
-        a, _ = se.render_frames(ms.pair_layout(), SCREEN, frames, samples_per_texel=16, out_dir=tmp_path)
-    assert (tmp_path / "run.json").is_file() and np.load(tmp_path / "done.npy").all()
-    with pytest.warns(DeprecationWarning):
-        b, _ = se.render_frames(ms.pair_layout(), SCREEN, frames, samples_per_texel=16, out_dir=tmp_path)
-    np.testing.assert_array_equal(a.irradiance_w_m2, b.irradiance_w_m2)
-    with ms.Run(tmp_path / "r") as run, pytest.raises(ms.InputError, match="not both"):
-        se.render_frames(ms.pair_layout(), SCREEN, frames, out_dir=tmp_path, sink=run.sink("x"))
+def test_out_dir_is_gone_and_a_store_needs_the_runs_identity(tmp_path):
     sim = ms.Simulation(ms.pair_layout(), screen=SCREEN)
-    with pytest.warns(DeprecationWarning, match=r"Simulation.measure\(out_dir=...\)") as said:
-        c = sim.measure(frames, ms.ResponseMap(), ms.Budget(samples_per_texel=16), out_dir=tmp_path / "s")
-    assert said[0].filename == __file__  # said at the caller's line
-    np.testing.assert_array_equal(c.irradiance_w_m2, a.irradiance_w_m2)
-    assert sorted(p.name for p in (tmp_path / "s").glob(".mincam.lock")) == [".mincam.lock"]
+    with pytest.raises(TypeError, match="out_dir"):
+        sim.measure(_frames(2), ms.ResponseMap(), ms.Budget(samples_per_texel=16), out_dir=tmp_path)
+    with ms.Run(tmp_path) as run, pytest.raises(StoreError, match="identified run"):
+        sim.measure(_frames(2), ms.Aperture(), ms.Budget(spp=1 << 10), sink=run.sink("x"))
+    assert not (tmp_path / "x").exists()

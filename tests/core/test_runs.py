@@ -6,10 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import mincam_sim as ms
 from mincam_sim import Mincam, Mixel, Pose, Screen, masks, pair_layout
 from mincam_sim.errors import StaleResultError
 from mincam_sim.render import response_map as rm
-from mincam_sim.render.screen_engine import UnseenWarning, render_frames
+from mincam_sim.render.estimation import UnseenWarning
 from mincam_sim.run import Run
 from mincam_sim.scene.display import FrameSource, line_sweep
 
@@ -22,12 +23,18 @@ def _sinusoid_cam(phase_rad: float) -> Mincam:
                                                   name="x")))
 
 
-def _render(mincam, screen, frames, form="response_map", out_dir=None, overwrite=False, **kw):
-    """render_frames, its rows kept in ``out_dir/run`` by a Run when ``out_dir`` is given."""
+SOLVERS = {"response_map": ms.ResponseMap, "fast": ms.Aperture}
+
+
+def _render(mincam, screen, frames, form="response_map", out_dir=None, overwrite=False, spp=None,
+            samples_per_texel=None, **kw):
+    """``Simulation.measure``, kept in ``out_dir/run`` by a Run when ``out_dir`` is given."""
+    sim, solver = ms.Simulation(mincam, screen=screen), SOLVERS[form]()
+    budget = ms.Budget(spp=spp, samples_per_texel=samples_per_texel, **kw)
     if out_dir is None:
-        return render_frames(mincam, screen, frames, form, **kw)
+        return sim.measure(frames, solver, budget)
     with Run(out_dir, overwrite=overwrite) as run:
-        return render_frames(mincam, screen, frames, form, sink=run.sink("run"), **kw)
+        return run.measure(sim, frames, solver, budget, name="run")
 
 
 def _frames(n: int = 6) -> np.ndarray:
@@ -41,8 +48,8 @@ def test_changed_mask_content_is_refused_not_reused(form, tmp_path):
     _render(_sinusoid_cam(0.0), SCREEN, _frames(), form, **kw)
     with pytest.raises(StaleResultError, match=r"different run.*mincam.*--overwrite|different run.*overwrite"):
         _render(_sinusoid_cam(1.0), SCREEN, _frames(), form, **kw)
-    fresh, _ = _render(_sinusoid_cam(1.0), SCREEN, _frames(), form, **{**kw, "out_dir": None})
-    replaced, _ = _render(_sinusoid_cam(1.0), SCREEN, _frames(), form, overwrite=True, **kw)
+    fresh = _render(_sinusoid_cam(1.0), SCREEN, _frames(), form, **{**kw, "out_dir": None})
+    replaced = _render(_sinusoid_cam(1.0), SCREEN, _frames(), form, overwrite=True, **kw)
     np.testing.assert_array_equal(replaced.irradiance_w_m2, fresh.irradiance_w_m2)
 
 
@@ -57,20 +64,21 @@ def test_changed_frame_content_is_refused(tmp_path):
 def test_rerun_with_target_noise_reuses_cached_maps(tmp_path, monkeypatch):
     """The README's example twice: the second run finds its maps in the content cache and traces nothing."""
     cam, frames = pair_layout(), _frames()
-    first, _ = _render(cam, SCREEN, frames, target_rel_stderr=3e-3, seed=2, out_dir=tmp_path)
+    first = _render(cam, SCREEN, frames, target_rel_stderr=3e-3, seed=2, out_dir=tmp_path)
 
     def no_tracing(*args, **kwargs):
         raise AssertionError("maps were traced again although they are cached")
 
     monkeypatch.setattr(rm, "RayWeight", no_tracing)
-    second, _ = _render(cam, SCREEN, frames, target_rel_stderr=3e-3, seed=2, out_dir=tmp_path)
+    (tmp_path / "run.npz").unlink()  # not the finished result: the store resumes and the maps come from the cache
+    second = _render(cam, SCREEN, frames, target_rel_stderr=3e-3, seed=2, out_dir=tmp_path)
     np.testing.assert_array_equal(first.irradiance_w_m2, second.irradiance_w_m2)
     assert second.meta["samples_per_texel"] == first.meta["samples_per_texel"]
 
 
 def test_killed_map_tracing_resumes_mixel_by_mixel(tmp_path, monkeypatch):
     cam, frames = _sinusoid_cam(0.3), _frames()
-    reference, _ = _render(cam, SCREEN, frames, samples_per_texel=16, seed=4)
+    reference = _render(cam, SCREEN, frames, samples_per_texel=16, seed=4)
     original_put = rm.ContentCache.put
     calls = []
 
@@ -92,7 +100,7 @@ def test_killed_map_tracing_resumes_mixel_by_mixel(tmp_path, monkeypatch):
         return original_eval(mixel)
 
     monkeypatch.setattr(rm, "RayWeight", counting_eval)
-    resumed, _ = _render(cam, SCREEN, frames, samples_per_texel=16, seed=4, out_dir=tmp_path)
+    resumed = _render(cam, SCREEN, frames, samples_per_texel=16, seed=4, out_dir=tmp_path)
     assert traced == [cam[1].mask.name]  # only the mixel whose map was not stored
     np.testing.assert_array_equal(resumed.irradiance_w_m2, reference.irradiance_w_m2)
 
@@ -101,9 +109,8 @@ def test_streamed_frames_equal_the_stack(tmp_path):
     sweep = line_sweep((-0.2, -0.05), (0.2, 0.05), 40, 0.04)
     source = sweep.frame_source(SCREEN)
     assert isinstance(source, FrameSource) and source.shape == (40, *SCREEN.shape)
-    stacked, _ = _render(pair_layout(), SCREEN, sweep.frame_stack(SCREEN), samples_per_texel=16, seed=5)
-    streamed, _ = _render(pair_layout(), SCREEN, source, samples_per_texel=16, seed=5, out_dir=tmp_path,
-                                chunk=7)
+    stacked = _render(pair_layout(), SCREEN, sweep.frame_stack(SCREEN), samples_per_texel=16, seed=5)
+    streamed = _render(pair_layout(), SCREEN, source, samples_per_texel=16, seed=5, out_dir=tmp_path)
     np.testing.assert_array_equal(stacked.irradiance_w_m2, streamed.irradiance_w_m2)
     np.testing.assert_array_equal(stacked.stderr_w_m2, streamed.stderr_w_m2)
 
@@ -112,5 +119,5 @@ def test_a_measurement_no_sample_reached_warns():
     dark = np.zeros((2, *SCREEN.shape))
     dark[1] = 1.0
     with pytest.warns(UnseenWarning, match="not seen"):
-        m, _ = _render(pair_layout(), SCREEN, dark, samples_per_texel=16)
+        m = _render(pair_layout(), SCREEN, dark, samples_per_texel=16)
     assert np.all(m.irradiance_w_m2[0] == 0)
