@@ -8,11 +8,12 @@ import numpy as np
 import pytest
 from conftest import Z, assert_close_mc
 
+import mincam_sim as ms
 from mincam_sim import Mincam, Mixel, Pose, Screen, masks
 from mincam_sim.geometry import look_at
 from mincam_sim.masks import Mask
 from mincam_sim.quadrature import mixel_irradiance_gl, open_aperture_view_factor_irradiance
-from mincam_sim.render.screen_engine import ScreenRenderer, response_maps
+from mincam_sim.render.response_map import response_maps  # the map kernel
 from mincam_sim.scene.display import coverage
 
 TILT_SCREEN = Screen(width_m=0.4, height_m=0.3, resolution=(80, 60),
@@ -24,6 +25,17 @@ def _tilted_mixel(mask: Mask) -> Mixel:
     """A mixel off the axis, tilted to look at the square on the rotated screen."""
     target = TILT_SCREEN.to_world(0.055, 0.035)
     return Mixel(mask, pose=look_at((0.05, -0.02, 0.0), tuple(target), (0, 1, 0)), name="tilted")
+
+
+SOLVERS = {"fast": ms.Aperture(), "reference": ms.Reference()}
+
+
+def _render(cam: Mincam, screen: Screen, form: str, frames, spp: int, seed: int, replicates: int):
+    """The aperture ("fast") or reference solver's measurements of ``frames`` (one frame or a list)."""
+    frames = np.asarray(frames)
+    budget = ms.Budget(spp=spp, replicates=replicates, seed=seed)
+    return ms.Simulation(cam, screen=screen).measure(frames if frames.ndim == 3 else frames[None], SOLVERS[form],
+                                                     budget)
 
 
 def _square_frame(screen: Screen, region=SQUARE_M, radiance: float = 1.0) -> np.ndarray:
@@ -53,7 +65,7 @@ def test_fast_and_reference_unbiased_on_coupled_geometry():
     expected = mixel_irradiance_gl(mixel, TILT_SCREEN, SQUARE_M, 2.0, n_detector=8, n_screen=24)
     frame = _square_frame(TILT_SCREEN, radiance=2.0)
     for form, spp in (("fast", 1 << 22), ("reference", 1 << 22)):
-        m = ScreenRenderer(cam, TILT_SCREEN, form, replicates=16).render(frame, spp=spp, seed=6)
+        m = _render(cam, TILT_SCREEN, form, frame, spp, 6, 16)
         assert m.stderr_w_m2[0, 0] / expected < 0.02
         assert_close_mc(m.irradiance_w_m2[0, 0], expected, m.stderr_w_m2[0, 0], what=f"{form} vs quadrature")
 
@@ -110,7 +122,7 @@ def test_mixels_shadow_each_other(form):
         m = response_maps(cam, FRONT_SCREEN, samples_per_texel=16, seed=3).measure(frame)
     else:
         spp = 1 << 20 if form == "fast" else 1 << 23
-        m = ScreenRenderer(cam, FRONT_SCREEN, form, replicates=16).render(frame, spp=spp, seed=3)
+        m = _render(cam, FRONT_SCREEN, form, frame, spp, 3, 16)
     value, sigma = m.irradiance_w_m2[0, 0], m.stderr_w_m2[0, 0]
     assert sigma / expected < 1e-3, f"{form}: sigma {sigma / expected:.1e} too large"
     assert_close_mc(value, expected, sigma, what=f"{form}: shadowed mixel vs view-factor oracle")
@@ -124,8 +136,7 @@ def test_reference_form_has_no_ray_offset_bias_near_an_occluder():
     -0.25 % (5.9 sigma at this sample count); the millimetre scene around each mixel must not."""
     cam = _shadowing_pair()
     expected, _ = _shadow_oracle(cam, 2.0)
-    m = ScreenRenderer(cam, FRONT_SCREEN, "reference", replicates=16).render(
-        np.full(FRONT_SCREEN.shape, 2.0), spp=1 << 25, seed=11)
+    m = _render(cam, FRONT_SCREEN, "reference", np.full(FRONT_SCREEN.shape, 2.0), 1 << 25, 11, 16)
     value, sigma = m.irradiance_w_m2[0, 0], m.stderr_w_m2[0, 0]
     assert sigma / expected < 4e-4
     assert_close_mc(value, expected, sigma, what="reference near an occluder")
@@ -171,11 +182,10 @@ def test_analytic_masks_are_exact_where_textures_lose_contrast():
 def test_fast_and_reference_sigma_match_spread_over_seeds(form):
     """The replicate standard error of the ray-traced forms equals the spread over independent seeds."""
     cam = Mincam((_tilted_mixel(SINUSOID_30),))
-    renderer = ScreenRenderer(cam, TILT_SCREEN, form, replicates=8)
     frames = [_square_frame(TILT_SCREEN, radiance=2.0), _square_frame(TILT_SCREEN, (0.0, 0.1, -0.05, 0.1))]
     values, sigmas = [], []
     for seed in range(10):
-        m = renderer.render(frames, spp=1 << 14, seed=200 + seed)
+        m = _render(cam, TILT_SCREEN, form, frames, 1 << 14, 200 + seed, 8)
         values.append(m.irradiance_w_m2[:, 0])
         sigmas.append(m.stderr_w_m2[:, 0])
     values, sigmas = np.array(values), np.array(sigmas)

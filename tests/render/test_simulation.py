@@ -12,25 +12,35 @@ import trimesh
 import mincam_sim as ms
 from mincam_sim.errors import InputError, StaleResultError
 from mincam_sim.render import scene_dicts as sd
-from mincam_sim.render.screen_engine import render_frames
-from mincam_sim.render.world import WorldRenderer, vertex_update
+from mincam_sim.render.estimation import replicate_mean_stderr
+from mincam_sim.render.mincam_scene import MincamScene
+from mincam_sim.render.response_map import response_maps
+from mincam_sim.render.updates import vertex_update
 
 
 def _frames(screen, n=3):
     return ms.line_sweep((-0.15, 0.0), (0.15, 0.0), n=n, size_m=0.04).frame_stack(screen)
 
 
-@pytest.mark.parametrize("solver, budget, form, kw", [
-    (ms.ResponseMap(), ms.Budget(samples_per_texel=16, seed=3), "response_map", {"samples_per_texel": 16}),
-    (ms.Aperture(), ms.Budget(spp=1 << 14, seed=3), "fast", {"spp": 1 << 14}),
-])
-def test_display_measure_is_the_engine_bit_for_bit(solver, budget, form, kw):
+def test_display_measure_is_the_kernels_bit_for_bit():
+    """The ResponseMap solver is the map kernel's product with the frames (its maps kept as ``m.maps``); the
+    Aperture solver the fast kernel's replicates frame by frame."""
     cam, screen = ms.pair_layout(), ms.Screen()
-    m = ms.Simulation(cam, screen=screen).measure(_frames(screen), solver=solver, budget=budget)
-    ref, _ = render_frames(cam, screen, _frames(screen), form, seed=3, **kw)
+    sim = ms.Simulation(cam, screen=screen)
+    m = sim.measure(_frames(screen), solver=ms.ResponseMap(), budget=ms.Budget(samples_per_texel=16, seed=3))
+    ref = response_maps(cam, screen, 16, 3, replicates=4).measure(_frames(screen))
     np.testing.assert_array_equal(m.irradiance_w_m2, ref.irradiance_w_m2)
     np.testing.assert_array_equal(m.stderr_w_m2, ref.stderr_w_m2)
-    assert m.meta["solver"] == solver.name
+    np.testing.assert_array_equal(m.maps.measure(_frames(screen)).irradiance_w_m2, ref.irradiance_w_m2)
+    assert m.meta["solver"] == "response_map"
+    m = sim.measure(_frames(screen), solver=ms.Aperture(), budget=ms.Budget(spp=1 << 14, seed=3))
+    scene = MincamScene.display(cam, screen)
+    for frame, values, errors in zip(_frames(screen), m.irradiance_w_m2, m.stderr_w_m2, strict=True):
+        scene.set_frame(frame)
+        mean, err = replicate_mean_stderr(scene.fast_estimates(1 << 14, 8, 3))
+        np.testing.assert_array_equal(values, mean)
+        np.testing.assert_array_equal(errors, err)
+    assert m.meta["solver"] == "aperture" and m.maps is None
 
 
 def _world_parts():
@@ -45,13 +55,11 @@ def _world_parts():
 
 
 @pytest.mark.parametrize("solver", [ms.StratifiedChange(), ms.PlainChange()], ids=["stratified", "plain"])
-def test_world_changes_are_typed_and_equal_the_renderer(solver):
+def test_world_changes_are_typed(solver):
     cam, elements, frames = _world_parts()
     ch = ms.Simulation(cam, world=elements).measure_changes(frames, solver=solver, budget=ms.Budget(spp=1 << 12))
-    dp, p = WorldRenderer(cam, elements).measure_changes(frames, {}, spp=1 << 12, estimator=solver.form)
-    np.testing.assert_array_equal(ch.dp.irradiance_w_m2, dp.irradiance_w_m2)
-    np.testing.assert_array_equal(ch.p.stderr_w_m2, p.stderr_w_m2)
-    assert ch.info.estimator == solver.form and ch.info.rays_per_mixel_per_frame > 0
+    assert isinstance(ch.info, ms.RunInfo) and ch.dp.meta["solver"] == solver.name
+    assert ch.info.estimator == solver.name and ch.info.rays_per_mixel_per_frame > 0
     assert ch.info.reached_rel_stderr is not None and ch.info.replicates == 8
     assert np.all(np.abs(ch.dp.irradiance_w_m2) > 3 * ch.dp.stderr_w_m2)
 
@@ -92,6 +100,7 @@ def test_run_keeps_resumes_and_refuses(tmp_path):
     (lambda: ms.Budget(seed=1.5), "seed"),
     (lambda: ms.Simulation(ms.pair_layout()), "exactly one"),
     (lambda: ms.Simulation(ms.pair_layout(), screen=ms.Screen()).measure_changes([]), "does not solve display"),
+    (lambda: ms.Simulation(ms.pair_layout(), screen=ms.Screen()).measure([], ms.PlainChange()), "does not solve"),
     (lambda: ms.Simulation(ms.pair_layout(), screen=ms.Screen()).measure([], solver="fast"), "solver must be"),
     (lambda: ms.Simulation(ms.pair_layout(), world="no/such/room.xml"), "does not exist"),
 ])

@@ -7,18 +7,30 @@ import pytest
 import trimesh
 from conftest import assert_close_mc
 
+import mincam_sim as ms
 from mincam_sim import Pose, masks, single
 from mincam_sim.closed_forms import open_aperture_irradiance
 from mincam_sim.errors import InputError
 from mincam_sim.optics import cross_layout
 from mincam_sim.render import scene_dicts as sd
-from mincam_sim.render.world import WorldRenderer, vertex_update
+from mincam_sim.render.updates import vertex_update
 
 HEIGHT = 0.5
 PARK = np.array([5.0, 5.0, 0.0])
 
 
-def _world(cam, albedo=0.5, sky=2.0, replicates=16):
+def _p(sim: ms.Simulation, spp: int, seed: int, replicates: int = 16):
+    """P of the scene as it stands (the aperture solver), and its standard error, per mixel."""
+    m = sim.measure([{}], ms.Aperture(), ms.Budget(spp=spp, seed=seed, replicates=replicates))
+    return m.irradiance_w_m2[0], m.stderr_w_m2[0]
+
+
+def _changes(sim, frames, background, spp, seed, solver=None, replicates=8, **budget):
+    return sim.measure_changes(frames, background, solver or ms.PlainChange(),
+                               ms.Budget(spp=spp, seed=seed, replicates=replicates, **budget))
+
+
+def _world(cam, albedo=0.5, sky=2.0):
     box = trimesh.creation.box((0.05, 0.05, 0.05))
     box.apply_translation((0, 0, 0.025))
     elements = {
@@ -26,7 +38,7 @@ def _world(cam, albedo=0.5, sky=2.0, replicates=16):
         "sky": sd.sky(sky),
         "box": sd.mesh_object("box", box.vertices + PARK, box.faces, 0.9),
     }
-    return WorldRenderer(cam, elements, replicates=replicates), box
+    return ms.Simulation(cam, world=elements), box
 
 
 def test_plane_under_sky_matches_view_factor():
@@ -34,8 +46,7 @@ def test_plane_under_sky_matches_view_factor():
     measures pi rho L F with F the closed-form view factor of the plane seen through the aperture."""
     cam = single(masks.constant(1.0), pose=Pose((0, 0, HEIGHT), (0, 0, -1), (0, 1, 0)))
     world, _ = _world(cam)
-    est = world.estimates(1 << 20, seed=0)
-    value, sigma = est.mean(0)[0], est.std(0, ddof=1)[0] / np.sqrt(len(est))
+    value, sigma = (v[0] for v in _p(world, 1 << 20, 0))
     expected = open_aperture_irradiance(0.5 * 2.0, 1e-4, 2e-3, 2e-3, 2e-3, (-0.5, 0.5, -0.5, 0.5), HEIGHT)
     assert sigma / expected < 0.002
     assert_close_mc(value, expected, sigma, what="plane under sky")
@@ -44,7 +55,7 @@ def test_plane_under_sky_matches_view_factor():
 @pytest.fixture(scope="module")
 def moving_box():
     cam = cross_layout(center=Pose((0, 0, HEIGHT), (0, 0, -1), (0, 1, 0)))
-    world, box = _world(cam, replicates=8)
+    world, box = _world(cam)
     frames = [vertex_update("box", box.vertices + [x, 0.02, 0.0]) for x in (-0.08, 0.0, 0.08)]
     return world, frames, vertex_update("box", box.vertices + PARK)
 
@@ -53,8 +64,8 @@ def test_correlated_seeds_cancel_noise_in_changes(moving_box):
     """dP with the background's seed has a much smaller standard error than with independent seeds, and
     both estimate the same change."""
     world, frames, background = moving_box
-    corr, _ = world.measure_changes(frames, background, spp=1 << 16, seed=1, correlated=True)
-    indep, _ = world.measure_changes(frames, background, spp=1 << 16, seed=1, correlated=False)
+    corr = _changes(world, frames, background, 1 << 16, 1, ms.PlainChange(correlated=True)).dp
+    indep = _changes(world, frames, background, 1 << 16, 1, ms.PlainChange(correlated=False)).dp
     ratio = np.mean(indep.stderr_w_m2**2) / np.mean(corr.stderr_w_m2**2)
     assert ratio > 4, f"variance reduction only {ratio:.1f}x"
     assert_close_mc(corr.irradiance_w_m2, indep.irradiance_w_m2, np.hypot(corr.stderr_w_m2, indep.stderr_w_m2),
@@ -65,13 +76,17 @@ def test_correlated_seeds_cancel_noise_in_changes(moving_box):
 
 def test_change_target_noise_and_resume(moving_box, tmp_path):
     world, frames, background = moving_box
-    dp, _ = world.measure_changes(frames, background, spp=1 << 14, seed=2, target_rel_stderr=0.1)
+    dp = _changes(world, frames, background, 1 << 14, 2, target_rel_stderr=0.1).dp
     assert dp.meta["pilot_worst_rel_stderr"] > 0.1  # the pilot alone was not enough
     assert dp.meta["reached_rel_stderr"] <= 0.1
     assert dp.meta["spp_per_mixel_per_frame"] > 1 << 14
-    a, _ = world.measure_changes(frames, background, spp=1 << 14, seed=3, out_dir=tmp_path)
-    b, _ = world.measure_changes(frames, background, spp=1 << 14, seed=3, out_dir=tmp_path)  # all frames done
-    np.testing.assert_array_equal(a.irradiance_w_m2, b.irradiance_w_m2)
+    solver, budget = ms.PlainChange(), ms.Budget(spp=1 << 14, seed=3, replicates=8)
+    with ms.Run(tmp_path) as run:
+        a = run.measure_changes(world, frames, background, solver, budget)
+    (tmp_path / "measurements.npz").unlink()  # not finished: the store has every frame done
+    with ms.Run(tmp_path) as run:
+        b = run.measure_changes(world, frames, background, solver, budget)
+    np.testing.assert_array_equal(a.dp.irradiance_w_m2, b.dp.irradiance_w_m2)
 
 
 def test_unknown_parameter_is_a_clear_error(moving_box):
@@ -103,7 +118,7 @@ def _toy_scene(offset_m: np.ndarray, turn_deg: float):
         "light": sd.area_light(0.4, 0.4, pose((0.1, 0, 1.2), (0, 0, -1)).matrix(), 10.0),
         "toy": sd.mesh_object("toy", place(toy.vertices + PARK), toy.faces, 0.9),
     }
-    world = WorldRenderer(cam, elements, replicates=8)
+    world = ms.Simulation(cam, world=elements)
     frames = [vertex_update("toy", place(toy.vertices + [x, 0.02, 0.0])) for x in (-0.05, 0.04)]
     return world, frames, vertex_update("toy", place(toy.vertices + PARK))
 
@@ -115,8 +130,8 @@ def test_rigid_motion_of_the_whole_scene_changes_nothing():
     results = []
     for offset, turn in ((np.zeros(3), 0.0), (np.array([1000.0, -400.0, 30.0]), 30.0)):
         world, frames, background = _toy_scene(offset, turn)
-        dp, p = world.measure_changes(frames, background, spp=1 << 18, seed=1, estimator="stratified")
-        results.append((dp, p))
+        ch = _changes(world, frames, background, 1 << 18, 1, ms.StratifiedChange())
+        results.append((ch.dp, ch.p))
     (dp0, p0), (dp1, p1) = results
     assert dp0.stderr_w_m2.max() / np.abs(dp0.irradiance_w_m2).min() < 0.006  # 3.7 % would be > 4.5 sigma
     assert_close_mc(dp1.irradiance_w_m2, dp0.irradiance_w_m2, np.hypot(dp0.stderr_w_m2, dp1.stderr_w_m2),
@@ -134,19 +149,19 @@ def test_updates_of_a_point_light_a_texture_and_bad_shapes():
         elements = {"table": sd.textured_plane(np.full((4, 4), 0.5), 1.0, 1.0, Pose((0, 0, 0), (0, 0, 1)).matrix()),
                     "light": {"type": "point", "position": list(position),
                               "intensity": {"type": "spectrum", "value": 1.0}}}
-        return WorldRenderer(cam, elements, replicates=8)
+        return ms.Simulation(cam, world=elements)
 
     moved = world_with_light_at((0.3, 0.0, 0.6))
     moved.update({"light.position": np.array([-0.1, 0.2, 0.4])})
     built = world_with_light_at((-0.1, 0.2, 0.4))
-    a, b = moved.estimates(1 << 16, seed=2), built.estimates(1 << 16, seed=2)
-    np.testing.assert_allclose(a.mean(0), b.mean(0), rtol=1e-6)
+    (a, _), (b, _) = _p(moved, 1 << 16, 2, 8), _p(built, 1 << 16, 2, 8)
+    np.testing.assert_allclose(a, b, rtol=1e-6)
     where = moved.params["light.position"]  # world coordinates, as the update was given
     np.testing.assert_allclose(where, [-0.1, 0.2, 0.4], atol=1e-6)
     key = "table.bsdf.reflectance.data"
     texture = np.array(moved.params[key])
     moved.update({key: texture * 0.5})
     assert np.array(moved.params[key]).shape == texture.shape
-    np.testing.assert_allclose(moved.estimates(1 << 16, seed=2).mean(0), 0.5 * a.mean(0), rtol=1e-5)
+    np.testing.assert_allclose(_p(moved, 1 << 16, 2, 8)[0], 0.5 * a, rtol=1e-5)
     with pytest.raises(ValueError, match="texture of shape"):
         moved.update({key: np.zeros(5)})

@@ -17,7 +17,7 @@ import mincam_sim as ms
 from mincam_sim.errors import ConfigError, InputError, StaleResultError
 from mincam_sim.estimators import intrusion_position
 from mincam_sim.render import scene_dicts as sd
-from mincam_sim.render.world import vertex_update
+from mincam_sim.render.updates import vertex_update
 from mincam_sim.world_config import load_world_config, world_example_toml
 from mincam_sim.world_job import run_world_config
 
@@ -233,3 +233,68 @@ def test_measure_changes_in_world_coordinates_from_python():
     frames = [vertex_update("toy_car", v0 + [dx, 0.0, 0.0]) for dx in (0.05, 0.1)]
     ch = sim.measure_changes(frames, background={}, budget=ms.Budget(spp=1 << 12))
     assert ch.dp.irradiance_w_m2.shape == (2, 2) and ch.info.estimator == "stratified"
+
+
+_TOP = """<scene version="3.0.0">
+    <default name="mesh" value="toy.obj"/>
+    <include filename="parts/light.xml"/>
+    <shape type="rectangle" id="floor">
+        <transform name="to_world"><scale x="0.6" y="0.6" z="1"/></transform>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0.3"/></bsdf>
+    </shape>
+    <shape type="obj" id="toy">
+        <string name="filename" value="$mesh"/>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0.8"/></bsdf>
+    </shape>
+</scene>
+"""
+_LIGHT = """<scene version="3.0.0">
+    <shape type="rectangle" id="lamp">
+        <transform name="to_world"><scale x="0.1" y="0.1" z="1"/><rotate x="1" angle="180"/>
+            <translate z="1.0"/></transform>
+        <emitter type="area"><rgb name="radiance" value="{radiance}"/></emitter>
+    </shape>
+</scene>
+"""
+
+
+def _scene_files(tmp_path: Path, radiance: float = 20.0, toy_z: float = 0.0) -> Path:
+    (tmp_path / "parts").mkdir(exist_ok=True)
+    (tmp_path / "parts" / "light.xml").write_text(_LIGHT.format(radiance=radiance))
+    box = trimesh.creation.box((0.04, 0.04, 0.04))
+    box.apply_translation((0.05, 0.0, 0.02 + toy_z))
+    box.export(tmp_path / "toy.obj")
+    (tmp_path / "scene.xml").write_text(_TOP)
+    return tmp_path / "scene.xml"
+
+
+def test_an_edited_include_or_a_mesh_named_through_a_parameter_is_never_the_same_run(tmp_path):
+    """The run's identity hashes every file the scene names, recursively: an ``<include>``d file and a mesh
+    named through a ``$parameter`` default. Editing either makes the next run refuse (never report the old
+    result as 'this same run'); overwriting recomputes."""
+    path = _scene_files(tmp_path)
+    sim = ms.Simulation(CAM, world=path)
+    files = sim.identity()["files"]
+    assert set(files) == {"scene.xml", "parts/light.xml", "toy.obj"}
+    vertices = np.asarray(sim.params["toy.vertex_positions"]).reshape(-1, 3)
+    frames = [vertex_update("toy", vertices + [0.1, 0.0, 0.0])]
+    budget = ms.Budget(spp=1 << 12, replicates=4)
+    with ms.Run(tmp_path / "out") as run:
+        first = run.measure_changes(sim, frames, None, ms.PlainChange(), budget)
+    with ms.Run(tmp_path / "out") as run:  # unchanged files: the finished result, as it is
+        again = run.measure_changes(ms.Simulation(CAM, world=path), frames, None, ms.PlainChange(), budget)
+    np.testing.assert_array_equal(again.p.irradiance_w_m2, first.p.irradiance_w_m2)
+    for edit in (lambda: _scene_files(tmp_path, radiance=21.0), lambda: _scene_files(tmp_path, toy_z=0.01)):
+        edit()
+        edited = ms.Simulation(CAM, world=path)
+        assert edited.identity()["files"] != files
+        with ms.Run(tmp_path / "out") as run, pytest.raises(StaleResultError, match="scene.files"):
+            run.measure_changes(edited, frames, None, ms.PlainChange(), budget)
+        _scene_files(tmp_path)  # back as it was: the same run again
+    with ms.Run(tmp_path / "out") as run:
+        back = run.measure_changes(ms.Simulation(CAM, world=path), frames, None, ms.PlainChange(), budget)
+    np.testing.assert_array_equal(back.p.irradiance_w_m2, first.p.irradiance_w_m2)
+    _scene_files(tmp_path, radiance=21.0)
+    with ms.Run(tmp_path / "out", overwrite=True) as run:
+        brighter = run.measure_changes(ms.Simulation(CAM, world=path), frames, None, ms.PlainChange(), budget)
+    assert np.all(brighter.p.irradiance_w_m2 > first.p.irradiance_w_m2)
