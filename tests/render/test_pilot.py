@@ -57,28 +57,33 @@ def test_a_missed_target_is_a_warning_not_silence(monkeypatch):
     import pytest
 
     from mincam_sim.optics import pair_layout
-    from mincam_sim.render import screen_engine
     from mincam_sim.render.estimation import TargetNotReachedWarning
+    from mincam_sim.render.solvers import response_map
     from mincam_sim.scene.display import Screen
 
-    monkeypatch.setattr(screen_engine, "MAX_SAMPLES_PER_TEXEL", 64)
+    monkeypatch.setattr(response_map, "MAX_SAMPLES_PER_TEXEL", 64)
     screen = Screen(resolution=(32, 18))
     frame = np.zeros((1, 18, 32))
     frame[0, 8:10, 15:17] = 1.0
     with pytest.warns(TargetNotReachedWarning, match="cap of 64 samples"):
-        m, _ = screen_engine.render_frames(pair_layout(), screen, frame, target_rel_stderr=1e-6)
+        m = _map_measure(pair_layout(), screen, frame, target_rel_stderr=1e-6)
     assert m.meta["reached_rel_stderr"] > 1e-6 and m.meta["samples_per_texel"] == 64
 
 
-def test_render_frames_passes_replicates_to_the_response_maps():
+def _map_measure(mincam, screen, frames, **budget):
+    import mincam_sim as ms
+
+    return ms.Simulation(mincam, screen=screen).measure(frames, ms.ResponseMap(), ms.Budget(**budget))
+
+
+def test_the_budgets_replicates_reach_the_response_maps():
     from mincam_sim.optics import pair_layout
-    from mincam_sim.render.screen_engine import render_frames
     from mincam_sim.scene.display import Screen
 
     screen = Screen(resolution=(16, 9))
     frame = np.ones((1, 9, 16))
-    default, _ = render_frames(pair_layout(), screen, frame, samples_per_texel=64)
-    sixteen, _ = render_frames(pair_layout(), screen, frame, samples_per_texel=64, replicates=16)
+    default = _map_measure(pair_layout(), screen, frame, samples_per_texel=64)
+    sixteen = _map_measure(pair_layout(), screen, frame, samples_per_texel=64, replicates=16)
     assert default.meta["replicate_blocks"] == 4 and sixteen.meta["replicate_blocks"] == 16
 
 
@@ -86,15 +91,14 @@ def test_the_response_map_search_always_moves_on(monkeypatch):
     """Samples per texel are traced as replicates x k^2: doubling 16 (k = 2) rounds back to 16, and the search
     for a target just out of reach used to repeat that attempt forever. Each step now adds a stratum."""
     from mincam_sim.optics import pair_layout
-    from mincam_sim.render import screen_engine
     from mincam_sim.scene.display import Screen
 
     screen = Screen(resolution=(32, 18))
     frame = np.zeros((1, 18, 32))
     frame[0, 8:10, 15:17] = 1.0
-    first, _ = screen_engine.render_frames(pair_layout(), screen, frame, samples_per_texel=16)
+    first = _map_measure(pair_layout(), screen, frame, samples_per_texel=16)
     target = 0.97 * first.meta["reached_rel_stderr"]  # need ~1.06 x 16 samples: 2 x 16 would round to 16
-    m, _ = screen_engine.render_frames(pair_layout(), screen, frame, target_rel_stderr=target)
+    m = _map_measure(pair_layout(), screen, frame, target_rel_stderr=target)
     traced = [t["samples_per_texel"] for t in m.meta["budget_trail"]]
     assert traced[0] == 16 and bool(np.all(np.diff(traced) > 0))
     assert m.meta["reached_rel_stderr"] <= target
@@ -105,16 +109,18 @@ def test_a_store_of_other_replicates_is_not_reused(tmp_path):
     store written with one is refused for the other."""
     import pytest
 
+    import mincam_sim as ms
     from mincam_sim.errors import StoreError
     from mincam_sim.optics import pair_layout
-    from mincam_sim.render.screen_engine import render_frames
     from mincam_sim.scene.display import Screen
 
     screen = Screen(resolution=(16, 9))
     frame = np.ones((1, 9, 16))
-    render_frames(pair_layout(), screen, frame, samples_per_texel=256, replicates=4, out_dir=tmp_path)
-    with pytest.raises(StoreError, match="replicates"):
-        render_frames(pair_layout(), screen, frame, samples_per_texel=256, replicates=16, out_dir=tmp_path)
+    sim = ms.Simulation(pair_layout(), screen=screen)
+    with ms.Run(tmp_path) as run:
+        run.measure(sim, frame, ms.ResponseMap(), ms.Budget(samples_per_texel=256, replicates=4))
+    with ms.Run(tmp_path) as run, pytest.raises(StoreError, match="replicates"):
+        run.measure(sim, frame, ms.ResponseMap(), ms.Budget(samples_per_texel=256, replicates=16))
 
 
 def _stratified(true_values, rel_at_one_sample, exponent):
@@ -174,14 +180,15 @@ def test_a_quantised_search_ends_on_a_traced_count():
 def test_the_response_map_search_traces_stratum_steps():
     """The maps' search (the same rule): every attempt is replicates x k^2 samples per texel, more each step,
     and its last maps reach the target."""
+    import mincam_sim as ms
     from mincam_sim.optics import pair_layout
-    from mincam_sim.render.response_map import response_maps_to_target
+    from mincam_sim.render.solvers.response_map import maps_to_target
     from mincam_sim.scene.display import Screen
 
     screen = Screen(resolution=(32, 18))
     frame = np.zeros((1, 18, 32))
     frame[0, 8:10, 15:17] = 1.0
-    maps, trail = response_maps_to_target(pair_layout(), screen, frame, 4e-4, seed=1)
+    maps, trail = maps_to_target(ms.Simulation(pair_layout(), screen=screen), frame, 4e-4, seed=1)
     traced = [t["samples_per_texel"] for t in trail]
     assert len(traced) >= 3 and traced[0] == 16 and bool(np.all(np.diff(traced) > 0))
     assert all(np.sqrt(n / 4) % 1 == 0 for n in traced) and maps.meta["samples_per_texel"] == traced[-1]

@@ -14,7 +14,8 @@ from mincam_sim.optics import cross_layout
 from mincam_sim.render import scene_dicts as sd
 from mincam_sim.render.change_region import ApertureRegions
 from mincam_sim.render.stratified import stratified_estimates
-from mincam_sim.render.world import STRATA_EXPANSIONS, WorldRenderer
+import mincam_sim as ms
+from mincam_sim.render.solvers.change import STRATA_EXPANSIONS
 
 REPLICATES = 16
 
@@ -28,7 +29,7 @@ def world():
                                    Pose((0, 0, 0), (0, 0, 1)).matrix()),
         "light": sd.area_light(0.4, 0.4, Pose((0.1, 0, 1.0), (0, 0, -1)).matrix(), 10.0),
     }
-    return WorldRenderer(cam, elements, replicates=REPLICATES)
+    return ms.Simulation(cam, world=elements)
 
 
 def _regions(world, base, slope=(0.0, 0.0, 0.0, 0.0)) -> ApertureRegions:
@@ -51,7 +52,7 @@ CASES = {
 @pytest.mark.parametrize("case", list(CASES))
 def test_strata_add_up_to_the_whole_aperture(world, case):
     world.update({})
-    plain = world.estimates(1 << 17, seed=1)
+    plain = world.mincam_scene.fast_estimates(1 << 17, REPLICATES, 1)  # the aperture kernel
     base, slope = CASES[case]
     strat = stratified_estimates(world.scene, world.sensor, world.mincam, _regions(world, base, slope), REPLICATES,
                                  [1200, 300, 300, 300, 300], seed=2, expansions=STRATA_EXPANSIONS)
