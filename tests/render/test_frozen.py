@@ -8,13 +8,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
+from front import changes, estimates
 
+import mincam_sim as ms
 from mincam_sim import Pose, cross_layout
 from mincam_sim.render import backend
 from mincam_sim.render import scene_dicts as sd
 from mincam_sim.render import stratified as st
+from mincam_sim.render.change_geometry import changed_shapes
 from mincam_sim.render.elements import transform_update
-from mincam_sim.render.world import STRATA_EXPANSIONS, WorldRenderer, _changed_shapes, vertex_update
+from mincam_sim.render.solvers.change import STRATA_EXPANSIONS
+from mincam_sim.render.updates import vertex_update
 
 pytestmark = pytest.mark.skipif(not backend.is_jit(), reason="needs a JIT variant (LLVM or CUDA)")
 
@@ -42,7 +46,7 @@ def _world(extra: bool = False, moving_light: bool = False, ball: bool = True):
     }
     if extra:
         elements["post"] = sd.mesh_object("post", TOY.vertices * 0.5 + [0.3, 0.3, 0.0], TOY.faces, 0.5)
-    world = WorldRenderer(cam, elements, replicates=8)
+    world = ms.Simulation(cam, world=elements)
     xs = np.linspace(-0.1, 0.1, 5)
     frames = [{**vertex_update("toy", TOY.vertices + [x, 0.02 * np.sin(20 * x), 0.0]),
                **(transform_update("ball", _sphere_matrix(-x, 0.08)) if ball else {})} for x in xs]
@@ -61,7 +65,7 @@ def _passes(world, frames, background, counts, freeze: bool) -> list[np.ndarray]
     background = world.complete_background(frames, background)
     for i, frame in enumerate(frames):
         world.update({**background, **frame})
-        regions, guide, _ = world._change(_changed_shapes(frame, background))
+        regions, guide, _ = world.change_reach(changed_shapes(frame, background))
         kw = {"expansions": STRATA_EXPANSIONS, "guide": guide, "max_depth": 3}
         for _ in range(2):
             out.append(st.stratified_estimates(world.scene, world.sensor, world.mincam, regions, 8, counts, 11 + i,
@@ -93,7 +97,7 @@ def test_measure_changes_frozen_equals_traced_values_and_sigmas():
     runs = {}
     for freeze in (False, True, True):
         world.freeze_launches = freeze
-        dp, p = world.measure_changes(frames, background, spp=4096, seed=3, estimator="stratified")
+        dp, p = changes(world, frames, background, spp=4096, seed=3, solver=ms.StratifiedChange())
         runs.setdefault(freeze, []).append((dp, p))
     (dp0, p0), = runs[False]
     for dp, p in runs[True]:
@@ -121,14 +125,14 @@ def test_a_new_budget_and_a_new_scene_record_instead_of_replaying_a_stale_kernel
     assert all(np.array_equal(a, b) for a, b in zip(traced, frozen, strict=True))
 
 
-@pytest.mark.filterwarnings("ignore::mincam_sim.render.world.FallbackWarning")
-@pytest.mark.filterwarnings("ignore::mincam_sim.render.world.HeavyTailWarning")
+@pytest.mark.filterwarnings("ignore::mincam_sim.render.solvers.change.FallbackWarning")
+@pytest.mark.filterwarnings("ignore::mincam_sim.render.solvers.change.HeavyTailWarning")
 def test_a_moving_light_is_traced_unfrozen():
     world, frames, background = _world(moving_light=True)
-    dp, _ = world.measure_changes(frames[:2], background, spp=320, seed=1, estimator="stratified")
+    dp, _ = changes(world, frames[:2], background, spp=320, seed=1, solver=ms.StratifiedChange())
     assert st.frozen_recordings(world.scene) == 0
     world.freeze_launches = False
-    dp2, _ = world.measure_changes(frames[:2], background, spp=320, seed=1, estimator="stratified")
+    dp2, _ = changes(world, frames[:2], background, spp=320, seed=1, solver=ms.StratifiedChange())
     assert np.array_equal(dp.irradiance_w_m2, dp2.irradiance_w_m2)
 
 
@@ -139,7 +143,7 @@ def test_an_in_place_vertex_update_renders_as_a_scene_built_there():
     key = "toy.vertex_positions"
 
     def address():
-        return np.from_dlpack(world.world.params[key]).__array_interface__["data"][0]
+        return np.from_dlpack(world.mincam_scene.params[key]).__array_interface__["data"][0]
 
     before = address()
     placed = TOY.vertices + [0.03, -0.02, 0.0]
@@ -148,19 +152,19 @@ def test_an_in_place_vertex_update_renders_as_a_scene_built_there():
     assert np.allclose(world.world_value(key).reshape(-1, 3), placed, atol=1e-6)
     toy = next(s for s in world.scene.shapes() if s.id() == "toy")
     assert np.allclose(np.array(toy.bbox().min).ravel()[:2] + world.scene_origin_m[:2], placed.min(0)[:2], atol=1e-5)
-    moved = world.estimates(4096, seed=7)
+    moved = estimates(world, 4096, seed=7)
 
     cam = world.mincam
     table = np.clip(0.4 + 0.1 * np.random.default_rng(0).standard_normal((32, 32)), 0, 1)
-    built = WorldRenderer(cam, {
+    built = ms.Simulation(cam, world={
         "table": sd.textured_plane(table, 1.0, 1.0, Pose((0, 0, 0), (0, 0, 1)).matrix()),
         "light": sd.area_light(0.4, 0.4, Pose((0, 0, 1.2), (0, 0, -1)).matrix(), 10.0),
-        "toy": sd.mesh_object("toy", placed, TOY.faces, 0.9)}, replicates=8)
-    there = built.estimates(4096, seed=7)
+        "toy": sd.mesh_object("toy", placed, TOY.faces, 0.9)})
+    there = estimates(built, 4096, seed=7)
     assert np.allclose(moved, there, rtol=1e-6, atol=0), np.abs(moved / there - 1).max()
 
 
-@pytest.mark.filterwarnings("ignore::mincam_sim.render.world.FallbackWarning")
+@pytest.mark.filterwarnings("ignore::mincam_sim.render.solvers.change.FallbackWarning")
 @pytest.mark.parametrize("case", ["toy", "mirror", "far_movers", "glass"])
 def test_paired_background_lanes_equal_a_full_background_pass(case):
     """The background pass traces again only the lanes whose frame paths crossed a moving shape's box (in
@@ -178,7 +182,7 @@ def test_paired_background_lanes_equal_a_full_background_pass(case):
     runs = {}
     for pair in (False, True):
         world.pair_lanes = pair
-        runs[pair] = world.measure_changes(frames, background, spp=spp, seed=5, estimator="stratified")
+        runs[pair] = changes(world, frames, background, spp=spp, seed=5, solver=ms.StratifiedChange())
     for a, b in zip(runs[False], runs[True], strict=True):
         assert np.array_equal(a.irradiance_w_m2, b.irradiance_w_m2)
         assert np.array_equal(a.stderr_w_m2, b.stderr_w_m2)
@@ -193,7 +197,7 @@ def _rotation_z(deg: float) -> np.ndarray:
     return np.array([[np.cos(t), -np.sin(t), 0.0], [np.sin(t), np.cos(t), 0.0], [0.0, 0.0, 1.0]])
 
 
-@pytest.mark.filterwarnings("ignore::mincam_sim.render.world.HeavyTailWarning")
+@pytest.mark.filterwarnings("ignore::mincam_sim.render.solvers.change.HeavyTailWarning")
 def test_a_turning_smooth_mesh_on_a_far_tilted_rig_gives_the_traced_numbers():
     """A car loaded by Mitsuba's own OBJ loader (vertex normals, recomputed by Mitsuba when it turns), turning
     under a mincam 1.2 km from the origin and tilted with its table and light: frozen launches with paired lanes
@@ -221,7 +225,7 @@ def test_a_turning_smooth_mesh_on_a_far_tilted_rig_gives_the_traced_numbers():
         "car": {"type": "obj", "filename": str(obj), "to_world": mi.ScalarTransform4f(place(np.eye(4)).tolist()),
                 "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.8}}},
     }
-    world = WorldRenderer(cam, elements, replicates=8)
+    world = ms.Simulation(cam, world=elements)
     local = world.world_value("car.vertex_positions").reshape(-1, 3)
     local = (local - far) @ tilt  # the car in the table's frame
     frames = [vertex_update("car", at(local @ _rotation_z(a).T + [x, 0.01, 0.0]))
@@ -230,7 +234,7 @@ def test_a_turning_smooth_mesh_on_a_far_tilted_rig_gives_the_traced_numbers():
     runs = {}
     for fast in (False, True):
         world.freeze_launches = world.pair_lanes = fast
-        runs[fast] = world.measure_changes(frames, background, spp=2048, seed=2, estimator="stratified")
+        runs[fast] = changes(world, frames, background, spp=2048, seed=2, solver=ms.StratifiedChange())
     for a, b in zip(runs[False], runs[True], strict=True):
         assert np.array_equal(a.irradiance_w_m2, b.irradiance_w_m2)
         assert np.array_equal(a.stderr_w_m2, b.stderr_w_m2)
@@ -268,8 +272,8 @@ def test_frozen_paired_launches_of_several_sizes_equal_the_traced_ones(monkeypat
     runs = {}
     for fast in (False, True, True):
         world.freeze_launches = world.pair_lanes = fast
-        runs.setdefault(fast, []).append(world.measure_changes(frames, background, spp=8 * 72, seed=4,
-                                                               estimator="stratified"))
+        runs.setdefault(fast, []).append(changes(world, frames, background, spp=8 * 72, seed=4,
+                                                               solver=ms.StratifiedChange()))
     (dp0, p0), = runs[False]
     for dp, p in runs[True]:
         assert np.array_equal(dp0.irradiance_w_m2, dp.irradiance_w_m2)

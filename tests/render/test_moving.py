@@ -7,13 +7,15 @@ import numpy as np
 import pytest
 import trimesh
 from conftest import Z, assert_close_mc
+from front import changes, estimates
 
+import mincam_sim as ms
 from mincam_sim import Pose
 from mincam_sim.optics import cross_layout
 from mincam_sim.render import backend
 from mincam_sim.render import scene_dicts as sd
 from mincam_sim.render.change_region import ApertureRegions, change_points, mixel_regions
-from mincam_sim.render.world import WorldRenderer, vertex_update
+from mincam_sim.render.updates import vertex_update
 
 HEIGHT = 0.4  # [m] mixels above the table
 PARK = np.array([5.0, 5.0, 0.0])  # [m] where moving objects wait out of view
@@ -42,14 +44,14 @@ def _world(statics: dict, mover_size_m, light_at_m=(0.0, 0.0, 1.2), light_size_m
         elements[name] = sd.mesh_object(name, v, f, albedo)
     v, f = _box(mover_size_m, PARK)
     elements["mover"] = sd.mesh_object("mover", v, f, 0.9)
-    world = WorldRenderer(cam, elements, replicates=8)
+    world = ms.Simulation(cam, world=elements)
     frames = lambda positions: [vertex_update("mover", v - PARK + np.asarray(p)) for p in positions]  # noqa: E731
     return world, frames, vertex_update("mover", v)
 
 
 def _compare(world, frames, background, spp_plain, spp_fast, seed=1, what=""):
-    plain, _ = world.measure_changes(frames, background, spp=spp_plain, seed=seed)
-    fast, _ = world.measure_changes(frames, background, spp=spp_fast, seed=seed + 1, estimator="stratified")
+    plain, _ = changes(world, frames, background, spp=spp_plain, seed=seed)
+    fast, _ = changes(world, frames, background, spp=spp_fast, seed=seed + 1, solver=ms.StratifiedChange())
     sigma = np.hypot(fast.stderr_w_m2, plain.stderr_w_m2)
     assert_close_mc(fast.irradiance_w_m2, plain.irradiance_w_m2, sigma, what=f"stratified vs plain dP, {what}")
     resolution = sigma.max() / np.abs(plain.irradiance_w_m2).max()
@@ -90,7 +92,7 @@ def test_wrong_region_costs_variance_not_bias():
 
     world, frames, bg = _world({}, (0.06, 0.06, 0.03))
     world.update({**bg, **frames([(0.05, 0.0, 0.0)])[0]})
-    ref = world.estimates(1 << 16, seed=3)
+    ref = estimates(world, 1 << 16, seed=3)
     wrong = mixel_regions(world.mincam, np.array([[-0.15, -0.15, 0.0], [-0.14, -0.14, 0.01]]))
     for regions in (wrong, ApertureRegions.empty(world.mincam), ApertureRegions.full(world.mincam)):
         est = stratified_estimates(world.scene, world.sensor, world.mincam, regions, 8, [1024, 512, 512], 4,
@@ -104,7 +106,7 @@ def test_reported_sigma_matches_spread_over_seeds():
     frames and mixels: chi-square bounds at ~1e-4 false-alarm probability)."""
     world, frames, bg = _world({}, (0.04, 0.02, 0.02))
     fr = frames([(0.03, 0.02, 0.0), (-0.05, 0.0, 0.0)])
-    runs = [world.measure_changes(fr, bg, spp=1 << 13, seed=100 + s, estimator="stratified")[0] for s in range(10)]
+    runs = [changes(world, fr, bg, spp=1 << 13, seed=100 + s, solver=ms.StratifiedChange())[0] for s in range(10)]
     values = np.stack([r.irradiance_w_m2 for r in runs])  # (seeds, frames, mixels)
     sigma = np.stack([r.stderr_w_m2 for r in runs])
     spread_var = values.var(axis=0, ddof=1)  # (frames, mixels), 9 degrees of freedom each
@@ -120,7 +122,7 @@ def test_jittered_background_agrees_with_plain_and_reports_its_spread():
 
     world, frames, bg = _world({}, (0.04, 0.02, 0.02))
     world.update(bg)
-    plain = world.estimates(1 << 16, seed=3)
+    plain = estimates(world, 1 << 16, seed=3)
     runs = [whole_aperture_estimates(world.scene, world.sensor, world.mincam, 8, 1 << 14, seed=40 + s)
             for s in range(8)]
     means = np.stack([r.mean(0) for r in runs])  # (seeds, mixels)
@@ -155,8 +157,8 @@ def test_guide_sphere_holds_the_mover_and_its_shadow_in_scene_coordinates():
 def test_same_seed_same_numbers():
     world, frames, bg = _world({}, (0.04, 0.02, 0.02))
     fr = frames([(0.03, 0.02, 0.0)])
-    a, pa = world.measure_changes(fr, bg, spp=1 << 12, seed=5, estimator="stratified")
-    b, pb = world.measure_changes(fr, bg, spp=1 << 12, seed=5, estimator="stratified")
+    a, pa = changes(world, fr, bg, spp=1 << 12, seed=5, solver=ms.StratifiedChange())
+    b, pb = changes(world, fr, bg, spp=1 << 12, seed=5, solver=ms.StratifiedChange())
     np.testing.assert_array_equal(a.irradiance_w_m2, b.irradiance_w_m2)
     np.testing.assert_array_equal(pa.stderr_w_m2, pb.stderr_w_m2)
     assert a.meta["estimator"] == "stratified" and a.meta["rays_per_mixel_per_frame"] > 0
@@ -181,13 +183,13 @@ def test_region_bounds_hold_the_object_and_its_shadow():
 
 def test_bad_strata_are_clear_errors():
     world, frames, bg = _world({}, (0.04, 0.02, 0.02))
-    with pytest.raises(ValueError, match="estimator"):
-        world.measure_changes(frames([(0, 0, 0)]), bg, spp=64, estimator="fast")
+    with pytest.raises(ValueError, match="needs a change solver"):
+        changes(world, frames([(0, 0, 0)]), bg, spp=64, solver=ms.Aperture())
     with pytest.raises(ValueError, match="strata_shares"):
-        world.measure_changes(frames([(0, 0, 0)]), bg, spp=64, estimator="stratified", strata_shares=(1.0, -1.0))
+        changes(world, frames([(0, 0, 0)]), bg, spp=64, solver=ms.StratifiedChange(strata_shares=(1.0, -1.0)))
     with pytest.raises(ValueError, match="expansions"):
-        world.measure_changes(frames([(0, 0, 0)]), bg, spp=64, estimator="stratified", strata_shares=(1.0, 1.0),
-                              strata_expansions=(2.0,))
+        changes(world, frames([(0, 0, 0)]), bg, spp=64,
+                solver=ms.StratifiedChange(strata_shares=(1.0, 1.0), strata_expansions=(2.0,)))
     assert Z == 4.5
 
 
@@ -196,8 +198,8 @@ def test_small_box_high_precision_and_what_the_region_leaves_out():
     """The benchmark's kind of scene (a 4 x 2 x 2 cm box): stratified vs plain resolving 1 % of the largest
     change, and the part of dP outside the region bounds (light the box reflects onto the table) is many sigma
     from zero: an estimator of the region alone would be biased; the rings and the rest keep it unbiased."""
+    from mincam_sim.render.solvers.change import STRATA_EXPANSIONS
     from mincam_sim.render.stratified import stratified_estimates
-    from mincam_sim.render.world import STRATA_EXPANSIONS
 
     world, frames, bg = _world({}, (0.04, 0.02, 0.02))
     fr = frames([(0.03, 0.02, 0.0), (-0.06, -0.01, 0.0)])
@@ -222,13 +224,13 @@ def test_small_box_high_precision_and_what_the_region_leaves_out():
 def test_only_shapes_that_differ_from_the_background_bound_the_region():
     """Updates that re-set a parked shape to its background value do not move it (tracking frames re-park every
     toy but the active one): only the active shape's bounds enter the region."""
-    from mincam_sim.render.world import _changed_shapes
+    from mincam_sim.render.change_geometry import changed_shapes
 
     bg = {"a.vertex_positions": np.zeros(6, np.float32), "b.vertex_positions": np.ones(6, np.float32)}
     frame = {"a.vertex_positions": np.full(6, 2.0, np.float32), "b.vertex_positions": np.ones(6, np.float32),
              "c.to_world": np.eye(4)}
-    assert _changed_shapes(frame, bg) == {"a", "c"}
-    assert _changed_shapes(bg, bg) == set()
+    assert changed_shapes(frame, bg) == {"a", "c"}
+    assert changed_shapes(bg, bg) == set()
 
 
 # --- tilted, rotated mincams and every kind of light: the bounds checked against the sensor's own rays --------
@@ -271,7 +273,7 @@ def _tilted_world(light: str):
     size, at = TILTED_MOVER
     v, f = _box(size, PARK)
     elements["mover"] = sd.mesh_object("mover", v, f, 0.9)
-    world = WorldRenderer(_tilted_mincam(), elements, replicates=8)
+    world = ms.Simulation(_tilted_mincam(), world=elements)
     frame = vertex_update("mover", v - PARK + np.asarray(at))
     return world, frame, vertex_update("mover", v)
 
@@ -376,16 +378,16 @@ def test_directional_light_shadow_points_and_bad_direction():
         change_points([box], [], scene_box, [np.zeros(3)])
 
 
-@pytest.mark.parametrize("estimator", ["plain", "stratified"])
-def test_background_that_leaves_out_a_moved_parameter_means_the_scene_as_built(estimator):
+@pytest.mark.parametrize("solver", [ms.PlainChange(), ms.StratifiedChange()], ids=["plain", "stratified"])
+def test_background_that_leaves_out_a_moved_parameter_means_the_scene_as_built(solver):
     """``background={}`` (or one that leaves out a parameter the frames set) restores the scene as built, run after
     run: the same numbers as the explicit background (it once traced the background with the frame's toy in place
     and returned dP = 0, or the previous run's last frame as the background)."""
     world, frames, bg = _world({}, (0.04, 0.02, 0.02))
     fr = frames([(0.03, 0.02, 0.0)])
-    explicit, _ = world.measure_changes(fr, bg, spp=1 << 12, seed=5, estimator=estimator)
+    explicit, _ = changes(world, fr, bg, spp=1 << 12, seed=5, solver=solver)
     for _ in range(2):
-        left_out, _ = world.measure_changes(fr, {}, spp=1 << 12, seed=5, estimator=estimator)
+        left_out, _ = changes(world, fr, {}, spp=1 << 12, seed=5, solver=solver)
         np.testing.assert_array_equal(left_out.irradiance_w_m2, explicit.irradiance_w_m2)
     assert np.any(np.abs(explicit.irradiance_w_m2) > 3 * explicit.stderr_w_m2), "the frame should change dP"
 
@@ -393,13 +395,14 @@ def test_background_that_leaves_out_a_moved_parameter_means_the_scene_as_built(e
 def test_stratified_run_killed_midway_resumes_to_the_same_numbers(tmp_path, monkeypatch):
     """A stratified run stopped after two of four frames resumes with them kept and gives the uninterrupted run's
     numbers; the same out dir refuses other strata shares, unguided bounces or the plain estimator."""
-    import mincam_sim.render.world as world_module
+    import mincam_sim.render.solvers.change as change_module
     from mincam_sim.errors import StaleResultError
 
     world, frames, bg = _world({}, (0.04, 0.02, 0.02))
     fr = frames([(0.03, 0.02, 0.0), (-0.05, 0.0, 0.0), (0.0, -0.04, 0.0), (0.06, 0.05, 0.0)])
-    whole, _ = world.measure_changes(fr, bg, spp=1 << 12, seed=7, estimator="stratified")
-    real, calls = world_module.stratified_lanes, []
+    whole, _ = changes(world, fr, bg, spp=1 << 12, seed=7, solver=ms.StratifiedChange())
+    real, calls = change_module.stratified_lanes, []
+    budget = ms.Budget(spp=1 << 12, seed=7, replicates=8)
 
     def dies_on_the_fifth_pass(*args, **kwargs):  # two passes per frame: frames 0 and 1 finish
         calls.append(1)
@@ -407,19 +410,21 @@ def test_stratified_run_killed_midway_resumes_to_the_same_numbers(tmp_path, monk
             raise KeyboardInterrupt
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(world_module, "stratified_lanes", dies_on_the_fifth_pass)
-    with pytest.raises(KeyboardInterrupt):
-        world.measure_changes(fr, bg, spp=1 << 12, seed=7, estimator="stratified", out_dir=tmp_path)
-    monkeypatch.setattr(world_module, "stratified_lanes", lambda *a, **k: calls.append(1) or real(*a, **k))
+    monkeypatch.setattr(change_module, "stratified_lanes", dies_on_the_fifth_pass)
+    with pytest.raises(KeyboardInterrupt), ms.Run(tmp_path) as run:
+        run.measure_changes(world, fr, bg, ms.StratifiedChange(), budget)
+    monkeypatch.setattr(change_module, "stratified_lanes", lambda *a, **k: calls.append(1) or real(*a, **k))
     calls.clear()
-    resumed, _ = world.measure_changes(fr, bg, spp=1 << 12, seed=7, estimator="stratified", out_dir=tmp_path)
+    with ms.Run(tmp_path) as run:
+        resumed = run.measure_changes(world, fr, bg, ms.StratifiedChange(), budget).dp
     assert len(calls) == 4, f"the resumed run traced {len(calls) // 2} frames, not the 2 left"
     np.testing.assert_array_equal(resumed.irradiance_w_m2, whole.irradiance_w_m2)
     np.testing.assert_array_equal(resumed.stderr_w_m2, whole.stderr_w_m2)
-    for other in ({"estimator": "plain"}, {"estimator": "stratified", "strata_shares": (0.5, 0.1, 0.1, 0.1, 0.2)},
-                  {"estimator": "stratified", "guide_bounces": False}):
-        with pytest.raises(StaleResultError):
-            world.measure_changes(fr, bg, spp=1 << 12, seed=7, out_dir=tmp_path, **other)
+    (tmp_path / "measurements.npz").unlink()  # the store alone decides
+    for other in (ms.PlainChange(), ms.StratifiedChange(strata_shares=(0.5, 0.1, 0.1, 0.1, 0.2)),
+                  ms.StratifiedChange(guide_bounces=False)):
+        with ms.Run(tmp_path) as run, pytest.raises(StaleResultError):
+            run.measure_changes(world, fr, bg, other, budget)
 
 
 def _odd_world(case: str):
@@ -450,7 +455,7 @@ def _odd_world(case: str):
         elements["mover"] = {"type": "ply", "filename": path, "bsdf": {"type": "dielectric"}}
     else:
         elements["mover"] = sd.mesh_object("mover", v, f, 0.9)
-    world = WorldRenderer(cam, elements, replicates=8)
+    world = ms.Simulation(cam, world=elements)
     return world, vertex_update("mover", v - PARK + at), vertex_update("mover", v)
 
 
@@ -459,8 +464,8 @@ def test_stratified_agrees_with_plain_on_glass_metal_and_close_geometry(case):
     """Delta BSDFs on the mover (never guided), a glossy table, and mixels 6 cm above a 16 mm sphere (the change
     region's rings reach past the aperture's edge)."""
     world, frame, bg = _odd_world(case)
-    plain, _ = world.measure_changes([frame], bg, spp=1 << 19, seed=1)
-    fast, _ = world.measure_changes([frame], bg, spp=1 << 16, seed=2, estimator="stratified")
+    plain, _ = changes(world, [frame], bg, spp=1 << 19, seed=1)
+    fast, _ = changes(world, [frame], bg, spp=1 << 16, seed=2, solver=ms.StratifiedChange())
     sigma = np.hypot(fast.stderr_w_m2, plain.stderr_w_m2)
     assert_close_mc(fast.irradiance_w_m2, plain.irradiance_w_m2, sigma, what=f"stratified vs plain dP, {case}")
     assert np.all(sigma < 0.2 * np.abs(plain.irradiance_w_m2)), f"{case}: the comparison should resolve each dP"

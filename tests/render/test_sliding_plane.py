@@ -1,4 +1,4 @@
-"""A textured plane moving within its own plane, traced once and replayed (``SlidingPlane``).
+"""A textured plane moving within its own plane, traced once and replayed (``PlaneReplay``'s ``SlidingPlane``).
 
 A slide replays the frame Mitsuba traces with the plane moved there (same seed) to float32 rounding: with the
 road's end passing through the view, a tilted plane under a rig 1.2 km from the origin, black occluders and an
@@ -20,8 +20,7 @@ from mincam_sim.optics import Mincam, Mixel
 from mincam_sim.render import backend
 from mincam_sim.render import scene_dicts as sd
 from mincam_sim.render.estimation import replicate_mean_stderr
-from mincam_sim.render.sliding_plane import SlidingPlane
-from mincam_sim.render.world import WorldRenderer
+from mincam_sim.render.solvers.plane_replay import SlidingPlane
 
 pytestmark = pytest.mark.skipif(not backend.is_jit(), reason="needs a JIT variant (LLVM or CUDA)")
 
@@ -42,7 +41,15 @@ def _placement(centre_xy, heading_rad: float, size_m, frame: np.ndarray) -> np.n
     return frame @ local @ np.diag([size_m[0] / 2, size_m[1] / 2, 1.0, 1.0])
 
 
-def _road_world(frame: np.ndarray | None = None, extras: dict | None = None, two: bool = False, replicates: int = 4):
+REPLICATES = 4
+
+
+def estimates(world, spp: int, seed: int, replicates: int = REPLICATES) -> np.ndarray:
+    """(replicates, n_mixels) estimates of the aperture solver's kernel, the scene as it stands."""
+    return world.mincam_scene.fast_estimates(spp, replicates, seed)
+
+
+def _road_world(frame: np.ndarray | None = None, extras: dict | None = None, two: bool = False):
     frame = np.eye(4) if frame is None else frame
     rng = np.random.default_rng(3)
     # grain on a gradient across the road and stripes along it: a mirrored or misplaced texture shows
@@ -57,31 +64,31 @@ def _road_world(frame: np.ndarray | None = None, extras: dict | None = None, two
                              tuple(frame[:3, :3] @ (0, 1.0, 0))))
     road = sd.textured_plane(texture, 2.0, 2.0, _placement((0.0, 0.0), 0.0, (2.0, 0.5), frame))
     elements = {"road": road, "sky": sd.sky(1.0), **(extras or {})}
-    return WorldRenderer(Mincam(tuple(mixels)), elements, replicates=replicates)
+    return ms.Simulation(Mincam(tuple(mixels)), world=elements)
 
 
-def _traced(world, placements, spp: int = SPP, seed: int = 11) -> np.ndarray:
+def _traced(world, placements, spp: int = SPP, seed: int = 11, replicates: int = REPLICATES) -> np.ndarray:
     out = []
     for m in placements:
         world.update({"road.to_world": m})
-        out.append(world.estimates(spp, seed=seed))
+        out.append(estimates(world, spp, seed, replicates))
     return np.array(out)
 
 
 def _assert_replays(world, placements) -> np.ndarray:
-    replay = SlidingPlane(world, "road", placements, SPP, seed=11)
+    replay = SlidingPlane(world, "road", placements, SPP, 11, REPLICATES)
     replayed = np.array([replay.estimates(m) for m in placements])
     traced = _traced(world, placements)
     np.testing.assert_allclose(replayed, traced, rtol=ROUNDING, atol=ROUNDING * np.abs(traced).max())
     return traced
 
 
-def _assert_agree(world, placements, spp: int = 1 << 15) -> float:
+def _assert_agree(world, placements, spp: int = 1 << 15, replicates: int = REPLICATES) -> float:
     """Replayed and traced frames (seeds of their own) agree within 4.5 combined standard errors; returns the
     largest |z|."""
-    replay = SlidingPlane(world, "road", placements, spp, seed=5)
+    replay = SlidingPlane(world, "road", placements, spp, 5, replicates)
     mean_r, se_r = replicate_mean_stderr(np.array([replay.estimates(m) for m in placements]).transpose(1, 0, 2))
-    mean_t, se_t = replicate_mean_stderr(_traced(world, placements, spp, seed=6).transpose(1, 0, 2))
+    mean_t, se_t = replicate_mean_stderr(_traced(world, placements, spp, 6, replicates).transpose(1, 0, 2))
     z = (mean_r - mean_t) / np.hypot(se_r, se_t)
     assert np.abs(z).max() <= 4.5, z
     assert np.ptp(mean_t) > 10 * se_t.max()  # the frames differ by far more than the noise: a real comparison
@@ -98,7 +105,7 @@ def test_slides_past_the_road_end():
 
 def test_turns_agree_within_the_standard_error_with_two_mixels_shadowing_each_other():
     placements = [_placement((0.3 * np.sin(h), 0.1 * h), h, (2.0, 0.5), np.eye(4)) for h in np.linspace(0, 1.2, 6)]
-    _assert_agree(_road_world(two=True, replicates=8), placements)
+    _assert_agree(_road_world(two=True), placements)
 
 
 def test_slides_with_two_mixels_shadowing_each_other():
@@ -106,38 +113,38 @@ def test_slides_with_two_mixels_shadowing_each_other():
     _assert_replays(_road_world(two=True), placements)
 
 
-def _tilted_far_world(replicates: int = 4):
+def _tilted_far_world():
     tilt = Pose((1200.0, -300.0, 40.0), (0.3, -0.2, 1.0), (0.0, 1.0, 0.2)).matrix()
     box = trimesh.creation.box((0.05, 0.05, 0.05))
     occluder = (tilt[:3, :3] @ (box.vertices + [0.0, 0.12, 0.2]).T).T + tilt[:3, 3]
     light = tilt @ Pose((0.0, -0.3, 0.6), (0.0, 0.5, -1.0), (0.0, 1.0, 0.0)).matrix()
     extras = {"occluder": sd.mesh_object("occluder", occluder, box.faces, 0.0),
               "lamp": sd.area_light(0.2, 0.2, light, 5.0)}
-    return _road_world(tilt, extras, replicates=replicates), tilt
+    return _road_world(tilt, extras), tilt
 
 
 def test_tilted_plane_far_from_the_origin_with_black_occluder_and_area_light():
     world, tilt = _tilted_far_world()
     placements = [_placement((x, 0.05 * x), 0.0, (2.0, 0.5), tilt) for x in np.linspace(-1.6, 1.6, 7)]
     _assert_replays(world, placements)
-    world, tilt = _tilted_far_world(replicates=8)
+    world, tilt = _tilted_far_world()
     turns = [_placement((x, 0.05 * x), 0.4 * x, (2.0, 0.5), tilt) for x in np.linspace(-0.8, 0.8, 5)]
-    _assert_agree(world, turns)
+    _assert_agree(world, turns, replicates=8)
 
 
 def test_leaves_the_renderer_as_found():
     world = _road_world()
     before = {k: np.array(world.params[k]) for k in ("road.to_world", "road.bsdf.reflectance.data")}
-    first = world.estimates(SPP, seed=2)
-    SlidingPlane(world, "road", [_placement((0.2, 0.0), 0.0, (2.0, 0.5), np.eye(4))], SPP, seed=2)
+    first = estimates(world, SPP, 2)
+    SlidingPlane(world, "road", [_placement((0.2, 0.0), 0.0, (2.0, 0.5), np.eye(4))], SPP, 2, REPLICATES)
     for key, value in before.items():
         np.testing.assert_array_equal(np.array(world.params[key]), value)
-    np.testing.assert_array_equal(world.estimates(SPP, seed=2), first)
+    np.testing.assert_array_equal(estimates(world, SPP, 2), first)
 
 
 def _refusal(world, placements, match: str, name: str = "road"):
     with pytest.raises(InputError, match=match):
-        SlidingPlane(world, name, placements, SPP, seed=0)
+        SlidingPlane(world, name, placements, SPP, 0, REPLICATES)
 
 
 def test_refuses_scenes_where_the_replay_is_not_exact():
@@ -154,7 +161,7 @@ def test_refuses_scenes_where_the_replay_is_not_exact():
     _refusal(world, flat + [flipped], r"placements_m\[1\] is not in the plane")
     _refusal(world, [np.eye(3)], "4 x 4")
     _refusal(world, [flat[0] * np.nan], "finite")
-    replay = SlidingPlane(world, "road", flat, SPP, seed=0)
+    replay = SlidingPlane(world, "road", flat, SPP, 0, REPLICATES)
     with pytest.raises(InputError, match="beyond the placements"):
         replay.estimates(_placement((0.5, 0.0), 0.0, (2.0, 0.5), np.eye(4)))
     with pytest.raises(InputError, match="leaves the plane"):
@@ -164,7 +171,7 @@ def test_refuses_scenes_where_the_replay_is_not_exact():
 def test_a_new_texture_is_replayed_and_any_other_change_refused():
     world = _road_world()
     placements = [_placement((x, 0.0), 0.0, (2.0, 0.5), np.eye(4)) for x in (-0.3, 0.4)]
-    replay = SlidingPlane(world, "road", placements, SPP, seed=11)
+    replay = SlidingPlane(world, "road", placements, SPP, 11, REPLICATES)
     data = np.array(world.params["road.bsdf.reflectance.data"])
     world.update({"road.bsdf.reflectance.data": (1.0 - data).astype(np.float32)})  # the negative of the road
     traced = _traced(world, placements)
@@ -180,11 +187,11 @@ def test_refuses_a_plane_that_is_not_a_textured_rectangle():
     world = _road_world(extras=sphere)
     _refusal(world, [np.eye(4)], "is a Sphere, not a rectangle", name="ball")
     plain = {"type": "rectangle", "bsdf": {"type": "diffuse", "reflectance": {"type": "spectrum", "value": 0.5}}}
-    world = WorldRenderer(Mincam((_mixel("a", (0, 0, 0.3)),)), {"road": plain, "sky": sd.sky(1.0)}, replicates=4)
+    world = ms.Simulation(Mincam((_mixel("a", (0, 0, 0.3)),)), world={"road": plain, "sky": sd.sky(1.0)})
     _refusal(world, [np.eye(4)], "bitmap reflectance")
     glowing = sd.textured_plane(np.full((4, 4), 0.5), 2.0, 2.0, np.eye(4))
     glowing["emitter"] = {"type": "area", "radiance": {"type": "spectrum", "value": 1.0}}
-    world = WorldRenderer(Mincam((_mixel("a", (0, 0, 0.3)),)), {"road": glowing, "sky": sd.sky(1.0)}, replicates=4)
+    world = ms.Simulation(Mincam((_mixel("a", (0, 0, 0.3)),)), world={"road": glowing, "sky": sd.sky(1.0)})
     _refusal(world, [np.eye(4)], "also emits light")
 
 
@@ -216,12 +223,12 @@ def test_each_runs_sigma_is_honest_over_many_seeds():
     """Per run, not on average: over 200 seeds of replayed turning frames at 1 k rays (8 replicates), |z| against
     a traced reference of 2^18 rays exceeds 4.5 about as often as Student's t with 7 degrees of freedom says
     (0.28 %), and the reported variance matches the spread over seeds."""
-    world = _road_world(two=True, replicates=8)
+    world = _road_world(two=True)
     placements = [_placement((0.3 * np.sin(h), 0.1 * h), h, (2.0, 0.5), np.eye(4)) for h in np.linspace(0, 1.2, 6)]
     reference, ref_se = replicate_mean_stderr(_traced(world, placements, 1 << 18, seed=1).transpose(1, 0, 2))
     means, sigmas = [], []
     for seed in range(200):
-        replay = SlidingPlane(world, "road", placements, 1 << 10, seed=1000 + seed)
+        replay = SlidingPlane(world, "road", placements, 1 << 10, 1000 + seed, REPLICATES)
         mean, se = replicate_mean_stderr(np.array([replay.estimates(m) for m in placements]).transpose(1, 0, 2))
         means.append(mean)
         sigmas.append(se)
