@@ -64,6 +64,7 @@ class Run:
         self.overwrite, self.show_progress = bool(overwrite), bool(show_progress)
         self.what = what
         self._lock: DirLock | None = None
+        self._recorded: Any = None  # the identity record_identity last recorded or checked
 
     def __enter__(self) -> Run:
         self._lock = lock_out_dir(self.out_dir, self.what)
@@ -81,9 +82,11 @@ class Run:
 
     # ------------------------------------------------------------------------------- identity, store, resume
     def sink(self, name: str, identity: Any = None) -> StoreSink:
-        """The per-frame store ``out_dir/name`` of a run with this ``identity`` (under this run's lock: no lock of
-        its own); its response maps are cached in ``out_dir/name/cache``. :meth:`measure` and
-        :meth:`measure_changes` build the identity and the sink themselves."""
+        """The per-frame store ``out_dir/name`` of a run with this ``identity`` (default: the one
+        :meth:`record_identity` recorded in this run; under this run's lock: no lock of its own); its response
+        maps are cached in ``out_dir/name/cache``. :meth:`measure` and :meth:`measure_changes` build the
+        identity and the sink themselves."""
+        identity = self._recorded if identity is None else identity
         return StoreSink(self.out_dir / name, identity, overwrite=self.overwrite, lock=self._check_open())
 
     def record_identity(self, identity: Any, name: str = "identity.json") -> bool:
@@ -96,7 +99,9 @@ class Run:
             A different identity is recorded (naming what changed), unless the run overwrites.
         """
         self._check_open()
-        return check_identity(self.out_dir, identity, overwrite=self.overwrite, name=name)
+        same = check_identity(self.out_dir, identity, overwrite=self.overwrite, name=name)
+        self._recorded = identity
+        return same
 
     def clear(self, name: str, extra: Sequence[str] = ()) -> None:
         """Delete the store ``out_dir/name`` (and the named ``extra`` files in it) before an overwrite."""
