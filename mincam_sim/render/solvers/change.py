@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import ClassVar
 
 import numpy as np
@@ -103,7 +103,8 @@ class ChangeSolver(Solver):
         self._check(frames, background, budget.rays(), replicates, budget.target_rel_stderr)
         background = sim.complete_background(frames, background)
         spp, resolved = self._resolve_spp(sim, frames, background, budget, replicates)
-        return ChangePlan(self, sim, frames, background, spp, budget, replicates, resolved, show_progress)
+        return ChangePlan(self, sim, frames, background, replace(budget, spp=spp), replicates, resolved,
+                          show_progress)
 
     def _check(self, frames, background, spp, replicates, target) -> None:
         """Refuse, in one line each, what a change run cannot honestly measure."""
@@ -129,7 +130,8 @@ class ChangeSolver(Solver):
             with warnings.catch_warnings():  # a pilot's fallbacks are said by the run itself
                 warnings.simplefilter("ignore", FallbackWarning)
                 warnings.simplefilter("ignore", HeavyTailWarning)
-                plan = ChangePlan(self, sim, pilot_frames, background, samples, budget, replicates, {}, False)
+                plan = ChangePlan(self, sim, pilot_frames, background, replace(budget, spp=int(samples)), replicates,
+                                  {}, False)
                 table = MemoryTable(plan.n_rows, len(plan.columns))
                 ch = plan.result(*collect(plan.rows(table.pending()), table))
             return ch.dp.irradiance_w_m2, ch.dp.stderr_w_m2
@@ -198,13 +200,14 @@ class StratifiedChange(ChangeSolver):
 
 
 class ChangePlan(Plan):
-    """One change run at ``spp`` rays per pass: the background traced once, then a row per frame (dP and P per
-    mixel, then heavy-tailed and unseen flags per mixel and :data:`INFO_COLUMNS`)."""
+    """One change run at the budget's ``spp`` rays per pass (the target already resolved): the background traced
+    once, then a row per frame (dP and P per mixel, then heavy-tailed and unseen flags per mixel and
+    :data:`INFO_COLUMNS`)."""
 
-    def __init__(self, solver: ChangeSolver, sim, frames, background, spp: int, budget: Budget, replicates: int,
+    def __init__(self, solver: ChangeSolver, sim, frames, background, budget: Budget, replicates: int,
                  resolved: dict, show_progress: bool) -> None:
         self.solver, self.sim, self.frames, self.background = solver, sim, frames, background
-        self.spp, self.seed, self.replicates, self.resolved = int(spp), budget.seed, replicates, resolved
+        self.spp, self.seed, self.replicates, self.resolved = budget.rays(), budget.seed, replicates, resolved
         self.target, self.show_progress = budget.target_rel_stderr, show_progress
         sim.update(background)
         self.bg_spp, self.bg = solver.background_estimates(sim, self.spp, self.seed, replicates)
