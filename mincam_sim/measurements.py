@@ -29,12 +29,16 @@ class Measurements:
     mixel_names : list of str
     meta : dict
         Variant, seed, samples, form, geometry ... (JSON-serialisable).
+    maps : ResponseMaps or None
+        The response maps a :class:`~mincam_sim.render.solvers.ResponseMap` measurement used (None otherwise;
+        not saved).
     """
 
     irradiance_w_m2: np.ndarray
     stderr_w_m2: np.ndarray
     mixel_names: list[str]
     meta: dict = field(default_factory=dict)
+    maps: object = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         self.irradiance_w_m2 = np.atleast_2d(np.asarray(self.irradiance_w_m2, dtype=np.float64))

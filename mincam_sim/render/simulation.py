@@ -144,10 +144,11 @@ class Simulation:
         if self.kind == "display":
             solver = self._solver(solver, ResponseMap(), "measure")
             sink = resolve_sink(sink, out_dir, overwrite, "Simulation.measure")
-            m, _ = render_frames(self.mincam, self.screen, frames, solver.form, budget.rays(),
-                                 budget.samples_per_texel or DEFAULT_SAMPLES_PER_TEXEL, budget.target_rel_stderr,
-                                 budget.seed, budget.replicates, show_progress=show_progress, sink=sink)
+            m, maps = render_frames(self.mincam, self.screen, frames, solver.form, budget.rays(),
+                                    budget.samples_per_texel or DEFAULT_SAMPLES_PER_TEXEL, budget.target_rel_stderr,
+                                    budget.seed, budget.replicates, show_progress=show_progress, sink=sink)
             m.meta["solver"] = solver.name
+            m.maps = maps  # ResponseMap: the maps it used; other solvers: None
             return m
         solver = self._solver(solver, Aperture(), "measure")
         if out_dir is not None or sink is not None:
