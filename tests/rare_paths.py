@@ -7,10 +7,10 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from mincam_sim import Pose
+from mincam_sim import Budget, PlainChange, Pose, Simulation, StratifiedChange
 from mincam_sim.optics import cross_layout
 from mincam_sim.render import scene_dicts as sd
-from mincam_sim.render.world import WorldRenderer, vertex_update
+from mincam_sim.render.elements import vertex_update
 
 HEIGHT_M = 0.4  # mixels above the table; their view reaches ~0.2 m from the centre on the table
 PARK_M = np.array([5.0, 5.0, 0.0])  # where movers wait out of the scene
@@ -36,8 +36,9 @@ def _glass_mesh(name: str, vertices, faces):
     return mesh
 
 
-def rare_scene(case: str, replicates: int = 8):
-    """(world, frames, background) for ``case`` in {"far_movers", "mirror", "glass"}."""
+def rare_scene(case: str):
+    """(world simulation, frames, background) for ``case`` in {"far_movers", "mirror", "glass"} (the replicates
+    are the budget's)."""
     cam = cross_layout(center=Pose((0.0, 0.0, HEIGHT_M), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)))
     elements = {
         "table": {"type": "rectangle", "to_world": sd._transform(np.diag([0.8, 0.8, 1.0, 1.0])),
@@ -74,7 +75,7 @@ def rare_scene(case: str, replicates: int = 8):
         parked.update(vertex_update(name, v))
         foot = v.min(axis=0) * [1, 1, 0] + np.array(sizes[name]) * [0.5, 0.5, 0]  # the box's foot centre
         placed.update(vertex_update(name, v - foot + np.asarray(at)))
-    world = WorldRenderer(cam, elements, replicates=replicates, max_depth=3)
+    world = Simulation(cam, world=elements, max_depth=3)
     return world, [placed], parked
 
 
@@ -84,12 +85,13 @@ def tail_counts(case: str, seeds, spp: int, replicates: int = 8):
     many are 0 +/- 0, the z values and the runs' values and sigmas (runs, frames, mixels)."""
     import warnings
 
-    world, frames, background = rare_scene(case, replicates)
+    world, frames, background = rare_scene(case)
     values, sigmas = [], []
     for seed in seeds:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            dp, _ = world.measure_changes(frames, background, spp=spp, seed=int(seed), estimator="stratified")
+            budget = Budget(spp=spp, replicates=replicates, seed=int(seed))
+            dp = world.measure_changes(frames, background, StratifiedChange(), budget).dp
         values.append(dp.irradiance_w_m2)
         sigmas.append(dp.stderr_w_m2)
     v, s = np.array(values), np.array(sigmas)
@@ -102,8 +104,8 @@ def tail_counts(case: str, seeds, spp: int, replicates: int = 8):
 
 
 def plain_reference(case: str, spp: int, seed: int = 12345, replicates: int = 16):
-    world, frames, background = rare_scene(case, replicates)
-    dp, _ = world.measure_changes(frames, background, spp=spp, seed=seed)
+    world, frames, background = rare_scene(case)
+    dp = world.measure_changes(frames, background, PlainChange(), Budget(spp=spp, replicates=replicates, seed=seed)).dp
     return dp.irradiance_w_m2, dp.stderr_w_m2
 
 
