@@ -188,7 +188,7 @@ class Intrusion(Experiment):
         rows, cols = np.indices((camera.pixels, camera.pixels))
         xy = camera.pixel_to_table(rows, cols, (camera.pixels, camera.pixels))
         band = np.abs(xy[..., 0] - params.boundary_x_m) <= params.band_m / 2
-        options = LocateOptions(predict, setup.tabletop_spp, region=band, axis=1, extrapolated=outside,
+        options = LocateOptions(predict, region=band, axis=1, extrapolated=outside,
                                 objects=scene.meshes, ground_truth=params.ground_truth,
                                 groups=self.cars_in_band(scene, camera, params.boundary_x_m, params.band_m),
                                 show_progress=show_progress)

@@ -70,8 +70,6 @@ class LocateOptions:
     ----------
     predict : callable
         ``predict(change_dn, min_total_dn)`` -> positions [m] (one per frame).
-    spp : int
-        The plain estimator's rays per mixel per frame (the stratified one spends ``spp / STRATIFIED_SHARE``).
     region : (rows, cols) bool ndarray, optional
         Restricts both ground truths (e.g. the boundary band).
     axis : int, optional
@@ -88,7 +86,6 @@ class LocateOptions:
     """
 
     predict: Callable[[np.ndarray, float], np.ndarray]
-    spp: int
     region: np.ndarray | None = None
     axis: int | None = None
     extrapolated: Callable[[np.ndarray, float], np.ndarray] | None = None
@@ -102,7 +99,7 @@ def locate_in_world(sim: Simulation, camera: GroundTruthCamera, frames: Sequence
                     setup: Setup, rng: np.random.Generator, options: LocateOptions,
                     truth_sim: Simulation | None = None) -> Located:
     """Render dP of every frame (``setup.dp_estimator``: the stratified solver with the plain budget
-    ``options.spp`` / ``STRATIFIED_SHARE`` rays per pass, or the plain correlated one with ``options.spp``), read it
+    ``setup.tabletop_spp`` / ``STRATIFIED_SHARE`` rays per pass, or the plain correlated one with it), read it
     out, detect, predict positions with ``options.predict(change_dn, min_total_dn)``, propagate the noise, and
     compare with the ground-truth camera of ``truth_sim`` (a second simulation of the same scene, so that dP and
     the ground truth share no mutable scene; default: ``sim`` itself).
@@ -132,7 +129,8 @@ def locate_in_world(sim: Simulation, camera: GroundTruthCamera, frames: Sequence
     o = options
     ground_truth, objects, extrapolated, groups = o.ground_truth, o.objects, o.extrapolated, o.groups
     _check_ground_truth(ground_truth, objects, frames)
-    rays = o.spp // STRATIFIED_SHARE if setup.dp_estimator == "stratified" else o.spp
+    spp = setup.tabletop_spp
+    rays = spp // STRATIFIED_SHARE if setup.dp_estimator == "stratified" else spp
     seen = _observe(sim, frames, background, setup, rng, o.predict, rays, o.show_progress)
     truths = _ground_truths(sim if truth_sim is None else truth_sim, camera, frames, background, setup, o)
     truth = truths.by_name[ground_truth]

@@ -175,7 +175,7 @@ class Tracking(Experiment):
         def outside(c, min_total_dn):
             return calibration.outside_range(track_4(c, min_total_dn))
 
-        options = LocateOptions(predict, setup.tabletop_spp, extrapolated=outside, objects=scene.meshes,
+        options = LocateOptions(predict, extrapolated=outside, objects=scene.meshes,
                                 ground_truth=params.ground_truth, groups=scene.toy_of_frame.tolist(),
                                 show_progress=show_progress)
         found = locate_in_world(world, camera, scene.frames, scene.background, setup, rng["readout"], options,
