@@ -14,6 +14,8 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE.parent / "tests"))
+sys.path.insert(0, str(HERE.parent / "tests" / "oracles"))  # test_physics
+sys.path.insert(0, str(HERE.parent / "tests" / "render"))  # test_render_core
 
 
 def main() -> int:
