@@ -45,20 +45,18 @@ def _sweep_setup():
 def bench_baseline() -> dict:
     """Baseline: samples/s and relative noise of one measurement of a small white square through a
     ramp mask, for the reference form (literal scene) and the fast form (mixel sensor), same spp."""
-    from mincam_sim import Screen, masks, single
-    from mincam_sim.render.screen_engine import ScreenRenderer
+    from mincam_sim import Aperture, Budget, Reference, Screen, Simulation, masks, single
     from mincam_sim.scene.display import white_square
 
     screen = Screen()
-    cam = single(masks.ramp("x"))
+    sim = Simulation(single(masks.ramp("x")), screen=screen)
     frame = white_square(screen, (0.05, 0.02), 4 * screen.texel_size_m[0])  # 4x4 texels
     out = {}
     spp = 1 << 22
-    for form in ("reference", "fast"):
-        r = ScreenRenderer(cam, screen, form, replicates=16)
-        r.render(frame, spp=1 << 16, seed=99)  # warm-up (kernel compilation)
-        t = time.perf_counter()
-        m = r.render(frame, spp=spp, seed=1)
+    for form, solver in (("reference", Reference()), ("fast", Aperture())):
+        sim.measure(frame, solver, Budget(spp=1 << 16, replicates=16, seed=99))  # warm-up (kernel compilation)
+        t = time.perf_counter()  # (each measure builds the solver's scene: included, as small as the trace)
+        m = sim.measure(frame, solver, Budget(spp=spp, replicates=16, seed=1))
         dt = time.perf_counter() - t
         rel = float(m.relative_stderr()[0, 0])
         out[form] = {
@@ -78,14 +76,15 @@ def bench_baseline() -> dict:
 def bench_sweep() -> dict:
     """1,000-position sweep x 4 mixels, each measurement <= 0.1 % relative standard error, wall time
     including building the response maps (target-noise mode: pilot + extrapolation)."""
-    from mincam_sim.render.screen_engine import render_frames
+    from mincam_sim import Budget, ResponseMap, Simulation
 
     cam, screen, sweep, square = _sweep_setup()
+    sim = Simulation(cam, screen=screen)
     warm = sweep.frame_stack(screen)[:8]
-    render_frames(cam, screen, warm, "response_map", samples_per_texel=8, seed=123)  # warm-up
+    sim.measure(warm, ResponseMap(), Budget(samples_per_texel=8, seed=123))  # warm-up
     t = time.perf_counter()
     frames = sweep.frame_stack(screen)
-    m, maps = render_frames(cam, screen, frames, "response_map", target_rel_stderr=TARGET_REL, seed=1)
+    m = sim.measure(frames, ResponseMap(), Budget(target_rel_stderr=TARGET_REL, seed=1))
     dt = time.perf_counter() - t
     rel = m.relative_stderr()
     return {
@@ -103,16 +102,16 @@ def bench_sweep() -> dict:
 def bench_bruteforce() -> dict:
     """Out-of-the-box irradiance-meter path tracing (the literal reference scene) on a subset of the same
     sweep's positions: seconds to reach 0.1 % per measurement, scaled to the whole sweep."""
-    from mincam_sim.render.screen_engine import ScreenRenderer
+    from mincam_sim import Budget, Reference, Simulation
 
     cam, screen, sweep, _ = _sweep_setup()
     subset = np.linspace(0, len(sweep) - 1, 5).astype(int)
     frames = sweep.frame_stack(screen)[subset]
-    r = ScreenRenderer(cam, screen, "reference", replicates=8)
-    r.render(frames[:1], spp=1 << 14, seed=5)  # warm-up
+    sim = Simulation(cam, screen=screen)
+    sim.measure(frames[:1], Reference(), Budget(spp=1 << 14, replicates=8, seed=5))  # warm-up
     spp = 1 << 21
     t = time.perf_counter()
-    m = r.render(frames, spp=spp, seed=2)
+    m = sim.measure(frames, Reference(), Budget(spp=spp, replicates=8, seed=2))
     dt = time.perf_counter() - t
     per_measurement_s = dt / m.irradiance_w_m2.size
     rel = m.relative_stderr()
@@ -128,13 +127,14 @@ def bench_bruteforce() -> dict:
     }
 
 
-def _tabletop(n_frames: int, replicates: int = 8):
+def _tabletop(n_frames: int):
+    """The moving-object scene as a world :class:`~mincam_sim.Simulation`, its frames and its background."""
     import trimesh
 
-    from mincam_sim import cross_layout
+    from mincam_sim import Simulation, cross_layout
     from mincam_sim.geometry import Pose
     from mincam_sim.render import scene_dicts as sd
-    from mincam_sim.render.world import WorldRenderer, vertex_update
+    from mincam_sim.render.elements import vertex_update
 
     height = 0.5
     cam = cross_layout(center=Pose((0.0, 0.0, height), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)))
@@ -147,7 +147,7 @@ def _tabletop(n_frames: int, replicates: int = 8):
         "light": sd.area_light(0.4, 0.4, Pose((0, 0, 1.2), (0, 0, -1)).matrix(), 10.0),
         "toy": sd.mesh_object("toy", toy.vertices + [5.0, 5.0, 0.0], toy.faces, 0.9),
     }
-    world = WorldRenderer(cam, elements, replicates=replicates)
+    world = Simulation(cam, world=elements)
     xs = np.linspace(-0.12, 0.12, n_frames)
     frames = [vertex_update("toy", toy.vertices + [x, 0.03 * np.sin(20 * x), 0.0]) for x in xs]
     background = vertex_update("toy", toy.vertices + [5.0, 5.0, 0.0])
@@ -164,13 +164,16 @@ def bench_moving_object() -> dict:
     # sits above the largest true sigma by ~2.5 times their relative noise (same rays and time either way). At
     # one budget (16,279 rays, guided bounces, 2026-12-01) the worst of a 9-frame run was 0.0082 +/- 0.0006 (max
     # 0.0095 over 24 seeds) with 32 replicates and 0.0082 +/- 0.0003 (max 0.0088 over 12) with 64
-    world, frames, background = _tabletop(9, replicates=64)
-    world.measure_changes(frames[:1], background, spp=1 << 12, seed=9)  # warm-up
+    from mincam_sim import PlainChange
+
+    world, frames, background = _tabletop(9)
+    plain_dp = _dp_with(PlainChange(), world, frames, background)
+    plain_dp(frames[:1], 1 << 12, 9)  # warm-up
     spp = 1 << 16
     res = {}
     for correlated in (True, False):
         t = time.perf_counter()
-        dp, _ = world.measure_changes(frames, background, spp=spp, seed=3, correlated=correlated)
+        dp = plain_dp(frames, spp, 3).dp if correlated else _independent_seeds_dp(world, frames, background, spp, 3)
         res[correlated] = (time.perf_counter() - t, dp)
     var_c = res[True][1].stderr_w_m2 ** 2
     var_i = res[False][1].stderr_w_m2 ** 2
@@ -179,9 +182,9 @@ def bench_moving_object() -> dict:
     dp = res[True][1]
     rel = np.abs(dp.stderr_w_m2 / dp.irradiance_w_m2)
     spp_needed = int(np.ceil(1.5 * spp * max(1.0, (np.max(rel) / 0.01) ** 2)))  # 1.5: margin for the worst of 36
-    world.measure_changes(frames[:1], background, spp=spp_needed, seed=8)  # warm-up at that size
+    plain_dp(frames[:1], spp_needed, 8)  # warm-up at that size
     t = time.perf_counter()
-    plain, _ = world.measure_changes(frames, background, spp=spp_needed, seed=4)
+    plain = plain_dp(frames, spp_needed, 4).dp
     dt_plain = time.perf_counter() - t
     rel2 = np.abs(plain.stderr_w_m2 / plain.irradiance_w_m2)
     fast = _moving_object_stratified(world, frames, background, plain)
@@ -201,17 +204,50 @@ def bench_moving_object() -> dict:
     }
 
 
+MOVING_OBJECT_REPLICATES = 64  # see bench_moving_object
+
+
+def _dp_with(solver, world, frames, background):
+    """``changes(frames, spp, seed) -> Changes``: the moving object's dP by ``solver`` at that budget."""
+    from mincam_sim import Budget
+
+    def changes(run_frames, spp: int, seed: int):
+        return world.measure_changes(run_frames, background, solver,
+                                     Budget(spp=spp, replicates=MOVING_OBJECT_REPLICATES, seed=seed))
+
+    return changes
+
+
+def _independent_seeds_dp(world, frames, background, spp: int, seed: int):
+    """The plain dP with independent seeds for frame and background (the variance the correlated seeds remove).
+    The front door has no solver for it (PlainChange pairs the seeds): the world's renderer is asked directly,
+    with the replicates the door would give it."""
+    renderer = world.renderer
+    renderer.replicates = MOVING_OBJECT_REPLICATES
+    dp, _ = renderer.measure_changes(frames, background, spp=spp, seed=seed, correlated=False)
+    return dp
+
+
+def _set_frozen_paired(world, on: bool) -> None:
+    """Frozen launches and paired background lanes on or off (the stratified solver's own switches; the front door
+    has none: the world's renderer is set directly)."""
+    world.renderer.freeze_launches = world.renderer.pair_lanes = on
+
+
 def _moving_object_stratified(world, frames, background, plain) -> dict:
     """Frames/s of the stratified estimator at <= 1 % on dP (two pilots, extrapolated budget, 3 timed runs of the
     9 frames with different seeds) and its largest |z| against the plain run on the same frames."""
+    from mincam_sim import StratifiedChange
+
+    fast_dp = _dp_with(StratifiedChange(), world, frames, background)
     pilot_spp = 1 << 16
-    world.measure_changes(frames[:2], background, spp=pilot_spp, seed=19, estimator="stratified")  # warm-up
-    pilot, _ = world.measure_changes(frames, background, spp=pilot_spp, seed=20, estimator="stratified")
+    fast_dp(frames[:2], pilot_spp, 19)  # warm-up
+    pilot = fast_dp(frames, pilot_spp, 20).dp
     first_worst = float(np.max(np.abs(pilot.stderr_w_m2 / pilot.irradiance_w_m2)))
     # a second pilot at the first one's extrapolation: the region's jittered grid makes the variance fall faster
     # than 1/rays, so extrapolating down from 65,536 rays alone promised 0.01 and gave 0.012
     second_spp = int(np.ceil(pilot_spp * (first_worst / 0.01) ** 2))
-    pilot, _ = world.measure_changes(frames, background, spp=second_spp, seed=23, estimator="stratified")
+    pilot = fast_dp(frames, second_spp, 23).dp
     rel = np.abs(pilot.stderr_w_m2 / pilot.irradiance_w_m2)
     second_worst = float(np.max(rel))
     # sigma ~ rays^-beta with beta from the two pilots (0.5 for independent rays; the jittered region converges
@@ -219,16 +255,16 @@ def _moving_object_stratified(world, frames, background, plain) -> dict:
     # sigma of a 9-frame run stays within ~7 % of its mean over seeds (above)
     beta = float(np.clip(np.log(second_worst / first_worst) / np.log(pilot_spp / second_spp), 0.5, 1.0))
     spp = int(np.ceil(second_spp * (second_worst / (0.01 / 1.1)) ** (1.0 / beta)))
-    world.measure_changes(frames[:2], background, spp=spp, seed=21, estimator="stratified")  # warm-up at that size
+    fast_dp(frames[:2], spp, 21)  # warm-up at that size
     # the same budget without guided bounces (Mitsuba's path samples the inter-reflection from the BSDF alone)
-    unguided, _ = world.measure_changes(frames, background, spp=spp, seed=22, estimator="stratified",
-                                        guide_bounces=False)
+    unguided = _dp_with(StratifiedChange(guide_bounces=False), world, frames, background)(frames, spp, 22).dp
     runs, raised = 3, []
     while True:  # the worst sigma of all timed runs must be <= 1 %: raise the rays and time again if it is not
         seconds, worst, z_max = 0.0, 0.0, 0.0
         for seed in range(runs):
             t = time.perf_counter()
-            dp, _ = world.measure_changes(frames, background, spp=spp, seed=30 + seed, estimator="stratified")
+            run = fast_dp(frames, spp, 30 + seed)
+            dp = run.dp
             seconds += time.perf_counter() - t
             worst = max(worst, float(np.max(np.abs(dp.stderr_w_m2 / dp.irradiance_w_m2))))
             z = (dp.irradiance_w_m2 - plain.irradiance_w_m2) / np.hypot(dp.stderr_w_m2, plain.stderr_w_m2)
@@ -237,17 +273,18 @@ def _moving_object_stratified(world, frames, background, plain) -> dict:
             break
         raised.append([spp, worst])
         spp = int(np.ceil(spp * (worst / 0.0097) ** (1.0 / beta)))
-        world.measure_changes(frames[:2], background, spp=spp, seed=21, estimator="stratified")  # warm-up
+        fast_dp(frames[:2], spp, 21)  # warm-up
     # the same runs traced every frame with full background passes (the estimator before frozen launches and
     # paired lanes): the same numbers bit for bit, timed in this run beside the frozen, paired ones
-    world.freeze_launches = world.pair_lanes = False
-    world.measure_changes(frames[:2], background, spp=spp, seed=21, estimator="stratified")  # warm-up
+    _set_frozen_paired(world, False)
+    fast_dp(frames[:2], spp, 21)  # warm-up
     traced_seconds = 0.0
     for seed in range(runs):
         t = time.perf_counter()
-        traced, _ = world.measure_changes(frames, background, spp=spp, seed=30 + seed, estimator="stratified")
+        traced_run = fast_dp(frames, spp, 30 + seed)
+        traced = traced_run.dp
         traced_seconds += time.perf_counter() - t
-    world.freeze_launches = world.pair_lanes = True
+    _set_frozen_paired(world, True)
     identical = bool(np.array_equal(traced.irradiance_w_m2, dp.irradiance_w_m2)
                      and np.array_equal(traced.stderr_w_m2, dp.stderr_w_m2))
     return {
@@ -256,16 +293,16 @@ def _moving_object_stratified(world, frames, background, plain) -> dict:
         "fps_speedup_frozen_paired_vs_traced": traced_seconds / seconds,
         "fps_budget_raised_from": raised,
         "fps_frozen_paired_equals_traced_bit_for_bit": identical,
-        "fps_traced_rays_per_mixel_per_frame": int(traced.meta["rays_per_mixel_per_frame"]),
+        "fps_traced_rays_per_mixel_per_frame": traced_run.info.rays_per_mixel_per_frame,
         "fps_background_rays_share": dp.meta["background_rays_share"],
-        "fps_launches": dp.meta["launches"],
+        "fps_launches": run.info.launches,
         "fps_seconds_timed": seconds,
         "fps_worst_rel_stderr_dP": worst,
         "fast_vs_plain_max_abs_z": z_max,
         "fast_vs_plain_comparisons": runs * plain.irradiance_w_m2.size,
         "fps_estimator": "stratified",
         "fps_spp_per_mixel_per_frame": spp,
-        "fps_rays_per_mixel_per_frame": int(dp.meta["rays_per_mixel_per_frame"]),
+        "fps_rays_per_mixel_per_frame": run.info.rays_per_mixel_per_frame,
         "fps_region_area_fraction_mean": dp.meta["region_area_fraction_mean"],
         "fps_pilot_worst_rel_stderr_dP": [first_worst, second_worst],
         "fps_pilot_sigma_exponent": beta,
@@ -299,10 +336,10 @@ def _cost_point(n_mixels: int = 4, table_triangles: int = 2, n_movers: int = 1, 
     (extrapolated with sigma ~ rays^-1/2 and time ~ rays from the measured run)."""
     import trimesh
 
-    from mincam_sim import cross_layout
+    from mincam_sim import Budget, PlainChange, Simulation, StratifiedChange, cross_layout
     from mincam_sim.geometry import Pose
     from mincam_sim.render import scene_dicts as sd
-    from mincam_sim.render.world import WorldRenderer, vertex_update
+    from mincam_sim.render.elements import vertex_update
 
     height = 0.5
     cam = (cross_layout(center=Pose((0.0, 0.0, height), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0))) if n_mixels == 4
@@ -328,17 +365,18 @@ def _cost_point(n_mixels: int = 4, table_triangles: int = 2, n_movers: int = 1, 
     xs = np.linspace(-0.05, 0.05, n_frames)
     frames = [{k: v for j, (cx, cy) in enumerate(centres)
                for k, v in vertex_update(f"toy{j}", toy.vertices + [cx + x, cy, 0.0]).items()} for x in xs]
-    world = WorldRenderer(cam, elements, replicates=16)
+    world = Simulation(cam, world=elements)
     out = {"n_mixels": len(cam), "table_triangles": int(len(faces)), "n_movers": n_movers, "spp": spp}
-    for estimator in ("stratified", "plain"):
-        world.measure_changes(frames[:1], background, spp=1 << 10, seed=1, estimator=estimator)  # warm-up
+    for estimator, solver in (("stratified", StratifiedChange()), ("plain", PlainChange())):
+        world.measure_changes(frames[:1], background, solver, Budget(spp=1 << 10, replicates=16, seed=1))  # warm-up
         t = time.perf_counter()
-        dp, _ = world.measure_changes(frames, background, spp=spp, seed=2, estimator=estimator)
+        ch = world.measure_changes(frames, background, solver, Budget(spp=spp, replicates=16, seed=2))
         seconds = time.perf_counter() - t
+        dp = ch.dp
         significant = np.abs(dp.irradiance_w_m2) > 4 * dp.stderr_w_m2
         rel = np.abs(dp.stderr_w_m2 / dp.irradiance_w_m2)[significant]
         worst = float(rel.max()) if rel.size else float("nan")
-        rays = int(dp.meta["rays_per_mixel_per_frame"])
+        rays = ch.info.rays_per_mixel_per_frame
         scale = (worst / 0.01) ** 2
         out[estimator] = {"seconds_per_frame": seconds / n_frames, "rays_per_mixel_per_frame": rays,
                           "worst_rel_stderr_dP": worst, "significant_values": int(significant.sum()),
@@ -365,8 +403,7 @@ def bench_cost_curves() -> dict:
     movers (1, 2, 8), stratified and plain side by side at each point; and the response-map build time against
     screen resolution (256 x 144 .. 1920 x 1080, 4 mixels, 16 samples per texel). Extrapolated to <= 1 %
     from one run per point (sigma ~ rays^-1/2, time ~ rays): a curve of how things scale, not the frame rate."""
-    from mincam_sim import Screen, cross_layout
-    from mincam_sim.render.response_map import response_maps
+    from mincam_sim import Budget, Screen, Simulation, cross_layout
 
     curves = {
         "mixels": [_cost_point_alone(n_mixels=n) for n in (4, 16, 64)],
@@ -375,10 +412,11 @@ def bench_cost_curves() -> dict:
     }
     maps = []
     cam = cross_layout()
-    response_maps(cam, Screen(resolution=(64, 36)), 16, seed=0)  # warm-up
+    budget = Budget(samples_per_texel=16, seed=0)
+    Simulation(cam, screen=Screen(resolution=(64, 36))).response_maps(budget)  # warm-up
     for res in ((256, 144), (640, 360), (1280, 720), (1920, 1080)):
         t = time.perf_counter()
-        response_maps(cam, Screen(resolution=res), 16, seed=0)
+        Simulation(cam, screen=Screen(resolution=res)).response_maps(budget)
         maps.append({"resolution": list(res), "texels": res[0] * res[1], "seconds": time.perf_counter() - t})
     curves["response_map_build"] = maps
     _plot_cost_curves(curves, HERE.parent / "scenes" / "figures" / "cost_curves.png")
@@ -421,16 +459,15 @@ def bench_memory_sweep_1080p() -> dict:
     measured in chunks, results in a resumable store): peak memory of the whole process."""
     import tempfile
 
-    from mincam_sim import Screen, pair_layout
-    from mincam_sim.render.screen_engine import render_frames
+    from mincam_sim import Budget, ResponseMap, Run, Screen, Simulation, pair_layout
     from mincam_sim.scene.display import line_sweep
 
     screen = Screen(resolution=(1920, 1080))
     sweep = line_sweep((-0.25, 0.0), (0.25, 0.0), 1000, 0.03)
     t = time.perf_counter()
-    with tempfile.TemporaryDirectory() as out:
-        m, _ = render_frames(pair_layout(), screen, sweep.frame_source(screen), samples_per_texel=4, seed=0,
-                             out_dir=out)
+    with tempfile.TemporaryDirectory() as out, Run(out) as run:
+        m = run.measure(Simulation(pair_layout(), screen=screen), sweep.frame_source(screen), ResponseMap(),
+                        Budget(samples_per_texel=4, seed=0))
     return {"frames": len(sweep), "resolution": [1920, 1080], "seconds": time.perf_counter() - t,
             "frame_stack_gib_if_held": len(sweep) * 1920 * 1080 * 8 / 2**30, "goal_peak_gib": 3.0,
             "finite": bool(np.isfinite(m.irradiance_w_m2).all())}
@@ -440,16 +477,15 @@ def bench_memory_10k_frames() -> dict:
     """10,000 frames at 256 x 144, streamed into a resumable store: peak memory of the process."""
     import tempfile
 
-    from mincam_sim import Screen, pair_layout
-    from mincam_sim.render.screen_engine import render_frames
+    from mincam_sim import Budget, ResponseMap, Run, Screen, Simulation, pair_layout
     from mincam_sim.scene.display import line_sweep
 
     screen = Screen()
     sweep = line_sweep((-0.25, -0.1), (0.25, 0.1), 10_000, 0.03)
     t = time.perf_counter()
-    with tempfile.TemporaryDirectory() as out:
-        m, _ = render_frames(pair_layout(), screen, sweep.frame_source(screen), samples_per_texel=16, seed=0,
-                             out_dir=out)
+    with tempfile.TemporaryDirectory() as out, Run(out) as run:
+        m = run.measure(Simulation(pair_layout(), screen=screen), sweep.frame_source(screen), ResponseMap(),
+                        Budget(samples_per_texel=16, seed=0))
     return {"frames": len(sweep), "resolution": list(screen.resolution), "seconds": time.perf_counter() - t,
             "goal_peak_gib": 1.0, "finite": bool(np.isfinite(m.irradiance_w_m2).all())}
 
@@ -478,46 +514,40 @@ def bench_study_scaling() -> dict:
 
 def bench_sliding_plane() -> dict:
     """The speed experiment's vehicle road (one sinusoid mixel 0.3 m over a textured road, 2^19 rays a frame):
-    frames traced (the plane moved, Mitsuba's path tracer) and replayed (``SlidingPlane``) side by side, same
-    seed, with the largest relative difference between them."""
-    from mincam_sim import objects
+    frames traced (the plane moved, the Aperture solver) and replayed (the PlaneReplay solver) side by side,
+    same seed, with the largest relative difference between their measurements. The replay's build is the
+    time of one replay less the frames' share, measured as the difference to a replay of every frame twice
+    (the same placements: the same cover, the same build)."""
+    from mincam_sim import Aperture, Budget, PlaneReplay, Simulation, objects
     from mincam_sim.experiments.layouts import sinusoid_mixel
     from mincam_sim.experiments.setup import Setup
     from mincam_sim.geometry import Pose
     from mincam_sim.optics import Mincam
     from mincam_sim.render.elements import road_elements
-    from mincam_sim.render.sliding_plane import SlidingPlane
-    from mincam_sim.render.world import WorldRenderer
     from mincam_sim.scene.road import Road
 
     setup, spp, n_frames = Setup(), 1 << 19, 64
     cam = Mincam((sinusoid_mixel(setup, 0.2e-3, Pose((0.0, 0.0, 0.3), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0))),))
     road = Road(objects.road_texture((512, 4096), np.random.default_rng(0)), 4.0, 0.6)
-    world = WorldRenderer(cam, road_elements(road), replicates=4)
-    placements = [road.matrix_at(1.5 - 3.0 * i / n_frames) for i in range(n_frames)]
-
-    def traced(frames):
-        out = []
-        for m in frames:
-            world.update({"road.to_world": m})
-            out.append(world.estimates(spp, seed=1))
-        return np.array(out)
-
-    traced(placements[:2])  # warm-up
-    SlidingPlane(world, "road", placements[:2], spp, seed=1).estimates(placements[0])  # warm-up
+    world = Simulation(cam, world=road_elements(road))
+    frames = [{"road.to_world": road.matrix_at(1.5 - 3.0 * i / n_frames)} for i in range(n_frames)]
+    budget = Budget(spp=spp, replicates=4, seed=1)
+    world.measure(frames[:2], Aperture(), budget)  # warm-up
+    world.measure(frames[:2], PlaneReplay("road"), budget)  # warm-up
     t = time.perf_counter()
-    reference = traced(placements)
+    reference = world.measure(frames, Aperture(), budget)
     traced_s = time.perf_counter() - t
     t = time.perf_counter()
-    replay = SlidingPlane(world, "road", placements, spp, seed=1)
-    build_s = time.perf_counter() - t
+    replayed = world.measure(frames, PlaneReplay("road"), budget)
+    once_s = time.perf_counter() - t
     t = time.perf_counter()
-    replayed = np.array([replay.estimates(m) for m in placements])
-    replay_s = time.perf_counter() - t
+    world.measure(frames + frames, PlaneReplay("road"), budget)
+    replay_s = time.perf_counter() - t - once_s  # the frames' share: n_frames replayed
+    build_s = once_s - replay_s
     return {"frames": n_frames, "rays_per_frame": spp, "traced_ms_per_frame": 1e3 * traced_s / n_frames,
             "replay_build_s": build_s, "replayed_ms_per_frame": 1e3 * replay_s / n_frames,
-            "speedup_per_frame": traced_s / replay_s, "speedup_with_build": traced_s / (replay_s + build_s),
-            "max_rel_difference": float(np.abs(replayed / reference - 1).max())}
+            "speedup_per_frame": traced_s / replay_s, "speedup_with_build": traced_s / once_s,
+            "max_rel_difference": float(np.abs(replayed.irradiance_w_m2 / reference.irradiance_w_m2 - 1).max())}
 
 
 def bench_reproduce_all() -> dict:

@@ -14,13 +14,14 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE.parent / "tests"))
+sys.path.insert(0, str(HERE.parent / "tests" / "oracles"))  # test_physics
+sys.path.insert(0, str(HERE.parent / "tests" / "render"))  # test_render_core
 
 
 def main() -> int:
     from test_physics import _sinusoid_frequency, closed_form
 
     from mincam_sim import Mincam, Mixel, Pose, Screen, masks, single
-    from mincam_sim.render.screen_engine import ScreenRenderer, response_maps
     from mincam_sim.scene.display import vertical_line, white_square
 
     out: dict = {}
@@ -32,9 +33,9 @@ def main() -> int:
         rows = {"closed_form_w_m2": expected}
         for form in ("reference", "fast", "response_map"):
             if form == "response_map":
-                m = response_maps(cam, screen, 64, seed=1).measure(frame)
+                m = _maps(cam, screen, 64, seed=1).measure(frame)
             else:
-                m = ScreenRenderer(cam, screen, form, replicates=16).render(frame, spp=1 << 22, seed=1)
+                m = _rays(cam, screen, form, 1 << 22, seed=1, frame=frame)
             v, s = float(m.irradiance_w_m2[0, 0]), float(m.stderr_w_m2[0, 0])
             rows[form] = {"value_w_m2": v, "sigma_w_m2": s, "deviation_sigma": (v - expected) / s,
                           "relative_deviation": v / expected - 1}
@@ -45,7 +46,7 @@ def main() -> int:
     ramp = masks.ramp("x", 64)
     res = {}
     for name, mask in {"x": ramp, "1-x": ramp.complement(), "1": masks.constant(1.0), "0.3x": ramp.scaled(0.3)}.items():
-        m = ScreenRenderer(single(mask), screen, "fast", replicates=16).render(image, spp=1 << 22, seed=len(name))
+        m = _rays(single(mask), screen, "fast", 1 << 22, seed=len(name), frame=image)
         res[name] = (float(m.irradiance_w_m2[0, 0]), float(m.stderr_w_m2[0, 0]))
     diff = res["x"][0] + res["1-x"][0] - res["1"][0]
     sig = float(np.sqrt(res["x"][1] ** 2 + res["1-x"][1] ** 2 + res["1"][1] ** 2))
@@ -54,10 +55,10 @@ def main() -> int:
     sig = float(np.hypot(res["0.3x"][1], 0.3 * res["x"][1]))
     out["scaled_mask"] = {"P(0.3x)-0.3P(x)_w_m2": diff, "sigma_w_m2": sig}
 
-    renderer = ScreenRenderer(single(ramp), screen, "fast", replicates=16)
     a = white_square(screen, (-0.1, 0.05), 0.08, 3.0)
     b = white_square(screen, (0.12, -0.08), 0.12, 1.5)
-    pa, pb, pab = (renderer.render(f, spp=1 << 22, seed=s) for f, s in ((a, 11), (b, 12), (a + b, 13)))
+    pa, pb, pab = (_rays(single(ramp), screen, "fast", 1 << 22, seed=s, frame=f) for f, s in ((a, 11), (b, 12),
+                                                                                               (a + b, 13)))
     diff = float(pab.irradiance_w_m2[0, 0] - pa.irradiance_w_m2[0, 0] - pb.irradiance_w_m2[0, 0])
     sig = float(np.sqrt(pab.stderr_w_m2[0, 0] ** 2 + pa.stderr_w_m2[0, 0] ** 2 + pb.stderr_w_m2[0, 0] ** 2))
     out["superposition"] = {"P(A+B)-P(A)-P(B)_w_m2": diff, "sigma_w_m2": sig,
@@ -68,7 +69,7 @@ def main() -> int:
         scr = Screen(width_m=1.2, height_m=1.2, resolution=(480, 8), pose=Pose((0, 0, -depth), (0, 0, 1)))
         cam = Mincam((Mixel(masks.sinusoid(omega_df, resolution=512), d_f, name="sin"),
                       Mixel(masks.constant(1.0), d_f, name="open")), allow_overlap=True)
-        maps = response_maps(cam, scr, 64, seed=5)
+        maps = _maps(cam, scr, 64, seed=5)
         x = scr.texel_centers_m()[0][0]
         p = maps.measure(np.stack([vertical_line(scr, xc, scr.texel_size_m[0]) for xc in x])).irradiance_w_m2
         keep = (np.abs(x) < 0.8 * 1e-3 * depth / d_f) & (p[:, 1] > 0)
@@ -81,7 +82,7 @@ def main() -> int:
     baseline = 10 * scr.texel_size_m[0]
     cam = Mincam((Mixel(ramp, pose=Pose((-baseline / 2, 0, 0), (0, 0, -1)), name="l"),
                   Mixel(ramp, pose=Pose((baseline / 2, 0, 0), (0, 0, -1)), name="r")))
-    maps = response_maps(cam, scr, 64, seed=7)
+    maps = _maps(cam, scr, 64, seed=7)
     curves = maps.weights_sr.sum(axis=1)
     x = scr.texel_centers_m()[0][0]
     c = (curves * x).sum(axis=1) / curves.sum(axis=1)
@@ -91,6 +92,22 @@ def main() -> int:
     (HERE / "validation.json").write_text(json.dumps(out, indent=1))
     print(json.dumps(out, indent=1))
     return 0
+
+
+def _maps(cam, screen, samples_per_texel: int, seed: int, replicates: int | None = None):
+    """The response maps of ``cam`` over ``screen`` (the ResponseMap solver's maps, through the front door)."""
+    from mincam_sim import Budget, Simulation
+
+    budget = Budget(samples_per_texel=samples_per_texel, seed=seed, replicates=replicates)
+    return Simulation(cam, screen=screen).response_maps(budget)
+
+
+def _rays(cam, screen, form: str, spp: int, seed: int, frame: np.ndarray):
+    """``frame`` measured by the reference or the aperture ("fast") solver, 16 replicates."""
+    from mincam_sim import Aperture, Budget, Reference, Simulation
+
+    solver = Reference() if form == "reference" else Aperture()
+    return Simulation(cam, screen=screen).measure(frame, solver, Budget(spp=spp, replicates=16, seed=seed))
 
 
 def _row(value: float, sigma: float, expected: float) -> dict:
@@ -106,14 +123,13 @@ def coupled_geometry_and_shadows() -> dict:
 
     from mincam_sim import Mincam, Mixel, Screen, masks
     from mincam_sim.quadrature import mixel_irradiance_gl
-    from mincam_sim.render.screen_engine import ScreenRenderer, response_maps
     from mincam_sim.scene.display import coverage
 
     out: dict = {}
     for name, mask in (("sinusoid30", SINUSOID_30), ("ramp", masks.ramp("1-x"))):
         mixel = _tilted_mixel(mask)
         expected = mixel_irradiance_gl(mixel, TILT_SCREEN, SQUARE_M, 1.0, n_detector=8, n_screen=24)
-        m = response_maps(Mincam((mixel,)), TILT_SCREEN, 1024, seed=4, replicates=16).measure(
+        m = _maps(Mincam((mixel,)), TILT_SCREEN, 1024, seed=4, replicates=16).measure(
             coverage(TILT_SCREEN, *SQUARE_M))
         out[f"response_map_tilted_{name}"] = _row(m.irradiance_w_m2[0, 0], m.stderr_w_m2[0, 0], expected)
     cam = _shadowing_pair()
@@ -122,16 +138,15 @@ def coupled_geometry_and_shadows() -> dict:
     out["shadow_unshadowed_oracle_w_m2"] = alone
     for form in ("fast", "response_map", "reference"):
         if form == "response_map":
-            m = response_maps(cam, Screen(), 16, seed=3).measure(frame)
+            m = _maps(cam, Screen(), 16, seed=3).measure(frame)
         else:
-            spp = 1 << 20 if form == "fast" else 1 << 23
-            m = ScreenRenderer(cam, Screen(), form, replicates=16).render(frame, spp=spp, seed=3)
+            m = _rays(cam, Screen(), form, 1 << 20 if form == "fast" else 1 << 23, seed=3, frame=frame)
         out[f"shadow_{form}"] = _row(m.irradiance_w_m2[0, 0], m.stderr_w_m2[0, 0], expected)
     screen = Screen(width_m=0.24, height_m=0.12, resolution=(96, 48))
     exact = masks.sinusoid(2 * np.pi / 0.2e-3, 0.5, 0.5)
     region = (0.0125, 0.0375, -0.025, 0.025)
     expected = mixel_irradiance_gl(Mixel(exact), screen, region, 1.0, n_detector=12, n_screen=24)
-    m = response_maps(Mincam((Mixel(exact),)), screen, 1024, seed=2, replicates=16).measure(coverage(screen, *region))
+    m = _maps(Mincam((Mixel(exact),)), screen, 1024, seed=2, replicates=16).measure(coverage(screen, *region))
     out["speed_sinusoid_trough"] = _row(m.irradiance_w_m2[0, 0], m.stderr_w_m2[0, 0], expected)
     return out
 

@@ -16,7 +16,8 @@ from .wave.report import DEFAULT_PERIOD_M, print_deviation, rim_profile
 
 def make_figures(out_dir: str | Path) -> list[Path]:
     """Write the README's figures into ``out_dir``."""
-    from .render.screen_engine import response_maps
+    from .budget import Budget
+    from .render.simulation import Simulation
 
     out_dir = Path(out_dir)
     paths = [plot_mixel_geometry(Mixel(masks.ramp("x")), 0.5, out_dir / "mixel_geometry.png")]
@@ -26,7 +27,7 @@ def make_figures(out_dir: str | Path) -> list[Path]:
         plot_mask(mask, ax=ax, title=mask.name)
     paths.append(_save(fig, out_dir / "masks.png"))
     screen = Screen()
-    maps = response_maps(pair_layout(), screen, samples_per_texel=64, seed=0)
+    maps = Simulation(pair_layout(), screen=screen).response_maps(Budget(samples_per_texel=64, seed=0))
     paths.append(plot_response_maps(maps, screen, out_dir / "response_maps.png"))
     paths.append(render_figure(maps, screen, out_dir / "render_measurements.png"))
     paths.append(print_sheet_figure(out_dir / "print_sheet.png")[0])

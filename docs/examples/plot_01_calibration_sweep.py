@@ -14,30 +14,29 @@ product, so the sweep's 21 positions cost no more than one.
 # %%
 # Render the sweep
 # ----------------
-# ``render_frames`` returns the measurements (irradiance averaged over each detector, W/m², with its standard
-# error) and the response maps it traced. ``samples_per_texel`` sets the noise; ``target_rel_stderr=1e-3``
-# would pick it for a target instead.
+# ``Simulation.measure`` with the ``ResponseMap`` solver returns the measurements (irradiance averaged over each
+# detector, W/m², with its standard error), and ``m.maps`` the response maps it traced. The budget's
+# ``samples_per_texel`` sets the noise; ``target_rel_stderr=1e-3`` would pick it for a target instead.
 import matplotlib.pyplot as plt
 import numpy as np
 
+import mincam_sim as ms
 from mincam_sim import Screen, line_sweep, pair_layout
 from mincam_sim.calibration import Calibration1D
 from mincam_sim.estimators import intrusion_position
-from mincam_sim.render.screen_engine import render_frames
 
 # mixel "x" on the right, "1-x" on the left, looking along -z
 cam = pair_layout(spacing_m=0.033)
 screen = Screen()  # 50" 16:9 display at z = -0.5 m, 256 x 144 texels
 # screen coordinates: x right, y up [m]
 sweep = line_sweep((-0.2, 0.0), (0.2, 0.0), n=21, size_m=0.03)
-m, maps = render_frames(
-    cam,
-    screen,
+sim = ms.Simulation(cam, screen=screen)
+m = sim.measure(
     sweep.frame_source(screen),
-    form="response_map",
-    samples_per_texel=64,
-    seed=0,
+    solver=ms.ResponseMap(),
+    budget=ms.Budget(samples_per_texel=64, seed=0),
 )
+maps = m.maps
 print(
     f"{m.n_frames} positions x {len(m.mixel_names)} mixels ({m.mixel_names}); "
     f"worst relative standard error {np.nanmax(m.relative_stderr()):.1e}"

@@ -24,7 +24,7 @@ from mincam_sim import Pose, pair_layout
 from mincam_sim.estimators import intrusion_position
 from mincam_sim.readout import propagate_sigma
 from mincam_sim.render import scene_dicts as sd
-from mincam_sim.render.world import vertex_update
+from mincam_sim.render.elements import vertex_update
 
 HEIGHT_M = 0.5
 cam = pair_layout(

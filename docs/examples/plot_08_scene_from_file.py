@@ -28,7 +28,7 @@ import numpy as np
 import mincam_sim as ms
 from mincam_sim.estimators import intrusion_position
 from mincam_sim.readout import propagate_sigma
-from mincam_sim.render.world import vertex_update
+from mincam_sim.render.elements import vertex_update
 
 ROOT = Path.cwd()
 while not (ROOT / "scenes" / "world" / "room.xml").is_file():  # the gallery runs in docs/examples

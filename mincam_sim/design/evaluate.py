@@ -1,8 +1,9 @@
 """Physical evaluation of a tracking mincam on held-out scenes, with the simulator's non-differentiable
-response-map form (:func:`~mincam_sim.render.screen_engine.response_maps`: rays from the detectors through the
-masks, as printed on the film, to every display texel, with visibility in the mincam's scene), the 12-bit
-sensor and the paper's protocol: Eq. 7 ratios, cubic calibration on a grid of 3 cm squares at 0.5 m, scaled
-by ``depth / 0.5`` at other depths (:mod:`mincam_sim.design.tracking` for the coordinates)."""
+response-map solver (:meth:`Simulation.response_maps <mincam_sim.render.simulation.Simulation.response_maps>`:
+rays from the detectors through the masks, as printed on the film, to every display texel, with visibility in
+the mincam's scene), the 12-bit sensor and the paper's protocol: Eq. 7 ratios, cubic calibration on a grid of
+3 cm squares at 0.5 m, scaled by ``depth / 0.5`` at other depths (:mod:`mincam_sim.design.tracking` for the
+coordinates)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..budget import Budget
 from ..calibration import Calibration2D, ExtrapolationWarning
 from ..geometry import Pose
 from ..metrics import error_rates
@@ -55,10 +57,10 @@ def _frames(screen: Screen, centers_m: np.ndarray, sizes_m: np.ndarray, radiance
 def irradiances(cam: Mincam, depth_m: float, centers_m: np.ndarray, sizes_m: np.ndarray, radiance: np.ndarray,
                 task: tr.TrackingTask, seed: int) -> np.ndarray:
     """Irradiance (n, 4) [W/m^2] of every object on a display at ``depth_m`` (response-map form)."""
-    from ..render.response_map import response_maps
+    from ..render.simulation import Simulation
 
     screen = _screen(depth_m, task.screen_texels)
-    maps = response_maps(cam, screen, samples_per_texel=task.samples_per_texel, seed=seed)
+    maps = Simulation(cam, screen=screen).response_maps(Budget(samples_per_texel=task.samples_per_texel, seed=seed))
     return maps.measure(_frames(screen, centers_m, sizes_m, radiance)).irradiance_w_m2
 
 

@@ -1,8 +1,9 @@
 """The held-out suite of a design report: a fixed list of cases outside the training set, each evaluated in the
-physical simulator (response maps of the masks as printed, :func:`mincam_sim.render.response_map.response_maps`)
-with the 12-bit sensor, for the designed masks and, beside them, the baseline: the paper's ramps in the layout
-the package builds (:func:`mincam_sim.optics.cross_layout`) with Eq. 7 and the cubic calibration on a sweep of
-3 cm squares at 0.5 m on a black plane (the experiments' protocol).
+physical simulator (response maps of the masks as printed,
+:meth:`mincam_sim.render.simulation.Simulation.response_maps`) with the 12-bit sensor, for the designed masks
+and, beside them, the baseline: the paper's ramps in the layout the package builds
+(:func:`mincam_sim.optics.cross_layout`) with Eq. 7 and the cubic calibration on a sweep of 3 cm squares at
+0.5 m on a black plane (the experiments' protocol).
 
 Every frame's target is the centroid of the *change* (radiance change times area, over all its objects,
 mapped to normalised field coordinates through the direction of the 3D centroid: :mod:`.tracking`), which for
@@ -302,16 +303,17 @@ def evaluate_suite(entries: list[Entry], task: tr.TrackingTask, n_frames: int, t
     Returns ``{"cases": [{name, description, setup, rows: {label: row}, "ratio_to_baseline": {label: r}}],
     "errors": {case: {label: (n,) errors [%]}}}`` (``errors`` for figures and the NumPy archive).
     """
-    from ..render.response_map import response_maps
+    from ..budget import Budget
+    from ..render.simulation import Simulation
 
     maps_cache: dict = {}
+    budget = Budget(samples_per_texel=samples_per_texel, seed=task.seed + 7)
 
     def maps(entry: Entry, screen: Screen):
         key = (entry.readings or entry.label, screen.width_m, screen.resolution, tuple(screen.pose.forward),
                tuple(screen.pose.position_m))
         if key not in maps_cache:
-            maps_cache[key] = response_maps(entry.cam, screen, samples_per_texel=samples_per_texel,
-                                            seed=task.seed + 7)
+            maps_cache[key] = Simulation(entry.cam, screen=screen).response_maps(budget)
         return maps_cache[key]
 
     drawn = {c.name: draw_case(c, n_frames, texels, task.seed) for c in cases}

@@ -16,7 +16,7 @@ from ..render.elements import toy_updates
 from .base import Experiment, ExperimentResult, PaperNumbers
 from .ground_truth import GroundTruthCamera
 from .layouts import intrusion_mincam
-from .pipeline import locate_in_world
+from .pipeline import LocateOptions, locate_in_world
 from .screen_calibration import fit_calibration_1d, screen_sweep_1d, sweep_change_dn, visible_sweep
 from .setup import Setup
 from .tabletop_world import (
@@ -176,6 +176,7 @@ class Intrusion(Experiment):
         camera = GroundTruthCamera.for_setup(setup)
         cam = intrusion_mincam(setup, params.boundary_x_m, params.band_m)
         world = tabletop_world(setup, scene.table, cam, camera)
+        truth_world = tabletop_world(setup, scene.table, cam, camera)  # the ground truth's own scene
         calibration: Calibration1D = cal["calibration"]
 
         def predict(c, min_total_dn):
@@ -187,10 +188,12 @@ class Intrusion(Experiment):
         rows, cols = np.indices((camera.pixels, camera.pixels))
         xy = camera.pixel_to_table(rows, cols, (camera.pixels, camera.pixels))
         band = np.abs(xy[..., 0] - params.boundary_x_m) <= params.band_m / 2
-        found = locate_in_world(world, camera, scene.frames, scene.background, setup, rng["readout"], predict,
-                                setup.tabletop_spp, region=band, axis=1, show_progress=show_progress,
-                                extrapolated=outside, objects=scene.meshes, ground_truth=params.ground_truth,
-                                groups=self.cars_in_band(scene, camera, params.boundary_x_m, params.band_m))
+        options = LocateOptions(predict, region=band, axis=1, extrapolated=outside,
+                                objects=scene.meshes, ground_truth=params.ground_truth,
+                                groups=self.cars_in_band(scene, camera, params.boundary_x_m, params.band_m),
+                                show_progress=show_progress)
+        found = locate_in_world(world, camera, scene.frames, scene.background, setup, rng["readout"], options,
+                                truth_world)
         a = found.arrays
         plot_calibration_1d(cal["true_m"], cal["change_dn"], cal["observed"], calibration,
                             out_dir / "intrusion_calibration.png", names=("y", "1-y"))

@@ -8,11 +8,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..budget import Budget
+from ..changes import RunInfo
 from ..estimators import detect_change
 from ..metrics import error_rates
 from ..progress import progress
 from ..readout import propagate_sigma, read_out
-from ..render.world import WorldRenderer
+from ..render.simulation import Simulation
+from ..render.solvers import PlainChange, StratifiedChange
 from .ground_truth import GroundTruthCamera
 from .setup import Setup
 
@@ -59,28 +62,57 @@ def _finite_rows(a: np.ndarray) -> np.ndarray:
 GROUND_TRUTHS = ("object", "change")  # the paper's: the object's centroid; the change's (with the shadow)
 
 
-def locate_in_world(world: WorldRenderer, camera: GroundTruthCamera, frames: Sequence[dict], background: dict,
-                    setup: Setup, rng: np.random.Generator, predict: Callable[[np.ndarray, float], np.ndarray],
-                    spp: int,
-                    region: np.ndarray | None = None, axis: int | None = None,
-                    show_progress: bool = False,
-                    extrapolated: Callable[[np.ndarray, float], np.ndarray] | None = None,
-                    objects: Sequence[list[tuple[np.ndarray, np.ndarray]]] | None = None,
-                    ground_truth: str = "object", groups: Sequence[str] | None = None) -> Located:
-    """Render dP of every frame (``setup.dp_estimator``: the stratified estimator with the plain budget ``spp`` /
-    ``STRATIFIED_SHARE`` rays per pass, or the plain correlated one with ``spp``), read it out, detect, predict
-    positions with ``predict(change_dn, min_total_dn)``, propagate the noise, and compare with the ground-truth
-    camera.
+@dataclass(frozen=True)
+class LocateOptions:
+    """How :func:`locate_in_world` predicts and scores the frames.
+
+    Attributes
+    ----------
+    predict : callable
+        ``predict(change_dn, min_total_dn)`` -> positions [m] (one per frame).
+    region : (rows, cols) bool ndarray, optional
+        Restricts both ground truths (e.g. the boundary band).
+    axis : int, optional
+        Picks one coordinate (1D experiments).
+    extrapolated : callable, optional
+        ``extrapolated(change_dn, min_total_dn)`` marks the frames read outside the calibrated range.
+    objects : list, optional
+        Per frame, the meshes (world vertices [m], faces) of the object ground truth.
+    ground_truth : {"object", "change"}
+        The ground truth of the headline numbers.
+    groups : list of str, optional
+        One label per frame (which toy or car it shows): splits the statistics.
+    show_progress : bool
+    """
+
+    predict: Callable[[np.ndarray, float], np.ndarray]
+    region: np.ndarray | None = None
+    axis: int | None = None
+    extrapolated: Callable[[np.ndarray, float], np.ndarray] | None = None
+    objects: Sequence[list[tuple[np.ndarray, np.ndarray]]] | None = None
+    ground_truth: str = "object"
+    groups: Sequence[str] | None = None
+    show_progress: bool = False
+
+
+def locate_in_world(sim: Simulation, camera: GroundTruthCamera, frames: Sequence[dict], background: dict,
+                    setup: Setup, rng: np.random.Generator, options: LocateOptions,
+                    truth_sim: Simulation | None = None) -> Located:
+    """Render dP of every frame (``setup.dp_estimator``: the stratified solver with the plain budget
+    ``setup.tabletop_spp`` / ``STRATIFIED_SHARE`` rays per pass, or the plain correlated one with it), read it
+    out, detect, predict positions with ``options.predict(change_dn, min_total_dn)``, propagate the noise, and
+    compare with the ground-truth camera of ``truth_sim`` (a second simulation of the same scene, so that dP and
+    the ground truth share no mutable scene; default: ``sim`` itself).
 
     ``min_total_dn`` is the detection threshold: a ratio estimator (Eq. 4 / Eq. 7) gives NaN (not a position) where
     its denominator, a sum of mixel changes, is within that of zero, as when an object's brightening and its
     shadow's darkening cancel; such frames count as missed, not as wild positions.
 
-    Two ground truths are computed for every frame: the centroid of the **object** (the paper's definition: the
-    silhouette of the frame's meshes ``objects[i]``, each (world vertices [m], faces), in the camera) and the
-    centroid of the **change** (background subtraction, binary detection: object and shadow). ``ground_truth``
-    ("object" or "change") picks the one the headline numbers use; the other is scored too. Without
-    ``objects`` only the change centroid exists and must be the one chosen.
+    Two ground truths are computed for every frame (:class:`LocateOptions` for the fields named here): the centroid
+    of the **object** (the paper's definition: the silhouette of the frame's meshes ``objects[i]``, each (world
+    vertices [m], faces), in the camera) and the centroid of the **change** (background subtraction, binary
+    detection: object and shadow). ``ground_truth`` ("object" or "change") picks the one the headline numbers use;
+    the other is scored too. Without ``objects`` only the change centroid exists and must be the one chosen.
 
     ``axis`` picks one coordinate (1D experiments); ``region`` restricts both ground truths (e.g. the boundary
     band). ``extrapolated(change_dn, min_total_dn)``, if given, marks the frames whose observation lies outside
@@ -94,10 +126,13 @@ def locate_in_world(world: WorldRenderer, camera: GroundTruthCamera, frames: Seq
     ``unscored_frames_pct`` its share of the ground-truth frames. If no frame can be scored the error rates are
     ``None``. Rates are Euclidean (``normalisation``); ``per_axis`` gives the same frames per axis.
     """
+    o = options
+    ground_truth, objects, extrapolated, groups = o.ground_truth, o.objects, o.extrapolated, o.groups
     _check_ground_truth(ground_truth, objects, frames)
+    spp = setup.tabletop_spp
     rays = spp // STRATIFIED_SHARE if setup.dp_estimator == "stratified" else spp
-    seen = _observe(world, frames, background, setup, rng, predict, rays, show_progress)
-    truths = _ground_truths(world, camera, frames, background, setup, objects, region, axis, show_progress)
+    seen = _observe(sim, frames, background, setup, rng, o.predict, rays, o.show_progress)
+    truths = _ground_truths(sim if truth_sim is None else truth_sim, camera, frames, background, setup, o)
     truth = truths.by_name[ground_truth]
     other_name = "change" if ground_truth == "object" else "object"
     extrap = (extrapolated(seen.change, seen.readout.threshold_dn) if extrapolated is not None
@@ -143,6 +178,7 @@ class _Observed:
     """What the mincam saw: dP, its read-out, detections, predicted positions and their noise."""
 
     dp: object
+    info: RunInfo
     readout: object
     detected: np.ndarray
     change: np.ndarray
@@ -152,11 +188,13 @@ class _Observed:
     sigma_sensor: np.ndarray
 
 
-def _observe(world: WorldRenderer, frames, background, setup: Setup, rng: np.random.Generator, predict,
+def _observe(sim: Simulation, frames, background, setup: Setup, rng: np.random.Generator, predict,
              rays: int, show_progress: bool) -> _Observed:
     """Render dP of every frame, read it out with the sensor, detect, predict and propagate the noise."""
-    dp, _ = world.measure_changes(frames, background, spp=rays, seed=setup.seed, show_progress=show_progress,
-                                  estimator=setup.dp_estimator)
+    solver = StratifiedChange() if setup.dp_estimator == "stratified" else PlainChange()
+    changes = sim.measure_changes(frames, background, solver, Budget(spp=rays, seed=setup.seed),
+                                  show_progress=show_progress)
+    dp = changes.dp
     bg_irr = np.asarray(dp.meta["background_w_m2"])
     frame_irr = bg_irr + dp.irradiance_w_m2
     readout = read_out(frame_irr, bg_irr, setup.sensor(), rng, setup.exposure_fill)
@@ -170,7 +208,7 @@ def _observe(world: WorldRenderer, frames, background, setup: Setup, rng: np.ran
     predicted_ideal = estimate(readout.ideal_change_dn(frame_irr, bg_irr))
     sigma = propagate_sigma(estimate, change, readout.change_sigma_dn(frame_irr, bg_irr, dp.stderr_w_m2))
     sigma_sensor = propagate_sigma(estimate, change, readout.change_sigma_dn(frame_irr, bg_irr))
-    return _Observed(dp, readout, detected, change, predicted, predicted_ideal, sigma, sigma_sensor)
+    return _Observed(dp, changes.info, readout, detected, change, predicted, predicted_ideal, sigma, sigma_sensor)
 
 
 @dataclass
@@ -189,21 +227,22 @@ class _Truths:
         return {"object": self.object, "change": self.change}
 
 
-def _ground_truths(world: WorldRenderer, camera: GroundTruthCamera, frames, background, setup: Setup, objects,
-                   region, axis, show_progress: bool) -> _Truths:
+def _ground_truths(sim: Simulation, camera: GroundTruthCamera, frames, background, setup: Setup,
+                   options: LocateOptions) -> _Truths:
     """Render the ground-truth camera for the background and every frame (the world is left at the
     background) and take each frame's centroids."""
-    world.update(background)
-    bg_image = world.camera_image(spp=GROUND_TRUTH_SPP, seed=setup.seed)
+    objects, region, axis = options.objects, options.region, options.axis
+    sim.update(background)
+    bg_image = sim.camera_image(spp=GROUND_TRUTH_SPP, seed=setup.seed)
     shape = (len(frames),) if axis is not None else (len(frames), 2)
     truth_change, truth_object, signed = (np.full(shape, np.nan) for _ in range(3))
     net_fraction = np.full(len(frames), np.nan)
     images = []
     pick = (lambda v: v[axis]) if axis is not None else (lambda v: v)
     threshold = GROUND_TRUTH_THRESHOLD * float(bg_image.max())
-    for i in progress(range(len(frames)), desc="ground truth", disable=not show_progress):
-        world.update(frames[i])
-        image = world.camera_image(spp=GROUND_TRUTH_SPP, seed=setup.seed)
+    for i in progress(range(len(frames)), desc="ground truth", disable=not options.show_progress):
+        sim.update(frames[i])
+        image = sim.camera_image(spp=GROUND_TRUTH_SPP, seed=setup.seed)
         centroid, mask = camera.change_centroid(image, bg_image, threshold, region)
         truth_change[i] = pick(centroid) if mask.sum() >= 3 else np.nan
         if objects is not None:
@@ -214,7 +253,7 @@ def _ground_truths(world: WorldRenderer, camera: GroundTruthCamera, frames, back
         total = np.abs(diff).sum()
         net_fraction[i] = diff.sum() / total if total > 0 else np.nan
         images.append(image)
-    world.update(background)
+    sim.update(background)
     return _Truths(truth_change, truth_object, signed, net_fraction, images, bg_image)
 
 
@@ -282,8 +321,8 @@ def _summary_extras(seen: _Observed, truths: _Truths, truth: np.ndarray, ok: np.
         "noise_sigma_median_pct": float(100 * np.median(sigma_norm[ok]) / setup.field_m) if ok.any() else None,
         "dP_worst_rel_stderr": float(np.nanmax(dp_rel[ok])) if ok.any() else None,
         "spp_per_mixel_per_frame": rays,
-        "dP_estimator": seen.dp.meta["estimator"],
-        "rays_per_mixel_per_frame": seen.dp.meta["rays_per_mixel_per_frame"],
-        "launches": seen.dp.meta.get("launches"),
+        "dP_estimator": seen.info.estimator,
+        "rays_per_mixel_per_frame": seen.info.rays_per_mixel_per_frame,
+        "launches": seen.info.launches,
         "exposure_s": seen.readout.sensor.exposure_s,
     }

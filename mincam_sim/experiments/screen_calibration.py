@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..budget import Budget
 from ..calibration import Calibration1D, Calibration2D
 from ..errors import ConfigError
 from ..optics import seen_whole_by_every_mixel
 from ..readout import read_out
-from ..render.screen_engine import render_frames
+from ..render.simulation import Simulation
+from ..render.solvers import ResponseMap
 from ..scene.display import Sweep, grid_sweep, line_sweep
 from .layouts import mincam_on_screen
 from .setup import Setup
@@ -62,8 +64,9 @@ def sweep_change_dn(mincam, setup: Setup, sweep: Sweep, rng: np.random.Generator
     """Read-out change [DN] of every sweep position (rows) and mixel (columns) on the set-up's screen, rendered
     with response maps to ``target_rel_stderr``; returns it with the worst relative standard error reached."""
     screen = setup.screen()
-    m, _ = render_frames(mincam_on_screen(mincam, setup), screen, sweep.frame_source(screen), "response_map",
-                         target_rel_stderr=target_rel_stderr, seed=setup.seed)
+    sim = Simulation(mincam_on_screen(mincam, setup), screen=screen)
+    m = sim.measure(sweep.frame_source(screen), ResponseMap(),
+                    Budget(target_rel_stderr=target_rel_stderr, seed=setup.seed))
     readout = read_out(m.irradiance_w_m2, np.zeros(len(mincam)), setup.sensor(), rng, setup.exposure_fill)
     return readout.change_dn, float(m.meta["reached_rel_stderr"])
 

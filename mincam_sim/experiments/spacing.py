@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..budget import Budget
 from ..calibration import Calibration1D
 from ..estimators import intrusion_position
 from ..geometry import Pose
@@ -34,7 +35,7 @@ from ..paper import CALIBRATION_SQUARE_M, SPACING_M
 from ..plots import plot_spacing
 from ..progress import progress
 from ..readout import read_out
-from ..render.screen_engine import response_maps
+from ..render.simulation import Simulation
 from ..scene.display import Screen
 from .base import Experiment, ExperimentResult
 from .layouts import intrusion_mincam, mincam_on_screen
@@ -90,7 +91,8 @@ def boundary_sweep_irradiance(setup: Setup, depth_m: float, positions: int, samp
     sweep = screen_sweep_1d(scaled, boundary_x_m * scale, positions, square_m * scale)
     side = 1.3 * scaled.field_m  # a square display covering the swept boundary at this depth
     screen = Screen(side, side, (screen_texels, screen_texels), Pose((0.0, 0.0, -depth_m), (0.0, 0.0, 1.0)))
-    maps = response_maps(cam, screen, samples_per_texel=samples_per_texel, seed=setup.seed)
+    budget = Budget(samples_per_texel=samples_per_texel, seed=setup.seed)
+    maps = Simulation(cam, screen=screen).response_maps(budget)
     return maps.measure(sweep.frame_stack(screen)).irradiance_w_m2, sweep.positions_m[:, 1]
 
 

@@ -115,8 +115,10 @@ def _render_point(config_path: str) -> PointFunction:
     def point(params: dict, seed: int, quick: bool) -> dict:
         import tomllib
 
+        from ..budget import Budget
         from ..config import load_config
-        from ..render.screen_engine import render_frames
+        from ..render import solvers
+        from ..render.simulation import Simulation
 
         raw = tomllib.loads(Path(config_path).read_text(encoding="utf-8"))
         for key, value in params.items():
@@ -125,8 +127,11 @@ def _render_point(config_path: str) -> PointFunction:
         raw.setdefault("run", {})["seed"] = int(seed)
         cfg = load_config(raw, base_dir=Path(config_path).parent)
         run = cfg.run
-        m, _ = render_frames(cfg.mincam, cfg.screen, cfg.frames, run.form, run.spp, run.samples_per_texel,
-                             run.target_rel_stderr, run.seed, run.replicates)
+        by_form = {"response_map": solvers.ResponseMap, "fast": solvers.Aperture, "reference": solvers.Reference}
+        solver = by_form[run.form]
+        budget = Budget(spp=run.spp, samples_per_texel=run.samples_per_texel, target_rel_stderr=run.target_rel_stderr,
+                        replicates=run.replicates, seed=run.seed)
+        m = Simulation(cfg.mincam, screen=cfg.screen).measure(cfg.frames, solver(), budget)
         out = {}
         for j, mixel in enumerate(m.mixel_names):
             values, stderr = m.irradiance_w_m2[:, j], m.stderr_w_m2[:, j]

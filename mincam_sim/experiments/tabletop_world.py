@@ -1,5 +1,5 @@
 """The tabletop of the intrusion and tracking experiments: a printed background under an area light, toys
-placed per frame, rendered by the render layer's moving-scene renderer with the ground-truth camera."""
+placed per frame, in a world :class:`~mincam_sim.render.simulation.Simulation` with the ground-truth camera."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import trimesh
 from .. import objects
 from ..optics import Mincam
 from ..render.elements import tabletop_elements
-from ..render.world import WorldRenderer
+from ..render.simulation import Simulation
 from ..scene.tabletop import Tabletop
 from .ground_truth import GroundTruthCamera
 from .setup import Setup
@@ -68,7 +68,7 @@ def placed_meshes(table: Tabletop, placements: Mapping) -> list[tuple[np.ndarray
             if where is not None]
 
 
-def tabletop_world(setup: Setup, table: Tabletop, mincam: Mincam, camera: GroundTruthCamera,
-                   replicates: int = 8) -> WorldRenderer:
-    """The renderer of ``mincam`` over ``table`` with the ground-truth camera."""
-    return WorldRenderer(mincam, tabletop_elements(table), replicates=replicates, camera=camera.scene_dict(setup))
+def tabletop_world(setup: Setup, table: Tabletop, mincam: Mincam, camera: GroundTruthCamera) -> Simulation:
+    """The world simulation of ``mincam`` over ``table`` with the ground-truth camera (the replicates of its
+    measurements are the budget's: :class:`mincam_sim.budget.Budget`)."""
+    return Simulation(mincam, world=tabletop_elements(table), camera=camera.scene_dict(setup))

@@ -17,7 +17,7 @@ from ..render.elements import toy_updates
 from .base import Experiment, ExperimentResult, PaperNumbers
 from .ground_truth import GroundTruthCamera
 from .layouts import tracking_mincam
-from .pipeline import locate_in_world
+from .pipeline import LocateOptions, locate_in_world
 from .screen_calibration import fit_calibration_2d, screen_sweep_2d, sweep_change_dn, visible_sweep
 from .setup import Setup
 from .tabletop_world import (
@@ -166,6 +166,7 @@ class Tracking(Experiment):
         scene = self.scene(setup, params, rng["scene"])
         camera = GroundTruthCamera.for_setup(setup)
         world = tabletop_world(setup, scene.table, tracking_mincam(setup), camera)
+        truth_world = tabletop_world(setup, scene.table, tracking_mincam(setup), camera)  # the ground truth's own
         calibration: Calibration2D = cal["calibration"]
 
         def predict(c, min_total_dn):
@@ -174,10 +175,11 @@ class Tracking(Experiment):
         def outside(c, min_total_dn):
             return calibration.outside_range(track_4(c, min_total_dn))
 
-        found = locate_in_world(world, camera, scene.frames, scene.background, setup, rng["readout"], predict,
-                                setup.tabletop_spp, show_progress=show_progress, extrapolated=outside,
-                                objects=scene.meshes, ground_truth=params.ground_truth,
-                                groups=scene.toy_of_frame.tolist())
+        options = LocateOptions(predict, extrapolated=outside, objects=scene.meshes,
+                                ground_truth=params.ground_truth, groups=scene.toy_of_frame.tolist(),
+                                show_progress=show_progress)
+        found = locate_in_world(world, camera, scene.frames, scene.background, setup, rng["readout"], options,
+                                truth_world)
         a = found.arrays
         predicted, truth = a["predicted_m"], a["truth_m"]
         plot_calibration_2d(cal["true_m"], cal["observed"], calibration, out_dir / "tracking_calibration.png")

@@ -53,10 +53,10 @@ def test_forward_model_matches_response_maps():
     """The differentiable estimator and the physical response-map form are two estimators of the same
     integral: equal within their Monte Carlo errors (ramp masks, squares at 0.5 m)."""
     _needs_jit()
+    from mincam_sim import Budget, Simulation
     from mincam_sim.design.evaluate import _frames, _screen
     from mincam_sim.render import backend
     from mincam_sim.render import differentiable as dz
-    from mincam_sim.render.response_map import response_maps
 
     mi = backend.mitsuba()
     cam = tr.mincam(tr.paper_masks(256))
@@ -74,7 +74,7 @@ def test_forward_model_matches_response_maps():
     replicas = np.array(replicas)
     mean, se_ad = replicas.mean(axis=0), replicas.std(axis=0, ddof=1) / np.sqrt(len(replicas))
     screen = _screen(0.5, 240)
-    maps = response_maps(cam, screen, samples_per_texel=64, seed=3)
+    maps = Simulation(cam, screen=screen).response_maps(Budget(samples_per_texel=64, seed=3))
     m = maps.measure(_frames(screen, centers, sizes, np.ones(3)))
     # the response map's screen is pixelated: squares are anti-aliased texel coverages (exact in area)
     assert_close_mc(mean, m.irradiance_w_m2, np.hypot(se_ad, m.stderr_w_m2), what="AD form vs response maps")

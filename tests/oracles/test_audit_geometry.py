@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from conftest import assert_close_mc
 
-from mincam_sim import Mincam, Mixel, Pose, Screen, masks, single
+from mincam_sim import Aperture, Budget, Mincam, Mixel, Pose, Reference, ResponseMap, Screen, Simulation, masks, single
 from mincam_sim.closed_forms import open_aperture_irradiance
 from mincam_sim.geometry import look_at
 from mincam_sim.optics import cross_layout, pair_layout
@@ -20,7 +20,6 @@ from mincam_sim.quadrature import (
     open_aperture_view_factor_irradiance,
     visible_polygon_screen_m,
 )
-from mincam_sim.render.screen_engine import render_frames, response_maps
 from mincam_sim.scene.display import check_visible
 
 
@@ -227,7 +226,8 @@ def test_forms_match_exact_shadow_oracle(name, form, kw):
     mixel, screen = _geometry(name)
     expected = _oracle(mixel, screen)
     frame = np.ones((1, *screen.shape))  # uniform white (radiance 1): the oracle's region is the whole screen
-    m, _ = render_frames(Mincam((mixel,)), screen, frame, form, seed=11, replicates=16, **kw)
+    solver = {"response_map": ResponseMap(), "fast": Aperture(), "reference": Reference()}[form]
+    m = Simulation(Mincam((mixel,)), screen=screen).measure(frame, solver, Budget(seed=11, replicates=16, **kw))
     value, sigma = m.irradiance_w_m2[0, 0], m.stderr_w_m2[0, 0]
     assert sigma / expected < 0.01, f"{form} too noisy to mean anything (sigma {sigma / expected:.2e})"
     assert_close_mc(value, expected, sigma, what=f"{form} on {name} vs exact-shadow quadrature")
@@ -241,6 +241,7 @@ def test_response_map_noise_falls_with_samples_per_texel():
     mixel, screen = _geometry("close-2x3-ramp-tilt20")
     sigma = {}
     for spt in (256, 16384):
-        maps = response_maps(Mincam((mixel,)), screen, samples_per_texel=spt, seed=5, replicates=4)
+        budget = Budget(samples_per_texel=spt, seed=5, replicates=4)
+        maps = Simulation(Mincam((mixel,)), screen=screen).response_maps(budget)
         sigma[spt] = float(np.sqrt(maps.variance_sr2[0].sum()))
     assert sigma[16384] < 0.5 * sigma[256], f"sigma {sigma[256]:.3g} -> {sigma[16384]:.3g} with 64x the samples"

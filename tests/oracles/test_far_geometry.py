@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from conftest import assert_close_mc
 
+from mincam_sim import Aperture, Budget, ResponseMap, Simulation
 from mincam_sim.geometry import Pose
 from mincam_sim.optics import pair_layout
-from mincam_sim.render.screen_engine import render_frames
 from mincam_sim.scene.display import Screen
 
 FORWARD = np.array([0.3, -0.2, -1.0]) / np.linalg.norm([0.3, -0.2, -1.0])
@@ -21,8 +21,8 @@ def _measure(offset_m, form):
     screen = Screen(resolution=(32, 18), pose=Pose(tuple(np.add(offset_m, 0.4 * FORWARD)), tuple(-FORWARD),
                                                    (0.0, 1.0, 0.0)))
     frames = np.random.default_rng(0).random((2, 18, 32))
-    m, _ = render_frames(cam, screen, frames, form=form, seed=0, spp=1 << 16, samples_per_texel=64)
-    return m
+    solver = {"response_map": ResponseMap(), "fast": Aperture()}[form]
+    return Simulation(cam, screen=screen).measure(frames, solver, Budget(spp=1 << 16, samples_per_texel=64, seed=0))
 
 
 @pytest.mark.parametrize("form", ["response_map", "fast"])

@@ -10,13 +10,23 @@ import pytest
 from conftest import Z, assert_close_mc
 from scipy.optimize import curve_fit
 
-from mincam_sim import Mincam, Mixel, Pose, Screen, masks, single
+from mincam_sim import Aperture, Budget, Mincam, Mixel, Pose, Reference, Screen, Simulation, masks, single
 from mincam_sim.closed_forms import open_aperture_irradiance
-from mincam_sim.render.screen_engine import ScreenRenderer, response_maps
 from mincam_sim.scene.display import vertical_line, white_square
 
 SPP = 1 << 18
 REPLICATES = 16
+SOLVERS = {"fast": Aperture(), "reference": Reference()}
+
+
+def render(cam, screen, form, frames, spp, seed, replicates=REPLICATES):
+    """The frames measured by the aperture ("fast") or the reference solver."""
+    budget = Budget(spp=spp, replicates=replicates, seed=seed)
+    return Simulation(cam, screen=screen).measure(frames, SOLVERS[form], budget)
+
+
+def response_maps(cam, screen, samples_per_texel, seed):
+    return Simulation(cam, screen=screen).response_maps(Budget(samples_per_texel=samples_per_texel, seed=seed))
 
 
 def closed_form(screen: Screen, mixel: Mixel, radiance: float = 1.0) -> float:
@@ -41,7 +51,7 @@ def test_open_aperture_matches_view_factor(form, offset_m):
     if form == "response_map":
         m = response_maps(cam, screen, samples_per_texel=16, seed=1).measure(frame)
     else:
-        m = ScreenRenderer(cam, screen, form, replicates=REPLICATES).render(frame, spp=SPP, seed=1)
+        m = render(cam, screen, form, frame, SPP, seed=1)
     value, sigma = m.irradiance_w_m2[0, 0], m.stderr_w_m2[0, 0]
     assert sigma / expected < 0.01, "test too noisy to mean anything"
     assert_close_mc(value, expected, sigma, what=f"{form} open aperture")
@@ -58,12 +68,11 @@ def test_linearity_in_scene_radiance(form):
     """P(A + B) = P(A) + P(B), frames rendered with independent seeds."""
     screen = Screen()
     cam = single(masks.ramp("x"))
-    renderer = ScreenRenderer(cam, screen, form, replicates=REPLICATES)
     a, b = _two_squares(screen)
     spp = SPP if form == "fast" else 8 * SPP  # the literal scene wastes most rays on the housing and mask
-    pa = renderer.render(a, spp=spp, seed=11)
-    pb = renderer.render(b, spp=spp, seed=12)
-    pab = renderer.render(a + b, spp=spp, seed=13)
+    pa = render(cam, screen, form, a, spp, seed=11)
+    pb = render(cam, screen, form, b, spp, seed=12)
+    pab = render(cam, screen, form, a + b, spp, seed=13)
     lhs = pab.irradiance_w_m2[0, 0]
     rhs = pa.irradiance_w_m2[0, 0] + pb.irradiance_w_m2[0, 0]
     sigma = np.sqrt(pab.stderr_w_m2[0, 0] ** 2 + pa.stderr_w_m2[0, 0] ** 2 + pb.stderr_w_m2[0, 0] ** 2)
@@ -80,8 +89,7 @@ def test_complementary_and_scaled_masks(form):
     ramp = masks.ramp("x", 64)
     results = {}
     for label, mask in {"x": ramp, "1-x": ramp.complement(), "1": masks.constant(1.0), "kx": ramp.scaled(0.3)}.items():
-        renderer = ScreenRenderer(single(mask), screen, form, replicates=REPLICATES)
-        m = renderer.render(frame, spp=SPP, seed=hash(label) % 1000)
+        m = render(single(mask), screen, form, frame, SPP, seed=hash(label) % 1000)
         results[label] = (m.irradiance_w_m2[0, 0], m.stderr_w_m2[0, 0])
     (px, sx), (pc, sc), (p1, s1), (pk, sk) = (results[k] for k in ("x", "1-x", "1", "kx"))
     assert_close_mc(px + pc, p1, np.sqrt(sx**2 + sc**2 + s1**2), what="complementary masks")
@@ -94,9 +102,8 @@ def test_mask_orientation_projects_without_inversion():
     quadrant = masks.from_function(lambda x, y: ((x > 0.5) & (y > 0.5)).astype(float), "top-right", 64)
     screen = Screen()
     cam = single(quadrant)
-    renderer = ScreenRenderer(cam, screen, "reference", replicates=REPLICATES)
     frames = [white_square(screen, (sx * 0.12, sy * 0.12), 0.1) for sx, sy in ((1, 1), (-1, 1), (1, -1), (-1, -1))]
-    m = renderer.render(frames, spp=SPP, seed=3)
+    m = render(cam, screen, "reference", frames, SPP, seed=3)
     top_right, others = m.irradiance_w_m2[0, 0], m.irradiance_w_m2[1:, 0]
     assert top_right > 20 * m.stderr_w_m2[0, 0]  # clearly lit (the reference form has ~2 % noise here)
     assert np.all(others == 0.0)
@@ -181,8 +188,8 @@ def test_fast_and_reference_agree_on_ramp_and_square():
     screen = Screen()
     cam = single(masks.ramp("1-y", 64))
     frames = [white_square(screen, (0.05, 0.1), 0.1), white_square(screen, (-0.15, -0.05), 0.06, 2.0)]
-    fast = ScreenRenderer(cam, screen, "fast", replicates=REPLICATES).render(frames, spp=SPP, seed=2)
-    ref = ScreenRenderer(cam, screen, "reference", replicates=REPLICATES).render(frames, spp=4 * SPP, seed=2)
+    fast = render(cam, screen, "fast", frames, SPP, seed=2)
+    ref = render(cam, screen, "reference", frames, 4 * SPP, seed=2)
     sigma = np.hypot(fast.stderr_w_m2, ref.stderr_w_m2)
     assert np.all(sigma / ref.irradiance_w_m2 < 0.05)
     assert_close_mc(fast.irradiance_w_m2, ref.irradiance_w_m2, sigma, what="fast vs reference")
@@ -196,7 +203,7 @@ def test_open_aperture_high_precision(form):
     screen = Screen()
     frame = np.ones(screen.shape)
     expected = closed_form(screen, cam[0])
-    m = ScreenRenderer(cam, screen, form, replicates=REPLICATES).render(frame, spp=1 << 24, seed=21)
+    m = render(cam, screen, form, frame, 1 << 24, seed=21)
     assert_close_mc(m.irradiance_w_m2[0, 0], expected, m.stderr_w_m2[0, 0], what=f"{form} high precision")
 
 
@@ -208,7 +215,7 @@ def test_response_maps_match_reference_on_unseen_frames():
     maps = response_maps(cam, screen, samples_per_texel=64, seed=8)
     rng = np.random.default_rng(4)
     frames = [rng.uniform(0, 1, screen.shape), white_square(screen, (0.08, -0.1), 0.12, 2.0)]
-    ref = ScreenRenderer(cam, screen, "reference", replicates=REPLICATES).render(frames, spp=4 * SPP, seed=9)
+    ref = render(cam, screen, "reference", frames, 4 * SPP, seed=9)
     pred = maps.measure(np.stack(frames))
     sigma = np.hypot(ref.stderr_w_m2, pred.stderr_w_m2)
     assert np.all(sigma / ref.irradiance_w_m2 < 0.02)
@@ -225,12 +232,12 @@ def test_scalar_fallback_reference_form_matches_closed_form():
 
     code = (
         "import json, numpy as np\n"
+        "import mincam_sim as ms\n"
         "from mincam_sim import Screen, masks, single\n"
-        "from mincam_sim.render.screen_engine import ScreenRenderer\n"
-        "r = ScreenRenderer(single(masks.constant(1.0)), Screen(), 'reference', replicates=8)\n"
-        "m = r.render(np.ones(Screen().shape), spp=1 << 17, seed=0)\n"
+        "sim = ms.Simulation(single(masks.constant(1.0)), screen=Screen())\n"
+        "m = sim.measure(np.ones(Screen().shape), ms.Reference(), ms.Budget(spp=1 << 17, replicates=8, seed=0))\n"
         "try:\n"
-        "    ScreenRenderer(single(), Screen(), 'fast')\n"
+        "    sim.measure(np.ones(Screen().shape), ms.Aperture())\n"
         "    err = ''\n"
         "except RuntimeError as e:\n"
         "    err = str(e)\n"

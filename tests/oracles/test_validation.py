@@ -5,9 +5,23 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mincam_sim import Mixel, Pose, Screen, masks, pair_layout, single
-from mincam_sim.render.screen_engine import ScreenRenderer, render_frames, response_maps
-from mincam_sim.scene.display import white_square
+from mincam_sim import (
+    Aperture,
+    Budget,
+    Mixel,
+    Pose,
+    Reference,
+    ResponseMap,
+    Run,
+    Screen,
+    Simulation,
+    masks,
+    pair_layout,
+    single,
+)
+from mincam_sim.scene.display import FrameSource, white_square
+
+SOLVERS = {"fast": Aperture(), "reference": Reference(), "response_map": ResponseMap()}
 
 
 @pytest.mark.parametrize(
@@ -57,38 +71,36 @@ def test_bad_screen(kwargs, message):
 def test_mixel_behind_screen_is_refused():
     screen = Screen(pose=Pose((0, 0, -0.5), (0, 0, -1)))  # emits away from the mixel
     with pytest.raises(ValueError, match="behind the screen"):
-        ScreenRenderer(single(), screen)
+        Simulation(single(), screen=screen).measure(screen.blank(), Aperture())
 
 
 def test_screen_outside_field_of_view_is_refused():
     cam = single(pose=Pose((0, 0, 0), (0, 0, 1)))  # looks away from the screen at z = -0.5
     with pytest.raises(ValueError, match="behind the screen|outside"):
-        ScreenRenderer(cam, Screen())
+        Simulation(cam, screen=Screen()).measure(Screen().blank(), Aperture())
     cam = single(pose=Pose((0, 0, 0), (1, 0, -0.05)))  # looks sideways, screen out of its ~53 deg cone
     with pytest.raises(ValueError, match="outside mixel"):
-        response_maps(cam, Screen())
+        Simulation(cam, screen=Screen()).response_maps()
 
 
 @pytest.mark.parametrize("spp", [0, -5, 1.5])
 def test_bad_sample_counts(spp):
-    screen = Screen()
-    renderer = ScreenRenderer(single(), screen)
     with pytest.raises(ValueError, match="spp"):
-        renderer.render(screen.blank(), spp=spp)
+        Budget(spp=spp)
 
 
 def test_bad_frames():
     screen = Screen()
-    renderer = ScreenRenderer(single(), screen)
+    sim = Simulation(single(), screen=screen)
     with pytest.raises(ValueError, match="shape"):
-        renderer.render(np.zeros((3, 3)))
+        sim.measure(np.zeros((3, 3)), Aperture())
     bad = screen.blank()
     bad[0, 0] = np.nan
     with pytest.raises(ValueError, match="NaN"):
-        renderer.render(bad)
+        sim.measure(bad, Aperture())
     bad[0, 0] = -1
     with pytest.raises(ValueError, match="negative"):
-        renderer.render(bad)
+        sim.measure(bad, Aperture())
 
 
 @pytest.mark.parametrize("form", ["fast", "reference", "response_map"])
@@ -96,49 +108,42 @@ def test_same_seed_same_numbers(form):
     screen = Screen()
     cam = pair_layout()
     frames = np.stack([white_square(screen, (x, 0.0), 0.05) for x in (-0.1, 0.0, 0.1)])
-    a, _ = render_frames(cam, screen, frames, form, spp=1 << 14, samples_per_texel=16, seed=42)
-    b, _ = render_frames(cam, screen, frames, form, spp=1 << 14, samples_per_texel=16, seed=42)
-    c, _ = render_frames(cam, screen, frames, form, spp=1 << 14, samples_per_texel=16, seed=43)
+    sim = Simulation(cam, screen=screen)
+    a, b, c = (sim.measure(frames, SOLVERS[form], Budget(spp=1 << 14, samples_per_texel=16, seed=seed))
+               for seed in (42, 42, 43))
     np.testing.assert_array_equal(a.irradiance_w_m2, b.irradiance_w_m2)
     np.testing.assert_array_equal(a.stderr_w_m2, b.stderr_w_m2)
     assert not np.array_equal(a.irradiance_w_m2, c.irradiance_w_m2)
 
 
-def test_interrupted_run_resumes_without_recomputing(tmp_path, monkeypatch):
+def test_interrupted_run_resumes_without_recomputing(tmp_path):
     """A run killed after some frames keeps them on disk; the rerun computes only the rest, same numbers."""
     screen = Screen()
-    cam = single(masks.ramp("x", 32))
-    frames = np.stack([white_square(screen, (x, 0.0), 0.05) for x in np.linspace(-0.2, 0.2, 5)])
-    full, _ = render_frames(cam, screen, frames, "fast", spp=1 << 12, seed=1)
+    sim = Simulation(single(masks.ramp("x", 32)), screen=screen)
+    stack = np.stack([white_square(screen, (x, 0.0), 0.05) for x in np.linspace(-0.2, 0.2, 5)])
+    budget = Budget(spp=1 << 12, seed=1)
+    full = sim.measure(stack, Aperture(), budget)
+    calls = {"n": 0, "die_after": 2}
 
-    calls = {"n": 0}
-    original = ScreenRenderer.render
-
-    def dying_render(self, *args, **kwargs):
+    def make(i: int) -> np.ndarray:  # the aperture solver reads one frame at a time
         calls["n"] += 1
-        if calls["n"] > 2:
+        if calls["n"] > calls["die_after"]:
             raise KeyboardInterrupt
-        return original(self, *args, **kwargs)
+        return stack[i]
 
-    monkeypatch.setattr(ScreenRenderer, "render", dying_render)
-    with pytest.raises(KeyboardInterrupt):
-        render_frames(cam, screen, frames, "fast", spp=1 << 12, seed=1, out_dir=tmp_path)
-    monkeypatch.setattr(ScreenRenderer, "render", original)
-    done = np.load(tmp_path / "done.npy")
+    frames = FrameSource(len(stack), screen.shape, make, description={"test": "five squares"})
+    with pytest.raises(KeyboardInterrupt), Run(tmp_path) as run:
+        run.measure(sim, frames, Aperture(), budget)
+    done = np.load(tmp_path / "measurements" / "done.npy")
     assert done.sum() == 2
 
-    counted = {"n": 0}
-
-    def counting_render(self, *args, **kwargs):
-        counted["n"] += 1
-        return original(self, *args, **kwargs)
-
-    monkeypatch.setattr(ScreenRenderer, "render", counting_render)
-    resumed, _ = render_frames(cam, screen, frames, "fast", spp=1 << 12, seed=1, out_dir=tmp_path)
-    assert counted["n"] == 3
+    calls.update(n=0, die_after=len(stack))
+    with Run(tmp_path) as run:
+        resumed = run.measure(sim, frames, Aperture(), budget)
+    assert calls["n"] == 3
     np.testing.assert_array_equal(resumed.irradiance_w_m2, full.irradiance_w_m2)
-    with pytest.raises(ValueError, match="different run"):
-        render_frames(cam, screen, frames, "fast", spp=1 << 12, seed=2, out_dir=tmp_path)
+    with pytest.raises(ValueError, match="different run"), Run(tmp_path) as run:
+        run.measure(sim, frames, Aperture(), Budget(spp=1 << 12, seed=2))
 
 
 def test_target_noise_is_reached():
@@ -146,8 +151,9 @@ def test_target_noise_is_reached():
     screen = Screen()
     cam = pair_layout()
     frames = np.stack([white_square(screen, (x, 0.0), 0.04) for x in np.linspace(-0.15, 0.15, 7)])
-    m, _ = render_frames(cam, screen, frames, "response_map", target_rel_stderr=2e-3, seed=3)
+    sim = Simulation(cam, screen=screen)
+    m = sim.measure(frames, ResponseMap(), Budget(target_rel_stderr=2e-3, seed=3))
     assert m.meta["reached_rel_stderr"] <= 2e-3
     assert m.meta["samples_per_texel"] > 8
-    m, _ = render_frames(cam, screen, frames[:2], "fast", target_rel_stderr=5e-3, seed=3)
+    m = sim.measure(frames[:2], Aperture(), Budget(target_rel_stderr=5e-3, seed=3))
     assert m.meta["reached_rel_stderr"] <= 5e-3

@@ -293,9 +293,8 @@ def test_rendered_wave_measurement_matches_quadrature_of_the_response():
     """
     from conftest import assert_close_mc
 
-    from mincam_sim import single
-    from mincam_sim.render.mask_eval import wave_table
-    from mincam_sim.render.screen_engine import ScreenRenderer, response_maps
+    from mincam_sim import Aperture, Budget, Simulation, single
+    from mincam_sim.render.mask_eval import wave_table  # the ray model's table: the quadrature's integrand
     from mincam_sim.scene.display import Screen
 
     screen = Screen()
@@ -313,27 +312,27 @@ def test_rendered_wave_measurement_matches_quadrature_of_the_response():
     spill = _quadrature(cam_wave[0], screen, frame, table.wave, table.tan_x, table.tan_y) - expected_wave
     expected_geo = _quadrature(cam_geo[0], screen, frame, table.geometric, table.tan_x, table.tan_y)
     assert 0 <= spill < 1e-3 * expected_wave
-    m_wave = response_maps(cam_wave, screen, samples_per_texel=64, seed=3).measure(frame)
+    maps_budget = Budget(samples_per_texel=64, seed=3)
+    m_wave = Simulation(cam_wave, screen=screen).response_maps(maps_budget).measure(frame)
     with pytest.warns(UserWarning, match="rendered with geometric optics"):  # u = 0.11: the quick check flags it
-        m_geo = response_maps(cam_geo, screen, samples_per_texel=64, seed=3).measure(frame)
+        m_geo = Simulation(cam_geo, screen=screen).response_maps(maps_budget).measure(frame)
     sigma = m_wave.stderr_w_m2[0, 0]
     assert abs(expected_wave - expected_geo) > 10 * sigma, "wave and geometric must be distinguishable here"
     assert_close_mc(m_wave.irradiance_w_m2[0, 0], expected_wave, sigma, what="wave response map")
     assert_close_mc(m_geo.irradiance_w_m2[0, 0], expected_geo, m_geo.stderr_w_m2[0, 0], what="geometric map")
     assert m_wave.meta["optics"][cam_wave[0].name]["optics"] == "wave"
-    fast = ScreenRenderer(cam_wave, screen, "fast", replicates=16).render(frame, spp=1 << 21, seed=2)
+    fast = Simulation(cam_wave, screen=screen).measure(frame, Aperture(), Budget(spp=1 << 21, replicates=16, seed=2))
     sigma_fast = fast.stderr_w_m2[0, 0]
     assert abs(expected_wave - expected_geo) > 5 * sigma_fast
     assert_close_mc(fast.irradiance_w_m2[0, 0], expected_wave, sigma_fast, what="wave fast form")
 
 
 def test_reference_form_refuses_wave_optics():
-    from mincam_sim import single
-    from mincam_sim.render.screen_engine import ScreenRenderer
+    from mincam_sim import Reference, Simulation, single
     from mincam_sim.scene.display import Screen
 
     with pytest.raises(ValueError, match="reference form"):
-        ScreenRenderer(single(masks.ramp("x"), optics="wave"), Screen(), "reference")
+        Simulation(single(masks.ramp("x"), optics="wave"), screen=Screen()).measure(Screen().blank(), Reference())
 
 
 def test_config_selects_wave_optics():
