@@ -107,9 +107,11 @@ def refuse_old_solver_keys(run_table: dict, kind: str) -> None:
         if key in run_table:
             old = run_table[key]
             new = names.get(old) if isinstance(old, str) else None
-            fix = f'[run] solver = "{new}"' if new else "[run] solver = " + " or ".join(
-                f'"{n}"' for n in solvers_for(kind))
-            raise ConfigError(f"[run] {key} = {old!r} is the old name of the solver: use {fix}")
+            if new is not None:
+                raise ConfigError(f"[run] {key} = {old!r} is the old name of the solver: use [run] solver = "
+                                  f'"{new}"')
+            names = ", ".join(f'"{n}"' for n in solvers_for(kind))
+            raise ConfigError(f"[run] {key} is the old key of the solver: use [run] solver = one of {names}")
 
 
 def solvers_for(kind: str) -> tuple[str, ...]:

@@ -77,19 +77,19 @@ def run_render_config(cfg: RenderConfig, show_progress: bool = False, overwrite:
     written. The output directory is one :class:`~mincam_sim.run.Run`: a rerun resumes or returns the finished
     result, a different run is refused unless ``overwrite``. ``say`` is told when the sample count traced
     differs from the one asked (:func:`~mincam_sim.config.traced_samples`). ``maps`` are the response maps the
-    measurements used (the ``response_map`` solver; also written as ``response_maps*.exr``), else None.
+    measurements used (the ``response_map`` solver; also written as ``response_maps/*.exr``), else None.
     """
     if time_limit_s is not None:
         check_budget(cfg, backend.variant(), time_limit_s)
     out = Path(cfg.run.out_dir)
     job = display_job(cfg)
     _, rounding = traced_samples(cfg.run)
-    if rounding is not None and say is not None and not (out / RESULT).is_dir():
+    if rounding is not None and say is not None and (overwrite or not (out / RESULT).is_dir()):
         say(f"mincam-sim: {rounding}")  # on a fresh start only: a resumed run said it when it started
     with Run(out, overwrite=overwrite, show_progress=show_progress) as run:
         m = run.measure(job.sim, job.frames, job.solver, job.budget, name=RESULT)
         # MERGE: the ResponseMap solver's result carries the maps it used as m.maps (the contract); until then
-        # Simulation.measure drops them and no response_maps*.exr is written.
+        # Simulation.measure drops them and no response_maps/*.exr is written.
         maps = getattr(m, "maps", None)
         if maps is not None:
             maps.save_exr(out / "response_maps")

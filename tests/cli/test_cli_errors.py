@@ -444,7 +444,7 @@ def test_render_check_validates_without_rendering(tmp_path):
     (tmp_path / "c.toml").write_text(toml())
     result = _cli(["render", "c.toml", "--check"], tmp_path)
     assert result.exit_code == 0, _stderr(result)
-    for word in ("mixel x", "screen:", "frames: 2", "form: response_map", "out dir:"):
+    for word in ("mixel x", "screen:", "frames: 2", "solver: response_map", "out dir:"):
         assert word in result.output
     assert not (tmp_path / "out").exists()
 
