@@ -483,6 +483,7 @@ def masks_export(
         if preview.suffix.lower() != ".exr":
             raise ConfigError(f"--preview {preview}: the preview is OpenEXR; give a name ending in .exr")
     mask = parse_mask(spec, size_m, 512, "mask", encoding="srgb" if srgb else "linear")
+    _check_print_grid(mask, size_m, dpi)
     try:
         film = PrintedFilm(t_min=film_t_min, t_max=film_t_max, dpi=dpi, levels=levels,
                            halftone="ordered" if halftone else None)
@@ -497,6 +498,19 @@ def masks_export(
                    f"{printed.transmission.max():.3f} on a {printed.shape[1]}x{printed.shape[0]} dot grid")
     typer.echo(str(path))
     typer.echo(f"{sheet_path} (notes: {notes})")
+
+
+def _check_print_grid(mask, size_m: float, dpi: int) -> None:
+    """Refuse a mask that prints as more dots than a print file holds, naming --size-m and --dpi."""
+    from .masks.mask import MAX_TEXELS
+
+    per_m = dpi / 0.0254
+    rows, cols = max(1, round(mask.height_m * per_m)), max(1, round(mask.width_m * per_m))
+    if rows * cols > MAX_TEXELS:
+        largest = np.sqrt(MAX_TEXELS * mask.width_m / mask.height_m) / per_m
+        raise ConfigError(f"--size-m {size_m:g} at --dpi {dpi} prints {cols} x {rows} dots, more than a print file "
+                          f"holds ({MAX_TEXELS} dots): lower --dpi, or --size-m to at most {largest:.4g} m at "
+                          f"{dpi} dpi")
 
 
 def _render_demo(out_dir: Path) -> None:
@@ -596,6 +610,9 @@ def _reproduce_config(config: Path | None, quick: bool, **flags: Any) -> tuple[A
             raise
         flag = re.sub(r"Setup\.(\w+)", lambda m: "--" + m.group(1).replace("_", "-"), text)
         raise ConfigError(flag.replace("[command line]: ", "")) from None
+    from .experiments.reproduce_file import check_reproduce
+
+    check_reproduce(setup, params)  # what the experiments would refuse only deep inside, refused here
     if getattr(setup, "bit_depth", MIN_BIT_DEPTH) < MIN_BIT_DEPTH:
         where = "--bit-depth" if "bit_depth" in given else "[setup] bit_depth"
         raise ConfigError(f"{where} = {setup.bit_depth}: give 2 to 32 bits (the paper: {paper.ADC_BITS}); a 1-bit "

@@ -128,9 +128,12 @@ def solver_check(kind: str):
 
     def check(section: str, key: str, value: Any) -> str:
         if isinstance(value, str) and value in SOLVERS and value not in allowed:
-            other = "world" if kind == "display" else "display"
-            raise ConfigError(f"[run] solver = {value!r} does not solve {kind} scenes (it is a {other} solver or "
-                              f"measures absolute P); a {kind} config takes {', '.join(map(repr, allowed))}")
+            names = " or ".join(map(repr, allowed))
+            if kind == "world" and "world" in SOLVERS[value]().scenes:  # aperture, plane_replay: absolute P
+                raise ConfigError(f"[run] solver = {value!r} measures absolute P; a world config measures the "
+                                  f"changes dP with {names} (absolute P: Simulation.measure in Python)")
+            raise ConfigError(f"[run] solver = {value!r} does not solve {kind} scenes; a {kind} config takes "
+                              f"{names}")
         return Choice(allowed)(section, key, value)
     return check
 

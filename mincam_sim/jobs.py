@@ -313,7 +313,7 @@ def plot_changes(ch: Changes, path: Path) -> Path:
 # 2 mixels; worlds: the room of scenes/world, max_depth 3): the estimate is an upper bound of the time on faster
 # machines (a CUDA GPU is far faster).
 SAMPLES_PER_S: dict[type[Solver], float] = {ResponseMap: 2.0e7, Aperture: 1.0e7, Reference: 1.0e6,
-                                             PlainChange: 4.0e6, StratifiedChange: 2.0e6}
+                                             PlainChange: 4.0e6, StratifiedChange: 4.0e6}
 SCALAR_SLOWDOWN = 10.0  # scalar_rgb traces one ray at a time
 DOT_PRODUCTS_PER_S = 5.0e8  # response_map: frame x map products (numpy)
 DEFAULT_TIME_LIMIT_S = 4 * 3600.0
@@ -378,7 +378,7 @@ def check_budget(cfg: RenderConfig | WorldConfig, variant: str | None,
     seconds, what = estimate_seconds(cfg, variant)
     if seconds > limit_s:
         key = "samples_per_texel" if isinstance(cfg.run.solver, ResponseMap) else "spp"
-        frames = "[world] frame_rate_hz or the movers' frames" if isinstance(cfg, WorldConfig) else "the frames"
+        frames = "the movers' frames" if isinstance(cfg, WorldConfig) else "the frames"
         raise ConfigError(f"this render would take about {_duration(seconds)} ({what}), over the limit of "
                           f"{_duration(limit_s)}: lower [run] {key} (or {frames}), or raise the limit with "
                           f"--time-limit-s {max(limit_s, 1.5 * seconds):.0f}")
