@@ -21,6 +21,7 @@ import numpy as np
 
 from . import masks as masks_mod
 from . import paper
+from .budget import Budget
 from .errors import ConfigError, InputError
 from .geometry import Pose
 from .masks import Mask
@@ -33,6 +34,7 @@ from .optics import (
     cross_layout,
     pair_layout,
 )
+from .render.solvers import Aperture, PlainChange, PlaneReplay, Reference, ResponseMap, Solver, StratifiedChange
 from .scene.display import (
     DEFAULT_DISTANCE_M,
     DEFAULT_SCREEN_RESOLUTION,
@@ -44,8 +46,6 @@ from .scene.display import (
     grid_sweep,
     line_sweep,
 )
-from .budget import Budget
-from .render.solvers import Aperture, PlainChange, PlaneReplay, Reference, ResponseMap, Solver, StratifiedChange
 from .schema import (
     Choice,
     Integer,

@@ -17,7 +17,15 @@ from typing import Any
 import numpy as np
 
 from .budget import Budget
-from .config import MincamSection, MixelTable, _build_mincam, make_budget, make_solver, refuse_old_solver_keys, solver_check
+from .config import (
+    MincamSection,
+    MixelTable,
+    _build_mincam,
+    make_budget,
+    make_solver,
+    refuse_old_solver_keys,
+    solver_check,
+)
 from .errors import ConfigError
 from .geometry import Pose
 from .optics import Mincam

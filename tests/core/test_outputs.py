@@ -418,7 +418,8 @@ def test_design_json_not_needed_for_sheet_notes(tmp_path):
 def test_a_render_refused_by_the_budget_claims_nothing(tmp_path):
     from mincam_sim.jobs import run_render_config
 
-    cfg = load_config({"run": {"solver": "aperture", "spp": 2**40, "out_dir": str(tmp_path / "out")}, "frames": {"n": 2}})
+    cfg = load_config({"run": {"solver": "aperture", "spp": 2**40, "out_dir": str(tmp_path / "out")},
+                       "frames": {"n": 2}})
     with pytest.raises(ConfigError, match="--time-limit-s"):
         run_render_config(cfg, time_limit_s=60.0)
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())  # nothing claimed
