@@ -65,6 +65,11 @@ class Budget:
         t = self.target_rel_stderr
         if isinstance(t, bool) or not isinstance(t, (int, float)) or not np.isfinite(t) or not 0 <= t < 1:
             raise InputError(f"Budget.target_rel_stderr must be in [0, 1) (0 = use the counts as given), got {t!r}")
+        if self.samples_per_texel is not None and self.replicates is not None and \
+                self.samples_per_texel < self.replicates:
+            raise InputError(f"Budget.samples_per_texel = {self.samples_per_texel} is fewer than its {self.replicates} "
+                             "replicates; each replicate needs samples of its own in every texel: raise "
+                             "samples_per_texel or lower replicates")
         if self.spp is not None and self.replicates is not None and self.spp < self.replicates:
             raise InputError(f"Budget.spp = {self.spp} is fewer than its {self.replicates} replicates; each replicate "
                              "needs rays of its own")

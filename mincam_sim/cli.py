@@ -308,9 +308,9 @@ def _echo_table(m) -> None:
         typer.echo(f"{i:5d}  {cells}")
 
 
-def _render_world(config: Path, out_dir: Path | None, check: bool, overwrite: bool) -> None:
+def _render_world(config: Path, out_dir: Path | None, check: bool, overwrite: bool, time_limit_s: float) -> None:
+    from .jobs import run_world_config, world_summary
     from .world_config import load_world_config
-    from .world_job import run_world_config, world_summary
 
     cfg = load_world_config(config)
     if out_dir is not None:
@@ -323,7 +323,8 @@ def _render_world(config: Path, out_dir: Path | None, check: bool, overwrite: bo
         return
     check_out_dir(cfg.run.out_dir)
     _announce_variant()
-    ch = run_world_config(cfg, show_progress=_show_progress(), overwrite=overwrite, say=_say)
+    ch = run_world_config(cfg, show_progress=_show_progress(), overwrite=overwrite, say=_say,
+                          time_limit_s=time_limit_s)
     reached = ch.info.reached_rel_stderr
     typer.echo(f"# {ch.n_frames} frames x {len(ch.mixel_names)} mixels, dP [W/m^2] +/- stderr ({ch.info.estimator}, "
                f"{ch.info.rays_per_mixel_per_frame} rays per mixel per frame, worst relative stderr "
@@ -348,37 +349,43 @@ def render(
 
     A config with a [world] section renders your own scene (a Mitsuba XML file, meshes, lights, movers): dP and P
     per frame, a plot and the CSV (see `mincam-sim config-example --world`)."""
+    from .config import solver_name
+    from .jobs import config_summary, run_render_config
     from .plots import plot_render, plot_response_maps
-    from .render_job import config_summary, run_render_config
-    from .world_config import is_world_config
+    from .render.solvers import Reference, ResponseMap
+    from .toml_files import read_document
 
-    if is_world_config(config):
-        _render_world(config, out_dir, check, overwrite)
+    if not (np.isfinite(time_limit_s) and time_limit_s > 0):
+        raise ConfigError(f"--time-limit-s must be a positive number of seconds, got {time_limit_s}")
+    raw, _, _ = read_document(config, None)
+    if not raw:
+        typer.echo(f"warning: {config} sets nothing: rendering the default job (every key at its default, "
+                   "`mincam-sim config-example` shows them)", err=True)
+    if "world" in raw:
+        _render_world(config, out_dir, check, overwrite, time_limit_s)
         return
     cfg = load_config(config)
     if out_dir is not None:
         cfg.run.out_dir = out_dir
     variant = check_variant(cfg.run.variant)
     cfg.run.variant = variant
-    if variant == "scalar_rgb" and cfg.run.form != "reference":
-        raise ConfigError(f"[run] form = {cfg.run.form!r} needs a vectorised Mitsuba variant (llvm_ad_mono or "
-                          "cuda_ad_mono); scalar_rgb renders only form = \"reference\"")
+    if variant == "scalar_rgb" and not isinstance(cfg.run.solver, Reference):
+        raise ConfigError(f"[run] solver = {solver_name(cfg.run.solver)!r} needs a vectorised Mitsuba variant "
+                          "(llvm_ad_mono or cuda_ad_mono); scalar_rgb renders only solver = \"reference\"")
     if check:
         check_out_dir(cfg.run.out_dir, create=False)
         for line in config_summary(cfg, variant):
             typer.echo(line)
         return
-    if not (np.isfinite(time_limit_s) and time_limit_s > 0):
-        raise ConfigError(f"--time-limit-s must be a positive number of seconds, got {time_limit_s}")
     check_out_dir(cfg.run.out_dir)
     _announce_variant()
-    m, maps = run_render_config(cfg, show_progress=_show_progress(), overwrite=overwrite, reuse=True, say=_say,
+    m, maps = run_render_config(cfg, show_progress=_show_progress(), overwrite=overwrite, say=_say,
                                 time_limit_s=time_limit_s)
     out = Path(cfg.run.out_dir)
     figures = [plot_render(m, out / "measurements.png", cfg.frame_positions_m, cfg.frames_kind)]
     if maps is not None:
         figures.append(plot_response_maps(maps, cfg.screen, out / "response_maps.png"))
-    elif cfg.run.form == "response_map" and (out / "response_maps.png").is_file():
+    elif isinstance(cfg.run.solver, ResponseMap) and (out / "response_maps.png").is_file():
         figures.append(out / "response_maps.png")  # a finished run shown again: its maps' figure is still there
     np.set_printoptions(precision=6, suppress=False, linewidth=120)
     typer.echo(f"# {m.n_frames} frames x {len(m.mixel_names)} mixels, irradiance [W/m^2] +/- stderr, "
@@ -476,6 +483,7 @@ def masks_export(
         if preview.suffix.lower() != ".exr":
             raise ConfigError(f"--preview {preview}: the preview is OpenEXR; give a name ending in .exr")
     mask = parse_mask(spec, size_m, 512, "mask", encoding="srgb" if srgb else "linear")
+    _check_print_grid(mask, size_m, dpi)
     try:
         film = PrintedFilm(t_min=film_t_min, t_max=film_t_max, dpi=dpi, levels=levels,
                            halftone="ordered" if halftone else None)
@@ -492,9 +500,22 @@ def masks_export(
     typer.echo(f"{sheet_path} (notes: {notes})")
 
 
+def _check_print_grid(mask, size_m: float, dpi: int) -> None:
+    """Refuse a mask that prints as more dots than a print file holds, naming --size-m and --dpi."""
+    from .masks.mask import MAX_TEXELS
+
+    per_m = dpi / 0.0254
+    rows, cols = max(1, round(mask.height_m * per_m)), max(1, round(mask.width_m * per_m))
+    if rows * cols > MAX_TEXELS:
+        largest = np.sqrt(MAX_TEXELS * mask.width_m / mask.height_m) / per_m
+        raise ConfigError(f"--size-m {size_m:g} at --dpi {dpi} prints {cols} x {rows} dots, more than a print file "
+                          f"holds ({MAX_TEXELS} dots): lower --dpi, or --size-m to at most {largest:.4g} m at "
+                          f"{dpi} dpi")
+
+
 def _render_demo(out_dir: Path) -> None:
+    from .jobs import run_render_config
     from .plots import plot_response_maps, plot_sweep
-    from .render_job import run_render_config
 
     cfg = load_config({"run": {"out_dir": str(out_dir), "target_rel_stderr": 1e-3}})
     # The demo is a fixed job: it starts afresh in its own output directory every time.
@@ -589,6 +610,9 @@ def _reproduce_config(config: Path | None, quick: bool, **flags: Any) -> tuple[A
             raise
         flag = re.sub(r"Setup\.(\w+)", lambda m: "--" + m.group(1).replace("_", "-"), text)
         raise ConfigError(flag.replace("[command line]: ", "")) from None
+    from .experiments.reproduce_file import check_reproduce
+
+    check_reproduce(setup, params)  # what the experiments would refuse only deep inside, refused here
     if getattr(setup, "bit_depth", MIN_BIT_DEPTH) < MIN_BIT_DEPTH:
         where = "--bit-depth" if "bit_depth" in given else "[setup] bit_depth"
         raise ConfigError(f"{where} = {setup.bit_depth}: give 2 to 32 bits (the paper: {paper.ADC_BITS}); a 1-bit "
@@ -692,19 +716,34 @@ def _pair(text: str | None, option: str, scale: float = 1.0) -> tuple[float, flo
     return lo, hi
 
 
+def design_schema():
+    """The design command's ``--config`` file: one ``[tracking]`` section of TrackingTask fields."""
+    from .design.tracking import TrackingTask
+    from .schema import Part, Schema
+
+    return Schema("mincam-sim design tracking --config FILE: fields of the design task (options on the command "
+                  "line win).", (Part("tracking", TrackingTask),))
+
+
 def _design_overrides(config: Path | None, **options) -> dict:
-    """Task fields from a TOML file (``[tracking]`` table or top level) and the command line (which wins)."""
+    """Task fields from a ``[tracking]`` section of a TOML file, checked by :func:`design_schema`, and the
+    command line (which wins)."""
+    from dataclasses import fields
+
+    from .toml_files import read_document
+
     overrides: dict = {}
     if config is not None:
-        import tomllib
-
-        try:
-            data = tomllib.loads(config.read_text())
-        except FileNotFoundError:
-            raise ConfigError(f"--config {config}: no such file") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"--config {config} is not valid TOML: {exc}") from None
-        overrides.update(data.get("tracking", data))
+        raw, _, _ = read_document(Path(config), None, kind="--config")
+        schema = design_schema()
+        known = {f.name for f in fields(schema.part("tracking").cls)}
+        loose = sorted(k for k in raw if k in known)
+        if loose:
+            raise ConfigError(f"--config {config}: put {', '.join(loose)} in a [tracking] section (the design "
+                              "task's fields)")
+        given = schema.tables(raw)["tracking"]
+        task = schema.read("tracking", given)
+        overrides.update({key: getattr(task, key) for key in given})
     overrides.update({k: v for k, v in options.items() if v is not None})
     return overrides
 

@@ -21,7 +21,8 @@ import numpy as np
 
 from . import masks as masks_mod
 from . import paper
-from .errors import ConfigError
+from .budget import Budget
+from .errors import ConfigError, InputError
 from .geometry import Pose
 from .masks import Mask
 from .optics import (
@@ -33,6 +34,7 @@ from .optics import (
     cross_layout,
     pair_layout,
 )
+from .render.solvers import Aperture, PlainChange, PlaneReplay, Reference, ResponseMap, Solver, StratifiedChange
 from .scene.display import (
     DEFAULT_DISTANCE_M,
     DEFAULT_SCREEN_RESOLUTION,
@@ -58,7 +60,6 @@ from .schema import (
     describe,
     inline_table,
     is_number,
-    read_document,
     read_section,
     read_sections,
     setting,
@@ -68,12 +69,12 @@ from .schema import number as _number
 from .schema import path as _path
 from .schema import string as _string
 from .schema import vector as _vector
+from .toml_files import read_document
 
-__all__ = ["EXAMPLE_TOML", "RENDER_SCHEMA", "RenderConfig", "RunConfig", "dataclass_from_section", "load_config",
-           "load_frames_npy", "parse_mask", "read_sections", "traced_samples"]
+__all__ = ["EXAMPLE_TOML", "RENDER_SCHEMA", "SOLVERS", "RenderConfig", "RunConfig", "dataclass_from_section",
+           "load_config", "load_frames_npy", "parse_mask", "read_sections", "solver_name", "traced_samples"]
 
 MAX_FRAMES = 10_000_000  # frames stream through the renderer; this bounds run time and the result files
-_FORMS = ("response_map", "fast", "reference")
 _OPTICS = ("geometric", "wave")
 _ENCODINGS = ("linear", "srgb")
 _LAYOUTS = ("pair", "cross", "custom")
@@ -83,6 +84,76 @@ _VARIANTS = ("", "cuda_ad_mono", "llvm_ad_mono", "scalar_rgb")
 MAX_MASK_RESOLUTION = 8192  # texels per side (masks.MAX_TEXELS = 8192^2)
 MAX_SCREEN_TEXELS = 4096 * 4096  # Screen's own limit
 MAX_REPLICATES = 4096
+
+
+# ------------------------------------------------------------------------------------------------ solvers
+def solver_name(solver: Solver | type[Solver]) -> str:
+    """The configuration name of a solver: its class name in snake case (``ResponseMap`` -> ``"response_map"``)."""
+    cls = solver if isinstance(solver, type) else type(solver)
+    return "".join(f"_{c.lower()}" if c.isupper() else c for c in cls.__name__).lstrip("_")
+
+
+#: ``[run] solver`` names -> solver classes, for display and world files alike.
+SOLVERS: dict[str, type[Solver]] = {solver_name(cls): cls for cls in (Reference, Aperture, ResponseMap, PlainChange,
+                                                                       StratifiedChange, PlaneReplay)}
+# The keys and values of earlier releases: refused with the new key and value.
+_OLD_SOLVER_KEYS = {"form": {"response_map": "response_map", "fast": "aperture", "reference": "reference"},
+                    "estimator": {"stratified": "stratified_change", "plain": "plain_change"}}
+
+
+def refuse_old_solver_keys(run_table: dict, kind: str) -> None:
+    """A ``[run] form`` or ``[run] estimator`` (the old names) is refused, naming ``[run] solver`` and its value."""
+    for key, names in _OLD_SOLVER_KEYS.items():
+        if key in run_table:
+            old = run_table[key]
+            new = names.get(old) if isinstance(old, str) else None
+            if new is not None:
+                raise ConfigError(f"[run] {key} = {old!r} is the old name of the solver: use [run] solver = "
+                                  f'"{new}"')
+            names = ", ".join(f'"{n}"' for n in solvers_for(kind))
+            raise ConfigError(f"[run] {key} is the old key of the solver: use [run] solver = one of {names}")
+
+
+def solvers_for(kind: str) -> tuple[str, ...]:
+    """The solver names a ``kind`` ("display" or "world") config accepts."""
+    if kind == "world":
+        return ("stratified_change", "plain_change")  # a world file measures changes (dP); see jobs.py
+    return tuple(name for name, cls in SOLVERS.items() if "display" in cls().scenes)
+
+
+def solver_check(kind: str):
+    """The check of ``[run] solver`` in a ``kind`` config: one of :func:`solvers_for`, with a hint for the
+    names of the other kind and for misspellings."""
+    allowed = solvers_for(kind)
+
+    def check(section: str, key: str, value: Any) -> str:
+        if isinstance(value, str) and value in SOLVERS and value not in allowed:
+            names = " or ".join(map(repr, allowed))
+            if kind == "world" and "world" in SOLVERS[value]().scenes:  # aperture, plane_replay: absolute P
+                raise ConfigError(f"[run] solver = {value!r} measures absolute P; a world config measures the "
+                                  f"changes dP with {names} (absolute P: Simulation.measure in Python)")
+            raise ConfigError(f"[run] solver = {value!r} does not solve {kind} scenes; a {kind} config takes "
+                              f"{names}")
+        return Choice(allowed)(section, key, value)
+    return check
+
+
+def make_solver(name: str) -> Solver:
+    """The solver object of a checked ``[run] solver`` name."""
+    return SOLVERS[name]()
+
+
+def make_budget(solver: Solver, spp: int, samples_per_texel: int | None, target_rel_stderr: float,
+                replicates: int, seed: int) -> Budget:
+    """The :class:`~mincam_sim.budget.Budget` of a ``[run]`` section: the count the solver uses (samples per
+    texel for response maps, rays per mixel per frame otherwise); the Budget's own checks, as one ``[run]``
+    line."""
+    maps = isinstance(solver, ResponseMap)
+    try:
+        return Budget(spp=None if maps else spp, samples_per_texel=samples_per_texel if maps else None,
+                      target_rel_stderr=target_rel_stderr, replicates=replicates, seed=seed)
+    except InputError as err:
+        raise ConfigError("[run] " + str(err).removeprefix("Budget.")) from None
 
 
 # ------------------------------------------------------------------------------------------------ checks
@@ -160,9 +231,10 @@ def _any(section: str, key: str, value: Any) -> Any:
 class RunSection:
     """``[run]``: how to render."""
 
-    form: str = setting("response_map", '"response_map" (fast, display scenes), "fast" (mixel-sensor plugin), '
-                        '"reference"', Choice(_FORMS))
-    spp: int = setting(65536, 'samples per mixel per frame ("fast"/"reference"); rounded UP to a multiple of '
+    solver: str = setting("response_map", '"response_map" (maps over the screen, then a dot product per frame), '
+                          '"aperture" (rays through the mask aperture) or "reference" (the literal scene)',
+                          solver_check("display"))
+    spp: int = setting(65536, 'samples per mixel per frame ("aperture"/"reference"); rounded UP to a multiple of '
                        "replicates (65536 with 8 replicates runs exactly)", Integer())
     samples_per_texel: int = setting(
         64, 'samples per display texel per mixel ("response_map"): traced as replicates x k^2 stratified samples, '
@@ -298,12 +370,8 @@ _SINUSOID_KEYS = defaults(SinusoidMask)
 class RunConfig:
     """[run]: how to render. ``out_dir`` is resolved against the config file's directory."""
 
-    form: str
-    spp: int
-    samples_per_texel: int
-    target_rel_stderr: float
-    replicates: int
-    seed: int
+    solver: Solver
+    budget: Budget
     variant: str | None
     out_dir: Path
 
@@ -315,9 +383,8 @@ class RenderConfig:
     run: RunConfig
     mincam: Mincam
     screen: Screen
-    frames: np.ndarray
+    frames: FrameSource
     frame_positions_m: np.ndarray | None
-    raw: dict
     source: Path | None = None
     frames_kind: str = "line_sweep"
 
@@ -330,20 +397,23 @@ def traced_samples(run: RunConfig) -> tuple[int, str | None]:
     replicates)`` samples per mixel per frame (rounded up). With ``target_rel_stderr > 0`` the counts are chosen
     automatically and this returns the starting count and None.
     """
-    if run.form == "response_map":
-        k = max(1, int(np.sqrt(run.samples_per_texel / run.replicates)))
-        traced = run.replicates * k * k
-        if traced == run.samples_per_texel or run.target_rel_stderr > 0:
+    b = run.budget
+    replicates = b.replicates_or(8)
+    if isinstance(run.solver, ResponseMap):
+        asked = b.samples_per_texel
+        k = max(1, int(np.sqrt(asked / replicates)))
+        traced = replicates * k * k
+        if traced == asked or b.target_rel_stderr > 0:
             return traced, None
-        up = run.replicates * (k + 1) ** 2
-        return traced, (f"[run] samples_per_texel = {run.samples_per_texel} traces {traced} samples per texel "
-                        f"({run.replicates} replicates x {k}x{k} strata, rounded down); ask {traced} or {up} to "
+        up = replicates * (k + 1) ** 2
+        return traced, (f"[run] samples_per_texel = {asked} traces {traced} samples per texel "
+                        f"({replicates} replicates x {k}x{k} strata, rounded down); ask {traced} or {up} to "
                         "get exactly what runs")
-    per = -(-run.spp // run.replicates)
-    traced = run.replicates * per
-    if traced == run.spp or run.target_rel_stderr > 0:
+    per = -(-b.rays() // replicates)
+    traced = replicates * per
+    if traced == b.rays() or b.target_rel_stderr > 0:
         return traced, None
-    return traced, (f"[run] spp = {run.spp} traces {traced} samples per mixel per frame ({run.replicates} "
+    return traced, (f"[run] spp = {b.rays()} traces {traced} samples per mixel per frame ({replicates} "
                     f"replicates x {per}, rounded up); give a multiple of replicates to get exactly what runs")
 
 
@@ -614,13 +684,16 @@ def load_config(source: str | Path | dict, base_dir: str | Path | None = None) -
     """
     raw, base, path = read_document(source, base_dir)
     tables = RENDER_SCHEMA.tables(raw)
+    refuse_old_solver_keys(tables["run"], "display")
     sections = {name: read_section(name, tables[name], cls) for name, cls in _SECTIONS.items()}
     run: RunSection = sections["run"]
+    solver = make_solver(run.solver)
+    budget = make_budget(solver, run.spp, run.samples_per_texel, run.target_rel_stderr, run.replicates, run.seed)
     mincam = _build_mincam(sections["mincam"], tables["mixel"], base)
     wave = [mx.name for mx in mincam if mx.optics == "wave"]
-    if wave and run.form == "reference":
-        raise ConfigError(f"[run] form = \"reference\" is the literal geometric-optics scene, but mixel(s) {wave} "
-                          "have optics = \"wave\": use form = \"fast\" or \"response_map\", or optics = "
+    if wave and isinstance(solver, Reference):
+        raise ConfigError(f"[run] solver = \"reference\" is the literal geometric-optics scene, but mixel(s) {wave} "
+                          "have optics = \"wave\": use solver = \"aperture\" or \"response_map\", or optics = "
                           "\"geometric\"")
     screen = _build_screen(sections["screen"])
     try:
@@ -628,8 +701,5 @@ def load_config(source: str | Path | dict, base_dir: str | Path | None = None) -
     except ValueError as err:
         raise ConfigError(f"[mincam]/[screen]: {err}") from None
     frames, positions = _build_frames(sections["frames"], screen, base)
-    run_cfg = RunConfig(run.form, run.spp, run.samples_per_texel, run.target_rel_stderr, run.replicates, run.seed,
-                        run.variant or None, _path("run", "out_dir", run.out_dir, base))
-    given = {name: {**_SCHEMA[name], **tables[name]} for name in _SECTIONS}  # as written, defaults filled in
-    return RenderConfig(run_cfg, mincam, screen, frames, positions, {**given, "mixel": tables["mixel"]}, path,
-                        sections["frames"].kind)
+    run_cfg = RunConfig(solver, budget, run.variant or None, _path("run", "out_dir", run.out_dir, base))
+    return RenderConfig(run_cfg, mincam, screen, frames, positions, path, sections["frames"].kind)

@@ -21,7 +21,6 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import textwrap
-import tomllib
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from decimal import Decimal
@@ -31,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from .errors import ConfigError
+from .toml_files import read_document
 
 MAX_INT = 2**63 - 1
 EXAMPLE_WIDTH = 116  # characters per line of a generated example
@@ -341,40 +341,6 @@ def dataclass_from_section(section: str, table_: Any, defaults_: Any) -> Any:
 
 
 # ------------------------------------------------------------------------------------------------ documents
-def read_document(source: Any, base_dir: str | Path | None, kind: str = "config") -> tuple[dict, Path, Path | None]:
-    """(parsed document, base directory, file or None) from a ``.toml`` path, TOML text or a parsed dict.
-
-    ``kind`` names the document in messages (``"config"``, ``"study"``). Relative paths in the document
-    resolve against ``base_dir``, default: the file's directory (the working directory for text and dicts).
-    """
-    if isinstance(source, dict):
-        return source, Path(base_dir or "."), None
-    if isinstance(source, Path) or (isinstance(source, str) and "\n" not in source and "=" not in source
-                                    and (source.endswith(".toml") or Path(source).is_file())):
-        file = Path(source)
-        if not file.exists():
-            raise ConfigError(f"{kind} file {file} does not exist")
-        if file.is_dir():
-            raise ConfigError(f"{kind} file {file} is a directory; give a .toml file")
-        try:
-            text = file.read_bytes().decode("utf-8-sig")  # a byte-order mark (Windows editors) is dropped
-        except UnicodeDecodeError:
-            raise ConfigError(f"{kind} file {file} is not UTF-8 text; give a TOML file") from None
-        except OSError as err:
-            raise ConfigError(f"cannot read {kind} file {file}: {err.strerror or err}") from None
-        label = f"{kind} file {file}"
-        base = file.parent if base_dir is None else Path(base_dir)
-    elif isinstance(source, str):
-        text, label, base, file = source.removeprefix("\ufeff"), kind, Path(base_dir or "."), None
-    else:
-        raise ConfigError(f"a {kind} is a TOML file path, TOML text or a dict, got {type(source).__name__}")
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"{label} is not valid TOML: {err}") from None
-    return raw, base, file
-
-
 @dataclass(frozen=True)
 class Part:
     """One section of a file kind: ``[name]`` (a dataclass ``cls``), ``[[name]]`` tables (``array``), or a

@@ -16,10 +16,20 @@ from typing import Any
 
 import numpy as np
 
-from .config import MincamSection, MixelTable, _build_mincam
+from .budget import Budget
+from .config import (
+    MincamSection,
+    MixelTable,
+    _build_mincam,
+    make_budget,
+    make_solver,
+    refuse_old_solver_keys,
+    solver_check,
+)
 from .errors import ConfigError
 from .geometry import Pose
 from .optics import Mincam
+from .render.solvers import Solver
 from .schema import (
     Choice,
     Integer,
@@ -29,7 +39,6 @@ from .schema import (
     Text,
     Vector,
     describe,
-    read_document,
     read_section,
     setting,
 )
@@ -37,8 +46,8 @@ from .schema import number as _number
 from .schema import path as _path
 from .schema import string as _string
 from .schema import vector as _vector
+from .toml_files import read_document
 
-ESTIMATORS = ("stratified", "plain")
 UP_AXES = ("z", "y")
 LIGHT_KINDS = ("area", "point", "spot", "sky")
 BACKGROUNDS = ("without_movers", "as_built", "first_frame")
@@ -89,10 +98,10 @@ def _world_id(section: str, key: str, value: Any) -> str:
 # ------------------------------------------------------------------------------------------------ sections
 @dataclass(frozen=True)
 class WorldRunSection:
-    """``[run]`` of a world render: the estimator and its budget."""
+    """``[run]`` of a world render: the solver and its budget."""
 
-    estimator: str = setting("stratified", '"stratified" (rays where the change is) or "plain" (the reference)',
-                             Choice(ESTIMATORS))
+    solver: str = setting("stratified_change", '"stratified_change" (rays where the change is) or "plain_change" '
+                          "(whole-aperture rays, the reference)", solver_check("world"))
     spp: int = setting(16384, "rays per mixel per frame and pass", Integer())
     target_rel_stderr: float = setting(0.0, "> 0: raise spp until the worst significant dP reaches this",
                                        Number(minimum=0.0))
@@ -269,11 +278,10 @@ class CameraSpec:
 
 @dataclass
 class WorldRunConfig:
-    estimator: str
-    spp: int
-    target_rel_stderr: float
-    replicates: int
-    seed: int
+    """[run] of a world render: the solver object and its budget; ``out_dir`` resolved against the file's folder."""
+
+    solver: Solver
+    budget: Budget
     max_depth: int
     variant: str | None
     out_dir: Path
@@ -294,7 +302,6 @@ class WorldConfig:
     lights: list[WorldLight]
     movers: list[Mover]
     camera: CameraSpec | None
-    raw: dict
     source: Path | None = None
     files: list[Path] = field(default_factory=list)  # every file the numbers depend on (XML, meshes, CSVs)
 
@@ -319,12 +326,12 @@ def load_world_config(source: str | Path | dict, base_dir: str | Path | None = N
     """
     raw, base, path = read_document(source, base_dir)
     tables = WORLD_SCHEMA.tables(raw)
+    refuse_old_solver_keys(tables["run"], "world")
     run: WorldRunSection = WORLD_SCHEMA.read("run", tables["run"])
-    if run.spp < run.replicates:
-        raise ConfigError(f"[run] spp = {run.spp} is fewer than replicates = {run.replicates}; each replicate "
-                          "needs rays")
-    run_cfg = WorldRunConfig(run.estimator, run.spp, run.target_rel_stderr, run.replicates, run.seed, run.max_depth,
-                             run.variant or None, _path("run", "out_dir", run.out_dir, base))
+    solver = make_solver(run.solver)
+    budget = make_budget(solver, run.spp, None, run.target_rel_stderr, run.replicates, run.seed)
+    run_cfg = WorldRunConfig(solver, budget, run.max_depth, run.variant or None,
+                             _path("run", "out_dir", run.out_dir, base))
     mincam = _world_mincam(WORLD_SCHEMA.read("mincam", tables["mincam"]), tables["mixel"], base)
     w: WorldSection = WORLD_SCHEMA.read("world", tables["world"])
     files: list[Path] = []
@@ -355,7 +362,7 @@ def load_world_config(source: str | Path | dict, base_dir: str | Path | None = N
         raise ConfigError(f"[[world.mover]] ids {names}: each shape can move in one mover table only")
     camera = _camera(tables["world.camera"]) if "camera" in (raw.get("world") or {}) else None
     return WorldConfig(run_cfg, mincam, scene_file, w.up, w.frame_rate_hz, w.background, objects, lights, movers,
-                       camera, raw, path, files)
+                       camera, path, files)
 
 
 def referenced_files(xml_path: Path) -> list[Path]:
@@ -468,6 +475,11 @@ def _sample_keyframes(where: str, times: Any, keys: np.ndarray, rate: float) -> 
     t = np.array([_number(where, f"times_s[{j}]", v) for j, v in enumerate(times)], dtype=float)
     if len(t) < 2 or np.any(np.diff(t) <= 0):
         raise ConfigError(f"{where}: times_s must hold at least two increasing times, got {t.tolist()}")
+    count = int(np.floor((t[-1] - t[0]) * rate + 0.5)) + 1  # counted before anything is allocated
+    if count > MAX_WORLD_FRAMES:
+        raise ConfigError(f"{where}: keyframes from {t[0]:g} s to {t[-1]:g} s at [world] frame_rate_hz = {rate:g} "
+                          f"make {count} frames, more than {MAX_WORLD_FRAMES}: lower frame_rate_hz or shorten "
+                          "times_s")
     frames = np.arange(t[0], t[-1] + 0.5 / rate, 1.0 / rate)
     frames = frames[frames <= t[-1] + 1e-12]
     return np.stack([np.interp(frames, t, keys[:, k]) for k in range(3)], axis=1)

@@ -9,7 +9,9 @@ shipped ``scenes/experiments/reproduce.toml``) is written from the same dataclas
 from __future__ import annotations
 
 import dataclasses
+from typing import Any, get_args
 
+from ..errors import ConfigError
 from ..schema import Part, Schema, toml_value
 from .registry import REGISTRY
 from .setup import Setup
@@ -46,3 +48,43 @@ def _differences(full, quick) -> dict[str, str]:
 def reproduce_example_toml() -> str:
     """The documented reproduce file: every key of every section commented out at its default."""
     return reproduce_schema().example(notes=quick_notes(), commented_keys=True)
+
+
+def check_reproduce(setup: Setup, params: dict[str, Any]) -> None:
+    """Refuse, as one :class:`~mincam_sim.errors.ConfigError` line naming the section and key, the values of a
+    reproduce file that the experiments would only refuse deep inside (after minutes, as a bare ``ValueError``):
+    the set-up's mincam and screen, the tracking toys, the speed experiment's sampling of its mask."""
+    from ..optics import cross_layout
+
+    try:
+        cross_layout(setup.spacing_m, 8, setup.mask_size_m, d_f_m=setup.d_f_m, detector_size_m=setup.detector_size_m)
+    except ValueError as err:
+        raise ConfigError(f"[setup] detector_size_m = {setup.detector_size_m:g}, mask_size_m = "
+                          f"{setup.mask_size_m:g}: {err}") from None
+    try:
+        setup.screen()
+    except ValueError as err:
+        raise ConfigError(f"[setup] screen_resolution = {list(setup.screen_resolution)}: {err}") from None
+    if "tracking" in params:
+        _check_toys(params["tracking"])
+    if "speed" in params:
+        _check_speed(setup, params["speed"])
+
+
+def _check_toys(tracking: Any) -> None:
+    from ..objects import windup_toy
+
+    kinds = get_args(windup_toy.__annotations__.get("kind", "")) or ("robot", "chick", "frog")
+    unknown = [t for t in tracking.toys if t not in kinds]
+    if unknown:
+        raise ConfigError(f"[tracking] toys = {list(tracking.toys)}: {', '.join(map(repr, unknown))} is no wind-up "
+                          f"toy; choose from {', '.join(map(repr, kinds))}")
+
+
+def _check_speed(setup: Setup, speed: Any) -> None:
+    from .speed import check_nyquist
+
+    try:
+        check_nyquist(setup, speed)
+    except ConfigError as err:
+        raise ConfigError(f"with [speed] mask_period_m = {speed.mask_period_m:g} m: {err}") from None

@@ -113,25 +113,17 @@ def _flat_numeric(raw: dict) -> dict:
 
 def _render_point(config_path: str) -> PointFunction:
     def point(params: dict, seed: int, quick: bool) -> dict:
-        import tomllib
-
-        from ..budget import Budget
         from ..config import load_config
-        from ..render import solvers
         from ..render.simulation import Simulation
+        from ..toml_files import read_toml_file
 
-        raw = tomllib.loads(Path(config_path).read_text(encoding="utf-8"))
+        raw = read_toml_file(config_path, "[study] config")
         for key, value in params.items():
             section, name = key.split(".", 1)
             raw.setdefault(section, {})[name] = value
         raw.setdefault("run", {})["seed"] = int(seed)
         cfg = load_config(raw, base_dir=Path(config_path).parent)
-        run = cfg.run
-        by_form = {"response_map": solvers.ResponseMap, "fast": solvers.Aperture, "reference": solvers.Reference}
-        solver = by_form[run.form]
-        budget = Budget(spp=run.spp, samples_per_texel=run.samples_per_texel, target_rel_stderr=run.target_rel_stderr,
-                        replicates=run.replicates, seed=run.seed)
-        m = Simulation(cfg.mincam, screen=cfg.screen).measure(cfg.frames, solver(), budget)
+        m = Simulation(cfg.mincam, screen=cfg.screen).measure(cfg.frames, cfg.run.solver, cfg.run.budget)
         out = {}
         for j, mixel in enumerate(m.mixel_names):
             values, stderr = m.irradiance_w_m2[:, j], m.stderr_w_m2[:, j]
@@ -146,17 +138,13 @@ def _render_point(config_path: str) -> PointFunction:
 
 def render_target(config_path: str | Path) -> StudyExperiment:
     """A render config as a study target: every numeric key (``section.key``) is a parameter."""
-    import tomllib
-
     from ..config import load_config
+    from ..toml_files import read_toml_file
 
     path = Path(config_path)
     if not path.is_file():
         raise ConfigError(f"[study] config = {str(path)!r}: no such render config file")
-    try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"[study] config {path} is not valid TOML: {err}") from None
+    raw = read_toml_file(path, "[study] config")
     cfg = load_config(path)  # validated once here; each point validates its own values again
     metrics = tuple(f"{mixel.name}.{kind}" for mixel in cfg.mincam
                     for kind in ("mean_irradiance_w_m2", "peak_irradiance_w_m2"))

@@ -26,7 +26,8 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError
-from ..schema import Flag, Integer, Part, Schema, Text, closest, read_document, read_section, setting, toml_value
+from ..schema import Flag, Integer, Part, Schema, Text, closest, read_section, setting, toml_value
+from ..toml_files import read_document
 from .points import StudyExperiment, study_target, target_names
 
 DEFAULT_MAX_POINTS = 10_000

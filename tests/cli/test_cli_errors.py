@@ -264,7 +264,7 @@ CASES: list[Case] = [
     Case("reproduce_boundary_out_of_view", ["reproduce", "intrusion", "--quick", "--config", "r.toml"],
          {"r.toml": "[intrusion]\nboundary_x_m = 0.6\n"}, keywords=("boundary_x_m",)),
     Case("reproduce_mask_period_too_fine", ["reproduce", "speed", "--quick", "--config", "r.toml"],
-         {"r.toml": "[speed]\nmask_period_m = 1e-7\n"}, keywords=("mask period", "mask_period_m")),
+         {"r.toml": "[speed]\nmask_period_m = 1e-7\n"}, keywords=("mask_period_m",)),
     Case("world_config_unknown_mover", R,
          {"c.toml": '[world]\n[[world.object]]\nid = "toy"\nmesh = "m.obj"\n[[world.mover]]\nid = "car"\n'
                     'offsets_m = [[0, 0, 0]]\n',
@@ -300,7 +300,7 @@ CASES: list[Case] = [
     Case("samples_per_texel_rounded", R, {"c.toml": toml()}, expect="ok", notes=("traces 8",)),
     Case("render_writes_its_figures", R, {"c.toml": toml()}, expect="ok",
          outputs=("out/measurements.png", "out/response_maps.png", "out/measurements.csv")),
-    Case("fast_spp_2_40", R, {"c.toml": toml(run={"form": '"fast"', "spp": str(2**40)})},
+    Case("fast_spp_2_40", R, {"c.toml": toml(run={"solver": '"aperture"', "spp": str(2**40)})},
          keywords=("--time-limit-s",)),
     Case("render_warning_is_one_line", R, {"c.toml": toml(frames={"start_m": "[0.0, 0.3]", "end_m": "[0.0, 0.3]"})},
          expect="ok", notes=("warning: ",), clean_stderr=True),
@@ -310,6 +310,47 @@ CASES: list[Case] = [
     Case("masks_export_on_a_full_disk", ["masks", "export", "ramp:x", "--out", "m.png", "--dpi", "4800",
                                          "--size-m", "0.02"], fsize_limit=20000, keywords=("m.png", "m_sheet")),
 ]
+
+MESH = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"
+WORLD = '[world]\n[[world.object]]\nid = "toy"\nmesh = "m.obj"\n[[world.mover]]\nid = "toy"\n'
+RT = ["reproduce", "tracking", "--quick", "--config", "r.toml"]
+
+#: Values a user types that reached a deep ValueError (a traceback) or ran silently: refused at the boundary.
+BOUNDARY = [
+    Case("reproduce_unknown_toy", RT, {"r.toml": '[tracking]\ntoys = ["dragon"]\n'}, keywords=("[tracking] toys",)),
+    Case("reproduce_detector_larger_than_mask", RT, {"r.toml": "[setup]\ndetector_size_m = 0.003\n"},
+         keywords=("[setup] detector_size_m",)),
+    Case("reproduce_screen_resolution_zero", RT, {"r.toml": "[setup]\nscreen_resolution = [0, 0]\n"},
+         keywords=("[setup] screen_resolution",)),
+    Case("reproduce_mask_period_named", ["reproduce", "speed", "--quick", "--config", "r.toml"],
+         {"r.toml": "[speed]\nmask_period_m = 1e-7\n"}, keywords=("mask_period_m",)),
+    Case("masks_export_print_grid_too_large", ["masks", "export", "ramp:x", "--out", "m.png", "--size-m", "1",
+                                               "--dpi", "2400"], keywords=("--size-m",)),
+    Case("render_replicates_above_samples_per_texel", R,
+         {"c.toml": toml(run={"replicates": "64", "samples_per_texel": "16"})}, keywords=("samples_per_texel",)),
+    Case("render_old_form_key", R, {"c.toml": toml(run={"form": '"fast"'})}, keywords=('solver = "aperture"',)),
+    Case("render_world_solver_in_a_display_file", R, {"c.toml": toml(run={"solver": '"stratified_change"'})},
+         keywords=("display",)),
+    Case("world_old_estimator_key", R, {"c.toml": '[run]\nestimator = "plain"\n' + WORLD + "offsets_m = [[0, 0, 0]]\n",
+                                        "m.obj": MESH}, keywords=('solver = "plain_change"',)),
+    Case("world_absolute_solver", R, {"c.toml": '[run]\nsolver = "aperture"\n' + WORLD + "offsets_m = [[0, 0, 0]]\n",
+                                      "m.obj": MESH}, keywords=("absolute P",)),
+    Case("world_spp_2_40", R, {"c.toml": f"[run]\nspp = {2**40}\n" + WORLD + "offsets_m = [[0, 0, 0]]\n",
+                               "m.obj": MESH}, keywords=("--time-limit-s",)),
+    Case("world_frame_rate_1e9_keyframes", R,
+         {"c.toml": WORLD.replace("[world]\n", "[world]\nframe_rate_hz = 1e9\n")
+          + "times_s = [0.0, 1.2]\nkeyframes_m = [[0, 0, 0], [0.2, 0, 0]]\n", "m.obj": MESH},
+         keywords=("frame_rate_hz",)),
+    Case("design_config_key_outside_tracking", ["design", "tracking", "--config", "d.toml"],
+         {"d.toml": "dpi = 300.0\n"}, keywords=("[tracking]",)),
+    Case("design_config_unknown_field", ["design", "tracking", "--config", "d.toml"],
+         {"d.toml": "[tracking]\ndpii = 300.0\n"}, keywords=("dpii",)),
+    Case("design_config_not_toml", ["design", "tracking", "--config", "d.toml"], {"d.toml": "dpi = = 3\n"},
+         keywords=("not valid TOML",)),
+    Case("empty_config_says_it_is_the_default_job", ["render", "c.toml", "--check"], {"c.toml": ""}, expect="ok",
+         notes=("default job",)),
+]
+CASES += BOUNDARY
 
 _PROGRESS = re.compile(r"(\d+%\||/s\]|s/\w+\]|\d+\w* \[\d+:\d+)")  # any tqdm bar: "42%|", "it/s]", "3chunk [00:01"
 
@@ -426,6 +467,16 @@ def test_bad_input_is_one_line_in_process(case, tmp_path):
     assert verdict == "ok", f"{case.name}: rc {result.exit_code}, stderr {_stderr(result)!r}"
 
 
+@pytest.mark.parametrize("case", BOUNDARY, ids=lambda c: c.name)
+def test_a_value_that_reached_deep_code_is_refused_at_the_boundary(case, tmp_path):
+    """Each is refused (or said) before anything runs: one ``error:`` line, exit code 2, no traceback."""
+    _prepare(case, tmp_path)
+    result = _cli(case.argv, tmp_path)
+    assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
+    verdict = classify(case, result.exit_code, _stderr(result))
+    assert verdict == "ok", f"{case.name}: rc {result.exit_code}, stderr {_stderr(result)!r}"
+
+
 def test_debug_flag_shows_the_traceback(tmp_path):
     (tmp_path / "c.toml").write_text(toml(run={"seed": "true"}))
     result = _cli(["--debug", "render", "c.toml"], tmp_path)
@@ -444,7 +495,7 @@ def test_render_check_validates_without_rendering(tmp_path):
     (tmp_path / "c.toml").write_text(toml())
     result = _cli(["render", "c.toml", "--check"], tmp_path)
     assert result.exit_code == 0, _stderr(result)
-    for word in ("mixel x", "screen:", "frames: 2", "form: response_map", "out dir:"):
+    for word in ("mixel x", "screen:", "frames: 2", "solver: response_map", "out dir:"):
         assert word in result.output
     assert not (tmp_path / "out").exists()
 

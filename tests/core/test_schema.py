@@ -97,8 +97,7 @@ def test_each_example_parses_back_to_exactly_the_defaults(kind):
 
 def test_the_render_example_is_the_default_config():
     example, default = load_config(EXAMPLE_TOML), load_config({})
-    assert example.run == default.run
-    assert example.raw == default.raw  # the recorded config: every key at its default
+    assert example.run == default.run  # the solver object and the budget, every key at its default
     assert example.mincam.names == default.mincam.names
     assert [m.pose for m in example.mincam] == [m.pose for m in default.mincam]
     assert example.screen == default.screen and example.frames.shape == default.frames.shape
@@ -213,8 +212,49 @@ def test_an_unknown_section_gets_the_same_error_in_every_file_kind(kind, text, w
 def test_a_misspelt_study_parameter_and_choice_get_the_closest_name():
     with pytest.raises(ConfigError, match=r"\[grid\] depth_mm: not a parameter .*did you mean depth_m\?"):
         load_study({"study": {"experiment": "spacing"}, "grid": {"depth_mm": [0.5]}})
-    with pytest.raises(ConfigError, match=r"form = 'fats' is not one of .*did you mean 'fast'\?"):
-        load_config("[run]\nform = 'fats'\n")
+    with pytest.raises(ConfigError, match=r"solver = 'aperturr' is not one of .*did you mean 'aperture'\?"):
+        load_config("[run]\nsolver = 'aperturr'\n")
+
+
+@pytest.mark.parametrize("kind, text, fix", [
+    ("display", "form = 'fast'", 'use [run] solver = "aperture"'),
+    ("display", "form = 'response_map'", 'use [run] solver = "response_map"'),
+    ("display", "form = 'reference'", 'use [run] solver = "reference"'),
+    ("display", "form = 'fats'", 'use [run] solver = one of "reference", "aperture", "response_map"'),
+    ("world", "estimator = 'stratified'", 'use [run] solver = "stratified_change"'),
+    ("world", "estimator = 'plain'", 'use [run] solver = "plain_change"'),
+])
+def test_the_old_solver_keys_are_refused_naming_the_new_key_and_value(tmp_path, kind, text, fix):
+    if kind == "display":
+        with pytest.raises(ConfigError) as err:
+            load_config(f"[run]\n{text}\n")
+    else:
+        path = _world_dir(tmp_path) / "w.toml"
+        path.write_text(WORLD_BASE.replace("[run]\n", f"[run]\n{text}\n") if "[run]\n" in WORLD_BASE
+                        else f"[run]\n{text}\n" + WORLD_BASE)
+        with pytest.raises(ConfigError) as err:
+            load_world_config(path)
+    assert fix in str(err.value) and "\n" not in str(err.value)
+
+
+def test_the_solver_of_a_config_is_a_solver_object_of_its_kind():
+    import mincam_sim as ms
+
+    assert load_config("[run]\nsolver = 'aperture'\n").run.solver == ms.Aperture()
+    assert isinstance(load_config({}).run.solver, ms.ResponseMap)
+    with pytest.raises(ConfigError, match="does not solve display scenes"):
+        load_config("[run]\nsolver = 'stratified_change'\n")
+
+
+def test_a_budget_refuses_fewer_samples_per_texel_than_replicates_in_python_and_toml():
+    import mincam_sim as ms
+    from mincam_sim.errors import InputError
+
+    with pytest.raises(InputError, match="samples_per_texel = 16 is fewer than its 64 replicates"):
+        ms.Budget(samples_per_texel=16, replicates=64)
+    with pytest.raises(ConfigError, match=r"\[run\] samples_per_texel = 16 is fewer than its 64 replicates"):
+        load_config("[run]\nreplicates = 64\nsamples_per_texel = 16\n")
+    load_config("[run]\nsolver = 'aperture'\nreplicates = 64\nsamples_per_texel = 16\n")  # not its count
 
 
 def test_config_example_prints_each_generated_file():
@@ -246,13 +286,13 @@ def test_a_schema_refuses_a_table_where_an_array_of_tables_belongs():
     assert isinstance(WORLD_SCHEMA, Schema)
 
 
-def test_the_world_identity_holds_the_movers_and_the_camera(tmp_path):
-    """The parsed document is recorded whole: a changed trajectory or camera is a different run."""
+def test_the_world_config_holds_the_movers_and_the_camera(tmp_path):
+    """The typed config (what Run's identity reads) holds the trajectory and the camera."""
     path = _world_dir(tmp_path) / "w.toml"
     path.write_text(WORLD_BASE + "[world.camera]\nposition_m = [0, 0, 1]\nlook_at_m = [0, 0, 0]\n")
-    raw = load_world_config(path).raw
-    assert raw["world"]["mover"][0]["offsets_m"] == [[0, 0, 0]] and "camera" in raw["world"]
-    np.testing.assert_array_equal(load_world_config(path).movers[0].offsets_m, [[0.0, 0.0, 0.0]])
+    cfg = load_world_config(path)
+    assert cfg.camera is not None and cfg.camera.position_m == (0.0, 0.0, 1.0)
+    np.testing.assert_array_equal(cfg.movers[0].offsets_m, [[0.0, 0.0, 0.0]])
 
 
 def test_the_world_page_snippet_is_the_shipped_room_config():
