@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import objects
+from ..budget import Budget
 from ..errors import ConfigError
 from ..estimators import (
     AliasingError,
@@ -40,9 +41,8 @@ from ..progress import progress
 from ..readout import read_out
 from ..render import scene_dicts as sd
 from ..render.elements import road_elements
-from ..render.screen_engine import response_maps
-from ..render.sliding_plane import SlidingPlane
-from ..render.world import WorldRenderer
+from ..render.simulation import Simulation
+from ..render.solvers import PlaneReplay
 from ..scene.road import Road
 from .base import Experiment, ExperimentResult, PaperNumbers
 from .display_timing import DisplayTiming, displayed_readings, sample_times_s
@@ -212,7 +212,8 @@ class Speed(Experiment):
         """The paper's experiment: a road crop slides across the screen by k px per frame."""
         screen = setup.with_(screen_resolution=tuple(params.video_resolution)).screen()
         cam = Mincam((sinusoid_mixel(setup, params.mask_period_m, Pose()),))
-        maps = response_maps(cam, screen, samples_per_texel=params.video_samples_per_texel, seed=setup.seed)
+        maps = Simulation(cam, screen=screen).response_maps(
+            Budget(samples_per_texel=params.video_samples_per_texel, seed=setup.seed))
         rows, cols = screen.shape
         road = self.scene(setup, params, rng)
         shifts = params.video_shifts_px
@@ -289,16 +290,18 @@ class Speed(Experiment):
         length = max(speeds) * n_frames / rate + 1.0  # travel plus 0.5 m margins [m]
         width = 0.6  # [m], wider than the field of view at this height
         road = Road(objects.road_texture((512, 4096), rng), length, width, sky_radiance_w_m2_sr=1.0)
-        world = WorldRenderer(cam, road_elements(road), replicates=4)
+        sim = Simulation(cam, world=road_elements(road))
         omega_d = float(scene_frequency(2 * np.pi / params.mask_period_m, setup.d_f_m, d))
         # the vehicle moves +x at v: the road under the mixel (x = 0) moves -x, starting 0.5 m from its end
-        placements = {v: [road.matrix_at(length / 2 - 0.5 - v * i / rate) for i in range(n_frames)] for v in speeds}
-        # the road slides in its plane: its rays traced once, every frame replayed (same seed: correlated frames)
-        replay = SlidingPlane(world, "road", [m for frames in placements.values() for m in frames], params.vehicle_spp,
-                              seed=setup.seed)
+        frames = [{"road.to_world": road.matrix_at(length / 2 - 0.5 - v * i / rate)} for v in speeds
+                  for i in range(n_frames)]
+        # the road slides in its plane: its rays traced once, every frame replayed (same seed: correlated frames);
+        # one measure over every speed's frames, so that one replay covers them all
+        budget = Budget(spp=params.vehicle_spp, replicates=4, seed=setup.seed)
+        irr_all = sim.measure(frames, solver=PlaneReplay("road"), budget=budget).irradiance_w_m2[:, 0]
         true_v, pred_v, plain_v, spectra = [], [], [], []
-        for v in progress(speeds, desc="vehicle speeds", disable=not show_progress):
-            irr = np.array([replay.estimates(m).mean() for m in placements[v]])
+        for j, v in enumerate(progress(speeds, desc="vehicle speeds", disable=not show_progress)):
+            irr = irr_all[j * n_frames:(j + 1) * n_frames]
             signal = read_out(irr[:, None], np.array([irr.min()]), setup.sensor(), rng,
                               setup.exposure_fill).frames_dn[:, 0]
             true_v.append(v)
@@ -335,8 +338,7 @@ class Speed(Experiment):
         road = objects.road_texture((512, 512), rng)  # ~7 mm texels: asphalt-scale grain
         road_matrix = Pose((size / 2 - 0.5, 0.0, 0.0), (0.0, 0.0, 1.0), (0.0, 1.0, 0.0)).matrix() @ np.diag(
             [size / 2, size / 2, 1, 1])
-        world = WorldRenderer(cam, {"road": sd.textured_plane(road, 2.0, 2.0, np.eye(4)), "sky": sd.sky(1.0)},
-                              replicates=4)
+        sim = Simulation(cam, world={"road": sd.textured_plane(road, 2.0, 2.0, np.eye(4)), "sky": sd.sky(1.0)})
         omega_d = float(scene_frequency(2 * np.pi / params.mask_period_m, setup.d_f_m, d))
         placements = []
         for i in range(n_frames):
@@ -347,9 +349,8 @@ class Speed(Experiment):
             move[:2, 3] = -move[:2, :2] @ centre
             # the textured_plane spans [-1, 1]^2 scaled by 1 here, so road_matrix carries the road's size
             placements.append(move @ road_matrix)
-        replay = SlidingPlane(world, "road", placements, params.turn_spp, seed=setup.seed)  # turns in its plane
-        irr = np.array([replay.estimates(m).mean(axis=0)
-                        for m in progress(placements, desc="turning vehicle", disable=not show_progress)])
+        irr = sim.measure([{"road.to_world": m} for m in placements], solver=PlaneReplay("road"),  # turns in its plane
+                          budget=Budget(spp=params.turn_spp, replicates=4, seed=setup.seed)).irradiance_w_m2
         dn = read_out(irr, irr.min(axis=0), setup.sensor(), rng, setup.exposure_fill).frames_dn
         speeds = [_speed(dn[:, k], rate, omega_d, 0.5 * v, params.difference_order, 1.5 * v) for k in range(2)]
         path = trajectory_from_speeds(np.array([speeds[0]]), np.array([speeds[1]]), width, n_frames / rate)
