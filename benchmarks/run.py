@@ -219,19 +219,16 @@ def _dp_with(solver, world, frames, background):
 
 
 def _independent_seeds_dp(world, frames, background, spp: int, seed: int):
-    """The plain dP with independent seeds for frame and background (the variance the correlated seeds remove).
-    The front door has no solver for it (PlainChange pairs the seeds): the world's renderer is asked directly,
-    with the replicates the door would give it."""
-    renderer = world.renderer
-    renderer.replicates = MOVING_OBJECT_REPLICATES
-    dp, _ = renderer.measure_changes(frames, background, spp=spp, seed=seed, correlated=False)
-    return dp
+    """The plain dP with independent seeds for frame and background (the variance the correlated seeds remove)."""
+    from mincam_sim import Budget, PlainChange
+
+    return world.measure_changes(frames, background, PlainChange(correlated=False),
+                                 Budget(spp=spp, replicates=MOVING_OBJECT_REPLICATES, seed=seed)).dp
 
 
 def _set_frozen_paired(world, on: bool) -> None:
-    """Frozen launches and paired background lanes on or off (the stratified solver's own switches; the front door
-    has none: the world's renderer is set directly)."""
-    world.renderer.freeze_launches = world.renderer.pair_lanes = on
+    """Frozen launches and paired background lanes on or off (the simulation's switches of the stratified solver)."""
+    world.freeze_launches = world.pair_lanes = on
 
 
 def _moving_object_stratified(world, frames, background, plain) -> dict:

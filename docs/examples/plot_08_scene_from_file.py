@@ -109,11 +109,11 @@ ax1.grid(alpha=0.3)
 # -------------------------------
 # ``scenes/world/room.toml`` names the scene, the mincam, the car's keyframes and a ground-truth camera;
 # ``mincam-sim render scenes/world/room.toml`` renders it. In Python the same route is
-# :func:`mincam_sim.world_config.load_world_config` and :func:`mincam_sim.world_job.run_world_config`
+# :func:`mincam_sim.world_config.load_world_config` and :func:`mincam_sim.jobs.run_world_config`
 # (here into a temporary folder instead of the config's ``out_dir``). It writes ``measurements.npz/.csv``,
 # ``camera.npz`` and ``dP.png``.
+from mincam_sim.jobs import run_world_config  # noqa: E402
 from mincam_sim.world_config import load_world_config  # noqa: E402
-from mincam_sim.world_job import run_world_config  # noqa: E402
 
 raw = tomllib.loads((ROOT / "scenes" / "world" / "room.toml").read_text(encoding="utf-8"))
 with tempfile.TemporaryDirectory() as tmp:

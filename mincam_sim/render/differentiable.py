@@ -1,7 +1,7 @@
 """Differentiable mixel measurements of objects on a plane, with Dr.Jit's automatic differentiation.
 
 The only module of the package that uses Dr.Jit AD. Scenes are uniform-radiance squares ("objects") on a
-plane at ``depth_m`` in front of the mincam, facing it (the display of :mod:`.screen_engine`, one object per
+plane at ``depth_m`` in front of the mincam, facing it (the display of the display solvers, one object per
 frame). The estimator is the response map's (:mod:`.response_map`): for frame ``f`` with a square ``S_f`` of
 radiance ``L_f`` and area ``A_f``, and mixel ``k``::
 

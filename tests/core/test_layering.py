@@ -1,10 +1,11 @@
 """Architecture: the import graph of the package, read from the code (every import, module-level or local).
 
 Floors, bottom to top: the pure core (numpy physics, sensor, estimators, calibration, masks, scene
-descriptions, config, stores, budgets and typed results) -> ``render`` (the only Mitsuba / Dr.Jit user: the
+descriptions, stores, budgets and typed results) -> ``render`` (the only Mitsuba / Dr.Jit user: the
 simulation and its solvers, which hand their rows to a sink of ``mincam_sim.frames`` and never open a store or
-take a lock) -> ``run`` (output directories: lock, identity, stores, resume; the solvers never import it) ->
-``render_job`` and ``world_job`` (the config services) -> ``experiments`` and ``design`` -> ``studies`` ->
+take a lock) -> ``config`` and ``world_config`` (typed configuration; they name the solver classes) -> ``run``
+(output directories: lock, identity, stores, resume; the solvers never import it) -> ``jobs`` (the config
+services) -> ``experiments`` and ``design`` -> ``studies`` ->
 ``cli``. ``plots`` draws results and sits beside the core. The package root is the public facade: it exposes
 upper floors lazily and nothing inside the package imports it. Lower floors never import upper ones, and no
 modules import each other in a loop.
@@ -20,7 +21,8 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parents[2] / "mincam_sim"
-UPPER = ("render", "run", "render_job", "world_job", "experiments", "design", "studies", "cli", "plots", "figures")
+UPPER = ("render", "config", "world_config", "run", "jobs", "experiments", "design", "studies", "cli", "plots",
+         "figures")
 
 
 def _module_name(path: Path) -> str:
@@ -80,9 +82,11 @@ def test_only_the_render_layer_imports_mitsuba_or_drjit():
 
 @pytest.mark.parametrize("source, forbidden", [
     ({"core"}, set(UPPER)),
-    ({"render"}, {"run", "render_job", "world_job", "experiments", "design", "studies", "cli", "plots", "figures"}),
-    ({"run"}, {"render_job", "world_job", "experiments", "design", "studies", "cli", "plots", "figures"}),
-    ({"render_job", "world_job"}, {"experiments", "design", "studies", "cli", "plots", "figures"}),
+    ({"render"}, {"config", "world_config", "run", "jobs", "experiments", "design", "studies", "cli", "plots",
+                  "figures"}),
+    ({"config", "world_config"}, {"run", "jobs", "experiments", "design", "studies", "cli", "plots", "figures"}),
+    ({"run"}, {"config", "world_config", "jobs", "experiments", "design", "studies", "cli", "plots", "figures"}),
+    ({"jobs"}, {"experiments", "design", "studies", "cli", "plots", "figures"}),
     ({"plots"}, {"experiments", "design", "studies", "cli", "render"}),
     ({"experiments", "design"}, {"studies", "cli"}),
     ({"studies"}, {"cli"}),
@@ -131,7 +135,7 @@ def test_the_sink_protocol_loads_without_the_store():
     tree = ast.parse(MODULES["mincam_sim.frames"].read_text())
     top = {_resolve(n.module or "", n.level, "mincam_sim.frames", False) for n in tree.body
            if isinstance(n, ast.ImportFrom)}
-    assert "mincam_sim.store" not in top and "mincam_sim.store" in GRAPH["mincam_sim.frames"]  # lazily, in the shim
+    assert "mincam_sim.store" not in top and "mincam_sim.store" not in GRAPH["mincam_sim.frames"]
 
 
 def test_nothing_inside_the_package_imports_its_facade():
@@ -176,3 +180,25 @@ def test_pure_modules_import_without_a_renderer():
         "assert 'mitsuba' not in sys.modules and 'drjit' not in sys.modules, sorted(sys.modules)\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+#: What modules outside ``render/`` may import from it: the front door, scene building, and named exceptions.
+RENDER_DOOR = ("mincam_sim.render.simulation", "mincam_sim.render.solvers", "mincam_sim.render.scene_dicts",
+               "mincam_sim.render.elements", "mincam_sim.render.scene_files", "mincam_sim.render.world_input",
+               "mincam_sim.render.updates")
+RENDER_ALLOWED = {
+    # the variant in use and the set-up check: what the CLI, registry and runners print and record
+    "mincam_sim.render.backend": "the Mitsuba variant is described and checked, nothing rendered",
+    # the design floor optimises masks through Dr.Jit's automatic differentiation (a solver of gradients)
+    "mincam_sim.render.differentiable": "the design floor's differentiable square scenes",
+    "mincam_sim.render.autodiff": "the design floor's optimiser steps in Dr.Jit",
+    # a parameter converted as the loaded scene holds it (a turned scene file in a world config)
+    "mincam_sim.render.mincam_scene": "jobs.py turns a loaded scene file in place (to move into scene building)",
+}
+
+
+def test_outside_render_only_the_front_door_and_scene_building_are_imported():
+    offenders = sorted(f"{a} -> {b}" for a, targets in GRAPH.items() if _floor(a) != "render"
+                       for b in targets if b.startswith("mincam_sim.render.") and b != "mincam_sim.render"
+                       and not b.startswith(RENDER_DOOR) and b not in RENDER_ALLOWED)
+    assert offenders == []

@@ -21,11 +21,11 @@ from mincam_sim.config import load_config
 from mincam_sim.errors import OutDirLockedError, StaleResultError, StoreError
 from mincam_sim.frames import MemorySink, collect
 from mincam_sim.identity import IDENTITY_KINDS, build_identity, run_key
+from mincam_sim.jobs import run_render_config
 from mincam_sim.render import scene_dicts as sd
 from mincam_sim.render.solvers import aperture, change
 from mincam_sim.render.solvers import response_map as rms
 from mincam_sim.render.updates import vertex_update
-from mincam_sim.render_job import config_identity, run_render_config
 from mincam_sim.scene.display import line_sweep
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -374,15 +374,6 @@ def test_world_identities_equal_those_of_stores_written_before(pinned_versions, 
                 run.measure_changes(world, frames, background, solver, budget, name=f"world_{est}")
     for est in ("plain", "stratified"):
         assert run_key(_stored_identity(tmp_path / f"world_{est}")) == GOLDEN_KEYS[f"world_{est}"], est
-
-
-def test_config_identities_equal_those_written_before(pinned_versions):
-    cfg = load_config({"run": {"samples_per_texel": 16, "out_dir": "out"}, "frames": {"n": 2},
-                       "screen": {"resolution": [32, 18]}})
-    assert run_key(config_identity(cfg, "llvm_ad_mono")) == GOLDEN_KEYS["render_config"]
-    cfg = load_config({"run": {"form": "fast", "spp": 1024, "out_dir": "out"}, "frames": {"n": 2},
-                       "screen": {"resolution": [32, 18]}})
-    assert run_key(config_identity(cfg, None)) == GOLDEN_KEYS["render_config_fast"]
 
 
 class _nothing:

@@ -16,10 +16,10 @@ from conftest import assert_close_mc
 import mincam_sim as ms
 from mincam_sim.errors import ConfigError, InputError, StaleResultError
 from mincam_sim.estimators import intrusion_position
+from mincam_sim.jobs import run_world_config
 from mincam_sim.render import scene_dicts as sd
 from mincam_sim.render.updates import vertex_update
 from mincam_sim.world_config import load_world_config, world_example_toml
-from mincam_sim.world_job import run_world_config
 
 ROOM = Path(__file__).resolve().parents[2] / "scenes" / "world"
 CAM = ms.pair_layout(center=ms.Pose((0.0, 0.0, 0.4), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)))
@@ -135,7 +135,7 @@ def test_a_y_up_scene_measures_as_its_z_up_twin(tmp_path):
     z_up = ms.Simulation(CAM, world=ROOM / "room.xml")
     config = _room_copy(tmp_path, _y_up)
     cfg = load_world_config(config)
-    from mincam_sim.world_job import build_elements
+    from mincam_sim.jobs import build_elements
 
     cfg.up = "y"
     turned = ms.Simulation(CAM, world=build_elements(cfg))
@@ -189,7 +189,7 @@ def test_bad_files_are_one_clear_error(tmp_path):
     _write(tmp_path, "junk.obj", "this is not a mesh\n")
     cfg = load_world_config(_write(tmp_path, "d.toml", '[world]\n[[world.object]]\nid = "junk"\nmesh = "junk.obj"\n'
                                                        '[[world.mover]]\nid = "junk"\noffsets_m = [[0, 0, 0]]\n'))
-    from mincam_sim.world_job import build_elements
+    from mincam_sim.jobs import build_elements
 
     with pytest.raises(InputError, match="junk.obj"):
         build_elements(cfg)
