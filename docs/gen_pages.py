@@ -406,7 +406,7 @@ def config_reference() -> str:
     from mincam_sim.cli import design_schema
 
     text.append("## Design configuration (`mincam-sim design tracking --config FILE.toml`)\n\n"
-                "One `[tracking]` section of {class}`~mincam_sim.design.tracking.TrackingTask` fields, checked "
+                "One `[tracking]` section of `mincam_sim.design.tracking.TrackingTask` fields, checked "
                 "like the others; options on the command line win. Every key with its default:\n\n```toml\n"
                 + design_schema().example(commented_keys=True).rstrip() + "\n```\n")
     text.append("## World render configuration (`mincam-sim render WORLD.toml`)\n\n"

@@ -94,4 +94,4 @@ __all__ = [
     "single",
     "white_square",
 ]
-__version__ = "0.4.0"
+__version__ = "0.5.0"

@@ -486,8 +486,8 @@ def scene_file_digests(path, _seen: dict | None = None) -> dict[str, str]:
 
 
 def run_identity(scene: Mapping, solver: Mapping, budget: Mapping, frames: Any, variant: str) -> dict:
-    """The one identity of a run (kind ``"run"``), from the simulation's :meth:`identity`, the solver's
-    :meth:`identity`, the budget as requested (:meth:`Budget.describe`), the frames' identity and the Mitsuba
+    """The one identity of a run (kind ``"run"``), from the simulation's ``identity``, the solver's
+    ``identity``, the budget as requested (``Budget.describe``), the frames' identity and the Mitsuba
     variant; built by :class:`mincam_sim.run.Run` only."""
     return build_identity("run", {"scene": scene, "solver": solver, "budget": budget, "frames": frames},
                           variant=variant)

@@ -3,7 +3,7 @@
 ``mincam-sim render`` and the Python API alike.
 
 * :func:`display_job` / :func:`world_job` build the :class:`Job` of a config (no rendering);
-* :func:`run_render_config` / :func:`run_world_config` run it in ``[run] out_dir`` through one :class:`Run` (its
+* :func:`run_render_config` / :func:`run_world_config` run it in ``[run] out_dir`` through one ``Run`` (its
   lock, its identity, its store: a killed run resumes, a finished one with the same identity is returned
   without rendering, a different one is refused unless ``overwrite``) and add the job's own outputs: each
   frame's position or time and movers' offsets in ``measurements.csv`` / ``.npz``, response maps (OpenEXR), a plot
@@ -11,7 +11,7 @@
 * :func:`estimate_seconds` / :func:`check_budget`: the same estimate-and-refuse rule for displays and worlds,
   before anything is allocated or written; :func:`config_summary` / :func:`world_summary`: ``--check``.
 
-A job builds no identity of its own: the run's one identity is :class:`Run`'s.
+A job builds no identity of its own: the run's one identity is ``Run``'s.
 
 World outputs in ``[run] out_dir``: ``measurements.npz`` (``irradiance_w_m2`` / ``stderr_w_m2``: P;
 ``delta_irradiance_w_m2`` / ``delta_stderr_w_m2``: dP; (n_frames, n_mixels) each), ``measurements.csv`` (frame,

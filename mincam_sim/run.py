@@ -8,9 +8,9 @@ the solvers never import it.
         m = run.measure(sim, frames, solver=ms.ResponseMap(), budget=ms.Budget(samples_per_texel=256))
         ch = run.measure_changes(world_sim, frames, solver=ms.StratifiedChange())
 
-A run's identity is built here only (:func:`run_identity`): the simulation's :meth:`identity` (for a world from a
-file, every file it names, recursively), the solver's :meth:`identity`, the budget as requested
-(:meth:`Budget.describe`), the frames (a display's content hash; a world's updates and background), the Mitsuba
+A run's identity is built here only (:func:`run_identity`): the simulation's ``identity`` (for a world from a
+file, every file it names, recursively), the solver's ``identity``, the budget as requested
+(``Budget.describe``), the frames (a display's content hash; a world's updates and background), the Mitsuba
 variant and the library versions. Per-frame results go to ``OUT/<name>/`` as they are computed (a killed run
 resumes where it stopped; a run with anything else changed is refused, naming what changed, unless
 ``overwrite``); the finished result is written atomically as ``OUT/<name>.npz`` (and ``.csv``), and a rerun of

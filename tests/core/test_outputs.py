@@ -196,7 +196,6 @@ def test_render_writes_figure_positions_and_the_traced_count(tmp_path):
     assert "traces 8 samples per texel" in r.stderr
 
 
-@pytest.mark.xfail(reason="needs the ResponseMap solver's m.maps (the merge's Simulation.measure)", strict=False)
 def test_a_response_map_render_writes_its_maps(tmp_path):
     from typer.testing import CliRunner
 

@@ -68,7 +68,7 @@ class Plan:
 @dataclass(frozen=True)
 class Solver:
     """Base of every solver: ``name`` is what results record; ``scenes`` which scene kinds it solves;
-    ``changes`` whether it measures changes against a background (:meth:`Simulation.measure_changes`)."""
+    ``changes`` whether it measures changes against a background (``Simulation.measure_changes``)."""
 
     name: ClassVar[str] = "solver"
     scenes: ClassVar[tuple[str, ...]] = ()
@@ -91,7 +91,7 @@ class Solver:
                              "measure_changes(frames, background, solver=...)")
 
     def plan(self, sim, frames, budget: Budget, *, background=None, cache=None, show_progress: bool = False) -> Plan:
-        """The :class:`Plan` of measuring ``frames`` in ``sim`` with ``budget`` (``background``: change solvers;
+        """The ``Plan`` of measuring ``frames`` in ``sim`` with ``budget`` (``background``: change solvers;
         ``cache``: a content cache for intermediate results such as response maps)."""
         raise NotImplementedError
 

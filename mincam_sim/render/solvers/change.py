@@ -13,11 +13,11 @@ per-replicate differences, so it includes that correlation.
   traced with the same seed, counts and regions, so their rays pair up lane by lane; inter-reflection bounces
   are guided toward the moving shapes (``mincam_sim.render.guided_path``); the background's whole-aperture
   value (for ``P``) is traced once per run, on a jittered aperture grid with at least
-  :data:`BACKGROUND_MIN_SPP` rays. Kernels are compiled once and reused; each frame costs one parameter update
+  ``BACKGROUND_MIN_SPP`` rays. Kernels are compiled once and reused; each frame costs one parameter update
   for the frame and one back to the background.
 
 A target noise is reached by pilots: the solver's own plan on up to 4 frames spread over the run, at the
-budget's rays, extrapolated by :func:`..estimation.pilot_to_target` (no recursion through the front door).
+budget's rays, extrapolated by ``estimation.pilot_to_target`` (no recursion through the front door).
 """
 
 from __future__ import annotations
@@ -118,7 +118,7 @@ class ChangeSolver(Solver):
                              "(each replicate needs rays of its own); raise spp or lower replicates")
 
     def _resolve_spp(self, sim, frames, background, budget: Budget, replicates: int) -> tuple[int, dict]:
-        """The budget's rays, or (target > 0) the count the pilots extrapolate (:func:`.estimation.pilot_to_target`
+        """The budget's rays, or (target > 0) the count the pilots extrapolate (``estimation.pilot_to_target``
         on up to 4 frames spread over the run), with the pilots' trail."""
         spp, target = budget.rays(), budget.target_rel_stderr
         if not target > 0 or not len(frames):
@@ -169,7 +169,7 @@ class StratifiedChange(ChangeSolver):
         Draw half the inter-reflection bounces toward spheres around the moving shapes
         (``mincam_sim.render.guided_path``; unbiased). Ignored at a ``max_depth`` the guided path does not cover.
     correlated : bool
-        As :class:`ChangeSolver`.
+        As ``ChangeSolver``.
     """
 
     strata_shares: Sequence[float] = STRATA_SHARES
@@ -202,7 +202,7 @@ class StratifiedChange(ChangeSolver):
 class ChangePlan(Plan):
     """One change run at the budget's ``spp`` rays per pass (the target already resolved): the background traced
     once, then a row per frame (dP and P per mixel, then heavy-tailed and unseen flags per mixel and
-    :data:`INFO_COLUMNS`)."""
+    ``INFO_COLUMNS``)."""
 
     def __init__(self, solver: ChangeSolver, sim, frames, background, budget: Budget, replicates: int,
                  resolved: dict, show_progress: bool) -> None:
@@ -224,7 +224,7 @@ class ChangePlan(Plan):
             yield [i], np.concatenate([row_v, info])[None], np.concatenate([row_e, np.zeros_like(info)])[None]
 
     def result(self, values: np.ndarray, errors: np.ndarray) -> Changes:
-        """(dP, P) with the reached noise in their meta and the run's :class:`RunInfo`, the warnings said."""
+        """(dP, P) with the reached noise in their meta and the run's ``RunInfo``, the warnings said."""
         sim, run, bg = self.sim, self.run, self.bg
         sim.update(self.background)
         n, names = len(sim.mincam), sim.mincam.names
@@ -288,7 +288,7 @@ class _Run:
 
     def rows(self, frames, todo, show_progress: bool):
         """(frame index, values, stderr, info) per frame of ``todo``: dP then P per mixel; then heavy-tailed and
-        unseen flags per mixel and :data:`INFO_COLUMNS`."""
+        unseen flags per mixel and ``INFO_COLUMNS``."""
         n = len(self.r.mincam)
         for i in progress(todo, desc="frames", disable=not show_progress):
             i = int(i)

@@ -133,4 +133,4 @@ def stratum_steps(replicates: int, cap: int):
     return quantize
 
 
-__all__ = ["MapPlan", "ResponseMap", "ResponseMaps", "maps_to_target", "stratum_steps"]
+__all__ = ["MapPlan", "ResponseMap", "maps_to_target", "stratum_steps"]
