@@ -133,6 +133,7 @@ class Run:
         if done is not None:
             return done
         sink = StoreSink(self.out_dir / name, identity, overwrite=self.overwrite, lock=lock)
+        sink.refuse_another_run()
         m = sim.measure(frames, solver, budget, sink=sink, show_progress=self.show_progress)
         m.meta.update(identity_key=key, frames=identity["frames"])
         m.save_csv(self.out_dir / f"{name}.csv")
@@ -151,6 +152,7 @@ class Run:
         if done is not None:
             return done
         sink = StoreSink(self.out_dir / name, identity, overwrite=self.overwrite, lock=lock)
+        sink.refuse_another_run()
         ch = sim.measure_changes(frames, background, solver, budget, sink=sink, show_progress=self.show_progress)
         ch.dp.meta["identity_key"] = ch.p.meta["identity_key"] = key
         ch.save_csv(self.out_dir / f"{name}.csv")

@@ -270,6 +270,16 @@ def _summary(parts: list[str], limit: int = 6) -> str:
     return ", ".join(shown) + more
 
 
+def _refuse_different_run(directory: Path, old: dict, new: dict) -> None:
+    """Raise the one refusal of a store that holds another run, naming what changed between ``old`` and ``new``."""
+    changed = [c.removeprefix("identity.") for c in diff_identities(old, new, depth=3)]
+    what = _summary(changed) if changed else "its identity key"
+    raise StaleResultError(
+        f"{directory} holds results of a different run (changed: {what}); rerun with --overwrite "
+        "(overwrite=True) to replace them, or choose another output directory"
+    )
+
+
 class ResultStore:
     """Per-frame results of shape (n_frames, n_columns), written incrementally, verified on reopening.
 
@@ -360,12 +370,7 @@ class ResultStore:
             return
         old = {"identity": info.get("identity"), "n_frames": info.get("n_frames"), "columns": info.get("columns")}
         new = {"identity": self.identity, "n_frames": self.shape[0], "columns": self.columns}
-        changed = [c.removeprefix("identity.") for c in diff_identities(old, new, depth=3)]
-        what = _summary(changed) if changed else "its identity key"
-        raise StaleResultError(
-            f"{self.directory} holds results of a different run (changed: {what}); rerun with --overwrite "
-            "(overwrite=True) to replace them, or choose another output directory"
-        )
+        _refuse_different_run(self.directory, old, new)
 
     def _create(self) -> None:
         """Write fresh arrays (each atomically), then run.json (atomically): run.json commits the store."""
@@ -471,6 +476,17 @@ class StoreSink:
             _check_covers(lock, self.directory)
         self.lock = lock
         self.cache = ContentCache(self.directory / "cache")
+
+    def refuse_another_run(self) -> None:
+        """Refuse, before anything is traced, a store that holds a different run (unless overwriting); the
+        opened :class:`ResultStore` checks the same again with its frame count and columns."""
+        info_path = self.directory / "run.json"
+        if self.overwrite or self.identity is None or not info_path.exists():
+            return
+        old = _read_run_json(info_path).get("identity")
+        new = canonical(self.identity)
+        if run_key(old) != run_key(new):
+            _refuse_different_run(self.directory, {"identity": old}, {"identity": new})
 
     def open(self, n_frames: int, columns: Sequence[str]) -> ResultStore:
         """The :class:`ResultStore` of this sink's run (its pending frames are what is left to do)."""

@@ -458,23 +458,23 @@ def _stderr(result) -> str:
         return result.output
 
 
-@pytest.mark.parametrize("case", FAST, ids=lambda c: c.name)
-def test_bad_input_is_one_line_in_process(case, tmp_path):
+def _assert_one_clear_answer(case, tmp_path) -> None:
     _prepare(case, tmp_path)
     result = _cli(case.argv, tmp_path)
     assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
     verdict = classify(case, result.exit_code, _stderr(result))
     assert verdict == "ok", f"{case.name}: rc {result.exit_code}, stderr {_stderr(result)!r}"
+
+
+@pytest.mark.parametrize("case", FAST, ids=lambda c: c.name)
+def test_bad_input_is_one_line_in_process(case, tmp_path):
+    _assert_one_clear_answer(case, tmp_path)
 
 
 @pytest.mark.parametrize("case", BOUNDARY, ids=lambda c: c.name)
 def test_a_value_that_reached_deep_code_is_refused_at_the_boundary(case, tmp_path):
     """Each is refused (or said) before anything runs: one ``error:`` line, exit code 2, no traceback."""
-    _prepare(case, tmp_path)
-    result = _cli(case.argv, tmp_path)
-    assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
-    verdict = classify(case, result.exit_code, _stderr(result))
-    assert verdict == "ok", f"{case.name}: rc {result.exit_code}, stderr {_stderr(result)!r}"
+    _assert_one_clear_answer(case, tmp_path)
 
 
 def test_debug_flag_shows_the_traceback(tmp_path):

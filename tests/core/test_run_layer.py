@@ -293,8 +293,6 @@ def test_a_changed_identity_refuses_through_run_and_overwrite_replaces(tmp_path)
     np.testing.assert_array_equal(replaced.irradiance_w_m2, fresh.irradiance_w_m2)
 
 
-@pytest.mark.xfail(strict=True, reason="known regression of the one-identity Run: a changed run is refused when its "
-                   "store opens, after the plan has traced (response maps); Run must check the store first")
 def test_a_changed_config_refuses_before_anything_is_traced(tmp_path, monkeypatch):
     run_render_config(_small_config(tmp_path))
     monkeypatch.setattr(rms, "response_maps", lambda *a, **k: pytest.fail("traced although refused"))
