@@ -132,9 +132,9 @@ def _tabletop(n_frames: int):
     import trimesh
 
     from mincam_sim import Simulation, cross_layout
-    from mincam_sim.geometry import Pose
-    from mincam_sim.render import scene_dicts as sd
-    from mincam_sim.render.elements import vertex_update
+    from mincam_sim.model.geometry import Pose
+    from mincam_sim.render.scene import scene_dicts as sd
+    from mincam_sim.render.scene.elements import vertex_update
 
     height = 0.5
     cam = cross_layout(center=Pose((0.0, 0.0, height), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)))
@@ -315,8 +315,8 @@ def _moving_object_stratified(world, frames, background, plain) -> dict:
 def _grid_mincam(n: int, height_m: float):
     """``n`` mixels (a square grid, 6 mm apart, ramps x / 1-x / y / 1-y in turn) at ``height_m`` looking down."""
     from mincam_sim import masks
-    from mincam_sim.geometry import Pose
-    from mincam_sim.optics import layout
+    from mincam_sim.model.geometry import Pose
+    from mincam_sim.model.optics import layout
 
     side = int(round(np.sqrt(n)))
     offsets = [((i - (side - 1) / 2) * 0.006, (j - (side - 1) / 2) * 0.006) for j in range(side) for i in range(side)]
@@ -334,9 +334,9 @@ def _cost_point(n_mixels: int = 4, table_triangles: int = 2, n_movers: int = 1, 
     import trimesh
 
     from mincam_sim import Budget, PlainChange, Simulation, StratifiedChange, cross_layout
-    from mincam_sim.geometry import Pose
-    from mincam_sim.render import scene_dicts as sd
-    from mincam_sim.render.elements import vertex_update
+    from mincam_sim.model.geometry import Pose
+    from mincam_sim.render.scene import scene_dicts as sd
+    from mincam_sim.render.scene.elements import vertex_update
 
     height = 0.5
     cam = (cross_layout(center=Pose((0.0, 0.0, height), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0))) if n_mixels == 4
@@ -515,12 +515,13 @@ def bench_sliding_plane() -> dict:
     same seed, with the largest relative difference between their measurements. The replay's build is the
     time of one replay less the frames' share, measured as the difference to a replay of every frame twice
     (the same placements: the same cover, the same build)."""
-    from mincam_sim import Aperture, Budget, PlaneReplay, Simulation, objects
+    from mincam_sim import Aperture, Budget, PlaneReplay, Simulation
     from mincam_sim.experiments.layouts import sinusoid_mixel
     from mincam_sim.experiments.setup import Setup
-    from mincam_sim.geometry import Pose
-    from mincam_sim.optics import Mincam
-    from mincam_sim.render.elements import road_elements
+    from mincam_sim.model.geometry import Pose
+    from mincam_sim.model.optics import Mincam
+    from mincam_sim.render.scene.elements import road_elements
+    from mincam_sim.scene import objects
     from mincam_sim.scene.road import Road
 
     setup, spp, n_frames = Setup(), 1 << 19, 64

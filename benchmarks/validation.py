@@ -116,13 +116,13 @@ def _row(value: float, sigma: float, expected: float) -> dict:
 
 
 def coupled_geometry_and_shadows() -> dict:
-    """The render-core checks against the independent float64 oracles (:mod:`mincam_sim.quadrature`), at the
+    """The render-core checks against the independent float64 oracles (:mod:`mincam_sim.oracles.quadrature`), at the
     sample counts of ``tests/render/test_render_core.py``: tilted mixel and rotated screen, mixels that shadow each
     other (occluder 1 cm away), the 0.2 mm-period sinusoid at a trough."""
     from test_render_core import SINUSOID_30, SQUARE_M, TILT_SCREEN, _shadow_oracle, _shadowing_pair, _tilted_mixel
 
     from mincam_sim import Mincam, Mixel, Screen, masks
-    from mincam_sim.quadrature import mixel_irradiance_gl
+    from mincam_sim.oracles.quadrature import mixel_irradiance_gl
     from mincam_sim.scene.display import coverage
 
     out: dict = {}

@@ -9,14 +9,14 @@ results.
 These names load the renderer on first use (``import mincam_sim`` itself stays pure numpy).
 """
 
-from .budget import Budget
-from .changes import Changes, RunInfo
-from .errors import ConfigError, InputError, MincamError
-from .geometry import Pose, look_at
-from .masks import Mask
-from .measurements import Measurements
-from .optics import Mincam, Mixel, cross_layout, layout, pair_layout, single
-from .scene.display import Screen, grid_sweep, line_sweep, white_square
+from mincam_sim.budget import Budget
+from mincam_sim.changes import Changes, RunInfo
+from mincam_sim.errors import ConfigError, InputError, MincamError
+from mincam_sim.masks import Mask
+from mincam_sim.measurements import Measurements
+from mincam_sim.model.geometry import Pose, look_at
+from mincam_sim.model.optics import Mincam, Mixel, cross_layout, layout, pair_layout, single
+from mincam_sim.scene.display import Screen, grid_sweep, line_sweep, white_square
 
 _LAZY = {
     "Simulation": "mincam_sim.render.simulation",
@@ -26,21 +26,21 @@ _LAZY = {
     "PlainChange": "mincam_sim.render.solvers",
     "StratifiedChange": "mincam_sim.render.solvers",
     "PlaneReplay": "mincam_sim.render.solvers",
-    "Run": "mincam_sim.run",
+    "Run": "mincam_sim.runs.run",
     # building a world: updates by name (world coordinates), scene pieces, the experiments' tabletop and toys
-    "vertex_update": "mincam_sim.render.updates",
-    "transform_update": "mincam_sim.render.updates",
-    "mesh_object": "mincam_sim.render.scene_dicts",
-    "area_light": "mincam_sim.render.scene_dicts",
-    "textured_plane": "mincam_sim.render.scene_dicts",
-    "sky": "mincam_sim.render.scene_dicts",
-    "pinhole_camera": "mincam_sim.render.scene_dicts",
-    "tabletop_elements": "mincam_sim.render.elements",
-    "toy_updates": "mincam_sim.render.elements",
+    "vertex_update": "mincam_sim.render.scene.updates",
+    "transform_update": "mincam_sim.render.scene.updates",
+    "mesh_object": "mincam_sim.render.scene.scene_dicts",
+    "area_light": "mincam_sim.render.scene.scene_dicts",
+    "textured_plane": "mincam_sim.render.scene.scene_dicts",
+    "sky": "mincam_sim.render.scene.scene_dicts",
+    "pinhole_camera": "mincam_sim.render.scene.scene_dicts",
+    "tabletop_elements": "mincam_sim.render.scene.elements",
+    "toy_updates": "mincam_sim.render.scene.elements",
     "Tabletop": "mincam_sim.scene.tabletop",
-    "load_mesh": "mincam_sim.objects",
-    "mesh_at": "mincam_sim.objects",
-    "Trajectory": "mincam_sim.objects",
+    "load_mesh": "mincam_sim.scene.objects",
+    "mesh_at": "mincam_sim.scene.objects",
+    "Trajectory": "mincam_sim.scene.objects",
 }
 
 

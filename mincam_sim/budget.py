@@ -12,7 +12,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .errors import InputError
+from mincam_sim.errors import InputError
 
 DEFAULT_SPP = 1 << 16  # rays per mixel per frame when a budget names none
 DEFAULT_SAMPLES_PER_TEXEL = 64

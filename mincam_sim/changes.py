@@ -9,18 +9,18 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import atomic_open, atomic_save_npz
-from .measurements import Measurements, json_default
+from mincam_sim.measurements import Measurements, json_default
+from mincam_sim.storage.atomic import atomic_open, atomic_save_npz
 
 
 @dataclass(frozen=True)
 class RunInfo:
-    """What a change run did, always present whatever the estimator.
+    """What a change run did, always present whatever the solver.
 
     Attributes
     ----------
-    estimator : str
-        The change solver's name: ``"plain"`` or ``"stratified"``.
+    solver : str
+        The change solver's name: ``"plain_change"`` or ``"stratified_change"``.
     seed, replicates : int
     rays_per_mixel_per_frame : int
         Rays traced per mixel per frame, the mean over the frames (a stratified pair: the frame pass and the
@@ -36,14 +36,14 @@ class RunInfo:
     heavy_tailed : tuple of (frame, mixel)
         Values whose replicates stayed dominated by one after the retry: their sigma is uncertain.
     fallbacks : tuple of str
-        What the estimator could not bound or guide, and what it did instead.
+        What the solver could not bound or guide, and what it did instead.
     guided_frames : int or None
         Stratified runs: frames whose bounces were guided.
     launches : str or None
         Stratified runs: ``"frozen"`` (recorded once, replayed) or ``"traced..."`` with the reason.
     """
 
-    estimator: str
+    solver: str
     seed: int
     replicates: int
     rays_per_mixel_per_frame: int
@@ -103,6 +103,8 @@ class Changes:
         info["retried_frames"] = tuple(info["retried_frames"])
         info["heavy_tailed"] = tuple(tuple(x) for x in info["heavy_tailed"])
         info["fallbacks"] = tuple(info["fallbacks"])
+        if "estimator" in info:  # files written before 0.6.0 name the solver "estimator": "plain" | "stratified"
+            info["solver"] = f"{info.pop('estimator')}_change"
         return cls(dp, p, RunInfo(**info), columns)
 
     def save_csv(self, path: str | Path) -> Path:

@@ -19,11 +19,11 @@ import numpy as np
 import typer
 from typer.core import TyperGroup
 
-from . import paper
-from .config import EXAMPLE_TOML, load_config, parse_mask
-from .errors import BackendUnavailableError, ConfigError, MincamError
-from .masks import PrintedFilm, export_print_png, generate_library, save_exr
-from .store import lock_out_dir
+from mincam_sim import paper
+from mincam_sim.configuration.config import EXAMPLE_TOML, load_config, parse_mask
+from mincam_sim.errors import BackendUnavailableError, ConfigError, MincamError
+from mincam_sim.masks import PrintedFilm, export_print_png, generate_library, save_exr
+from mincam_sim.storage.store import lock_out_dir
 
 try:  # typer >= 0.2x vendors click
     from typer._click.exceptions import ClickException
@@ -184,8 +184,8 @@ def _global(
     debug: Annotated[bool, typer.Option("--debug", help="show the traceback of an error (env MINCAM_DEBUG=1)")]
     = False,
 ) -> None:
-    from . import progress
-    from .render import backend
+    from mincam_sim import progress
+    from mincam_sim.render import backend
 
     _state.update(verbose=verbose, quiet=quiet, debug=debug or _state["debug"], variant=variant)
     progress.set_enabled(not quiet)
@@ -205,7 +205,7 @@ def _show_progress() -> bool:
 
 def _announce_variant() -> None:
     if _state["verbose"]:
-        from .render import backend
+        from mincam_sim.render import backend
 
         _say(f"mincam-sim: Mitsuba variant {backend.variant()} ({backend.describe()['mitsuba']})")
 
@@ -219,7 +219,7 @@ def variant_problem(variant: str) -> str | None:
     Uses ``mincam_sim.render.backend.variant_available(name)`` when the backend offers it; otherwise asks the
     backend to load the variant (only the render layer imports Mitsuba / Dr.Jit) and reports its refusal.
     """
-    from .render import backend
+    from mincam_sim.render import backend
 
     ask = getattr(backend, "variant_available", None)
     if callable(ask):
@@ -248,7 +248,7 @@ def check_variant(config_variant: str | None = None) -> str | None:
     BackendUnavailableError
         The variant cannot run here (e.g. ``cuda_ad_mono`` without a GPU).
     """
-    from .render import backend
+    from mincam_sim.render import backend
 
     if _state["variant"] is not None:
         wanted, source = _state["variant"], "--variant"
@@ -309,8 +309,8 @@ def _echo_table(m) -> None:
 
 
 def _render_world(config: Path, out_dir: Path | None, check: bool, overwrite: bool, time_limit_s: float) -> None:
-    from .jobs import run_world_config, world_summary
-    from .world_config import load_world_config
+    from mincam_sim.configuration.world_config import load_world_config
+    from mincam_sim.runs.jobs import run_world_config, world_summary
 
     cfg = load_world_config(config)
     if out_dir is not None:
@@ -326,7 +326,7 @@ def _render_world(config: Path, out_dir: Path | None, check: bool, overwrite: bo
     ch = run_world_config(cfg, show_progress=_show_progress(), overwrite=overwrite, say=_say,
                           time_limit_s=time_limit_s)
     reached = ch.info.reached_rel_stderr
-    typer.echo(f"# {ch.n_frames} frames x {len(ch.mixel_names)} mixels, dP [W/m^2] +/- stderr ({ch.info.estimator}, "
+    typer.echo(f"# {ch.n_frames} frames x {len(ch.mixel_names)} mixels, dP [W/m^2] +/- stderr ({ch.info.solver}, "
                f"{ch.info.rays_per_mixel_per_frame} rays per mixel per frame, worst relative stderr "
                f"{'n/a' if reached is None else f'{reached:.2e}'}); outputs in {cfg.run.out_dir}")
     _echo_table(ch.dp)
@@ -349,11 +349,11 @@ def render(
 
     A config with a [world] section renders your own scene (a Mitsuba XML file, meshes, lights, movers): dP and P
     per frame, a plot and the CSV (see `mincam-sim config-example --world`)."""
-    from .config import solver_name
-    from .jobs import config_summary, run_render_config
-    from .plots import plot_render, plot_response_maps
-    from .render.solvers import Reference, ResponseMap
-    from .toml_files import read_document
+    from mincam_sim.configuration.config import solver_name
+    from mincam_sim.configuration.toml_files import read_document
+    from mincam_sim.plotting.plots import plot_render, plot_response_maps
+    from mincam_sim.render.solvers import Reference, ResponseMap
+    from mincam_sim.runs.jobs import config_summary, run_render_config
 
     if not (np.isfinite(time_limit_s) and time_limit_s > 0):
         raise ConfigError(f"--time-limit-s must be a positive number of seconds, got {time_limit_s}")
@@ -406,15 +406,15 @@ def config_example(
     if world + reproduce + study > 1:
         raise ConfigError("config-example prints one file: give at most one of --world, --reproduce, --study")
     if world:
-        from .world_config import world_example_toml
+        from mincam_sim.configuration.world_config import world_example_toml
 
         text = world_example_toml()
     elif reproduce:
-        from .experiments.reproduce_file import reproduce_example_toml
+        from mincam_sim.experiments.reproduce_file import reproduce_example_toml
 
         text = reproduce_example_toml()
     elif study:
-        from .studies.spec import study_example_toml
+        from mincam_sim.studies.spec import study_example_toml
 
         text = study_example_toml()
     else:
@@ -460,7 +460,7 @@ def masks_export(
 ) -> None:
     """Export a mask as a print-ready PNG at DPI and physical size, and a print sheet with its notes; optionally
     preview the printed film."""
-    from .masks.sheet import write_print_sheet
+    from mincam_sim.masks.sheet import write_print_sheet
 
     if not (np.isfinite(size_m) and size_m > 0):
         raise ConfigError(f"--size-m must be a positive mask side in metres, got {size_m}")
@@ -502,7 +502,7 @@ def masks_export(
 
 def _check_print_grid(mask, size_m: float, dpi: int) -> None:
     """Refuse a mask that prints as more dots than a print file holds, naming --size-m and --dpi."""
-    from .masks.mask import MAX_TEXELS
+    from mincam_sim.masks.mask import MAX_TEXELS
 
     per_m = dpi / 0.0254
     rows, cols = max(1, round(mask.height_m * per_m)), max(1, round(mask.width_m * per_m))
@@ -514,8 +514,8 @@ def _check_print_grid(mask, size_m: float, dpi: int) -> None:
 
 
 def _render_demo(out_dir: Path) -> None:
-    from .jobs import run_render_config
-    from .plots import plot_response_maps, plot_sweep
+    from mincam_sim.plotting.plots import plot_response_maps, plot_sweep
+    from mincam_sim.runs.jobs import run_render_config
 
     cfg = load_config({"run": {"out_dir": str(out_dir), "target_rel_stderr": 1e-3}})
     # The demo is a fixed job: it starts afresh in its own output directory every time.
@@ -533,7 +533,7 @@ def _pct(value, width: int, align: str = ">") -> str:
 
 
 def _print_table(results: dict) -> None:
-    from .experiments import EXPERIMENTS
+    from mincam_sim.experiments import EXPERIMENTS
 
     typer.echo("experiment   simulated max / avg error [%]   paper max / avg error [%]   n")
     for name in EXPERIMENTS:
@@ -594,7 +594,7 @@ MIN_BIT_DEPTH = 2  # reproduce --quick runs at 2 bits (large errors); at 1 bit t
 
 def _reproduce_config(config: Path | None, quick: bool, **flags: Any) -> tuple[Any, dict]:
     """Set-up and parameters from an optional reproduce config, then the command-line flags given."""
-    from .experiments import load_reproduce_config
+    from mincam_sim.experiments import load_reproduce_config
 
     given = {key: value for key, value in flags.items() if value is not None}
     for key in ("spacing_m", "depth_m"):
@@ -610,7 +610,7 @@ def _reproduce_config(config: Path | None, quick: bool, **flags: Any) -> tuple[A
             raise
         flag = re.sub(r"Setup\.(\w+)", lambda m: "--" + m.group(1).replace("_", "-"), text)
         raise ConfigError(flag.replace("[command line]: ", "")) from None
-    from .experiments.reproduce_file import check_reproduce
+    from mincam_sim.experiments.reproduce_file import check_reproduce
 
     check_reproduce(setup, params)  # what the experiments would refuse only deep inside, refused here
     if getattr(setup, "bit_depth", MIN_BIT_DEPTH) < MIN_BIT_DEPTH:
@@ -640,8 +640,8 @@ def reproduce(
                          ] = False,
 ) -> None:
     """Reproduce the paper's experiments in simulation; print the error table beside the paper's."""
-    from .experiments import EXPERIMENTS
-    from .experiments import reproduce as run
+    from mincam_sim.experiments import EXPERIMENTS
+    from mincam_sim.experiments import reproduce as run
 
     if experiment != "all" and experiment not in EXPERIMENTS:
         raise ConfigError(f"unknown experiment {experiment!r}: choose {', '.join(EXPERIMENTS)} or all")
@@ -672,7 +672,7 @@ def study_run(
                                                                          "this (default 10000)")] = None,
 ) -> None:
     """Run a parameter study on dask.distributed: results.zarr (xarray), summary.json and study.png in --out."""
-    from .studies.cli import run_study_command
+    from mincam_sim.studies.cli import run_study_command
 
     check_variant()
     run_study_command(study_file, workers, scheduler, out_dir, quick, overwrite, quiet=not _show_progress(),
@@ -686,8 +686,8 @@ def demo(
     """Built-in default job: a 2-mixel (x | 1-x) mincam 0.5 m from a 50" screen with a white square swept along
     the boundary (measurements, response maps as EXR, plots), then every registered experiment in quick mode
     (the paper's three and the spacing study)."""
-    from .experiments import EXPERIMENTS, REGISTRY
-    from .experiments import reproduce as run
+    from mincam_sim.experiments import EXPERIMENTS, REGISTRY
+    from mincam_sim.experiments import reproduce as run
 
     check_variant()
     check_out_dir(out_dir)
@@ -718,8 +718,8 @@ def _pair(text: str | None, option: str, scale: float = 1.0) -> tuple[float, flo
 
 def design_schema():
     """The design command's ``--config`` file: one ``[tracking]`` section of TrackingTask fields."""
-    from .design.tracking import TrackingTask
-    from .schema import Part, Schema
+    from mincam_sim.configuration.schema import Part, Schema
+    from mincam_sim.design.tracking import TrackingTask
 
     return Schema("mincam-sim design tracking --config FILE: fields of the design task (options on the command "
                   "line win).", (Part("tracking", TrackingTask),))
@@ -730,7 +730,7 @@ def _design_overrides(config: Path | None, **options) -> dict:
     command line (which wins)."""
     from dataclasses import fields
 
-    from .toml_files import read_document
+    from mincam_sim.configuration.toml_files import read_document
 
     overrides: dict = {}
     if config is not None:
@@ -779,9 +779,9 @@ def design(
 ) -> None:
     """Design masks by differentiable rendering through the real geometry; compare with the ramps of the layout
     the package builds, on the old held-out draw and on the held-out suite."""
-    from .design import TASKS, run_design
-    from .design.suite import table
-    from .store import lock_out_dir
+    from mincam_sim.design import TASKS, run_design
+    from mincam_sim.design.suite import table
+    from mincam_sim.storage.store import lock_out_dir
 
     if task not in TASKS:
         raise ConfigError(f"unknown design task {task!r}: choose one of {', '.join(TASKS)}")
@@ -800,7 +800,7 @@ def design(
                                   background_radiances=bg, depth_range_m=_pair(depth_range_m, "--depth-range-m"),
                                   spacing_m=spacing_m, d_f_m=d_f_m, film_t_min=film_t_min, film_t_max=film_t_max,
                                   dpi=dpi)
-    from .design.run import make_task
+    from mincam_sim.design.run import make_task
 
     make_task(quick, seed, **dict(overrides))  # one clear error for a bad field before anything runs
     check_variant()
@@ -830,7 +830,7 @@ def figures(
                                                              "(2-3 minutes of CPU)")] = False,
 ) -> None:
     """Write the README's figures (mixel geometry, masks, response maps; --wave: wave optics)."""
-    from .figures import make_figures, make_wave_figure
+    from mincam_sim.plotting.figures import make_figures, make_wave_figure
 
     check_variant()
     check_out_dir(out_dir)

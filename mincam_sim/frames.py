@@ -4,11 +4,11 @@ A solver's plan measures its frames one row (or one chunk of rows) at a time. Be
 simulation opens a :class:`FrameTable` from the :class:`FrameSink` it was given; the table says which frames are
 still to do (:meth:`FrameTable.pending`: all of them, or those a killed run did not finish) and takes each row as
 it comes (:meth:`FrameTable.write`). :func:`collect` is that loop. The sink is already identified: a store sink
-carries the run's identity (built by :class:`mincam_sim.run.Run`, the one place); the numerics never see it.
+carries the run's identity (built by :class:`mincam_sim.runs.run.Run`, the one place); the numerics never see it.
 
 * :class:`MemorySink` (the default) keeps rows in memory: no file, no lock, no identity needed.
-* :class:`mincam_sim.store.StoreSink` keeps them in a :class:`~mincam_sim.store.ResultStore` (resumable,
-  refused when the identity differs); :class:`mincam_sim.run.Run` hands one to the solver, under the run's one
+* :class:`mincam_sim.storage.store.StoreSink` keeps them in a :class:`~mincam_sim.storage.store.ResultStore` (resumable,
+  refused when the identity differs); :class:`mincam_sim.runs.run.Run` hands one to the solver, under the run's one
   lock.
 
 The solvers (``mincam_sim.render``) reach persistence only through this module (and content caches they are

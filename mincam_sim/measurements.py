@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from .atomic import atomic_open, atomic_save_npz
+from mincam_sim.storage.atomic import atomic_open, atomic_save_npz
 
 
 @dataclass

@@ -9,9 +9,9 @@ import trimesh
 
 import mincam_sim as ms
 from mincam_sim import Pose
-from mincam_sim.optics import cross_layout
-from mincam_sim.render import scene_dicts as sd
-from mincam_sim.render.updates import vertex_update
+from mincam_sim.model.optics import cross_layout
+from mincam_sim.render.scene import scene_dicts as sd
+from mincam_sim.render.scene.updates import vertex_update
 
 HEIGHT_M = 0.4  # mixels above the table; their view reaches ~0.2 m from the centre on the table
 PARK_M = np.array([5.0, 5.0, 0.0])  # where movers wait out of the scene

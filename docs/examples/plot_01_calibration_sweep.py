@@ -22,8 +22,8 @@ import numpy as np
 
 import mincam_sim as ms
 from mincam_sim import Screen, line_sweep, pair_layout
-from mincam_sim.calibration import Calibration1D
-from mincam_sim.estimators import intrusion_position
+from mincam_sim.estimation.calibration import Calibration1D
+from mincam_sim.estimation.estimators import intrusion_position
 
 # mixel "x" on the right, "1-x" on the left, looking along -z
 cam = pair_layout(spacing_m=0.033)

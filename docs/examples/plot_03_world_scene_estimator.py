@@ -21,10 +21,10 @@ import trimesh
 
 import mincam_sim as ms
 from mincam_sim import Pose, pair_layout
-from mincam_sim.estimators import intrusion_position
-from mincam_sim.readout import propagate_sigma
-from mincam_sim.render import scene_dicts as sd
-from mincam_sim.render.elements import vertex_update
+from mincam_sim.estimation.estimators import intrusion_position
+from mincam_sim.model.readout import propagate_sigma
+from mincam_sim.render.scene import scene_dicts as sd
+from mincam_sim.render.scene.elements import vertex_update
 
 HEIGHT_M = 0.5
 cam = pair_layout(

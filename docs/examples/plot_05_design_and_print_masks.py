@@ -24,7 +24,7 @@ import numpy as np
 
 from mincam_sim import masks
 from mincam_sim.design import run_design
-from mincam_sim.imageio import read_png
+from mincam_sim.storage.imageio import read_png
 
 out_dir = Path(tempfile.mkdtemp(prefix="mincam_design_"))
 ramp = masks.ramp("x")

@@ -26,9 +26,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import mincam_sim as ms
-from mincam_sim.estimators import intrusion_position
-from mincam_sim.readout import propagate_sigma
-from mincam_sim.render.elements import vertex_update
+from mincam_sim.estimation.estimators import intrusion_position
+from mincam_sim.model.readout import propagate_sigma
+from mincam_sim.render.scene.elements import vertex_update
 
 ROOT = Path.cwd()
 while not (ROOT / "scenes" / "world" / "room.xml").is_file():  # the gallery runs in docs/examples
@@ -61,7 +61,7 @@ background = vertex_update("toy_car", np.repeat(centre[None], len(car), axis=0))
 # ``StratifiedChange`` spends most rays where the car and its shadow can be seen, pairs frame and background
 # ray by ray, and reports the spread of 8 independent replicates as σ. ``ch.info`` says what the run did.
 ch = sim.measure_changes(frames, background, solver=ms.StratifiedChange(), budget=ms.Budget(spp=8192, seed=1))
-print(f"{ch.info.estimator}: {ch.info.rays_per_mixel_per_frame} rays per mixel per frame, "
+print(f"{ch.info.solver}: {ch.info.rays_per_mixel_per_frame} rays per mixel per frame, "
       f"{ch.info.replicates} replicates, worst relative σ {ch.info.reached_rel_stderr:.3f}, "
       f"retried frames {list(ch.info.retried_frames)}, fallbacks {list(ch.info.fallbacks)}")
 dp, dp_sigma = ch.dp.irradiance_w_m2, ch.dp.stderr_w_m2
@@ -109,11 +109,11 @@ ax1.grid(alpha=0.3)
 # -------------------------------
 # ``scenes/world/room.toml`` names the scene, the mincam, the car's keyframes and a ground-truth camera;
 # ``mincam-sim render scenes/world/room.toml`` renders it. In Python the same route is
-# :func:`mincam_sim.world_config.load_world_config` and :func:`mincam_sim.jobs.run_world_config`
+# :func:`mincam_sim.configuration.world_config.load_world_config` and :func:`mincam_sim.runs.jobs.run_world_config`
 # (here into a temporary folder instead of the config's ``out_dir``). It writes ``measurements.npz/.csv``,
 # ``camera.npz`` and ``dP.png``.
-from mincam_sim.jobs import run_world_config  # noqa: E402
-from mincam_sim.world_config import load_world_config  # noqa: E402
+from mincam_sim.configuration.world_config import load_world_config  # noqa: E402
+from mincam_sim.runs.jobs import run_world_config  # noqa: E402
 
 raw = tomllib.loads((ROOT / "scenes" / "world" / "room.toml").read_text(encoding="utf-8"))
 with tempfile.TemporaryDirectory() as tmp:

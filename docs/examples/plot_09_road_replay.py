@@ -20,10 +20,10 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import mincam_sim as ms
-from mincam_sim import objects
-from mincam_sim.estimators import scene_frequency, speed_from_signal
+from mincam_sim.estimation.estimators import scene_frequency, speed_from_signal
 from mincam_sim.experiments.layouts import sinusoid_mixel
 from mincam_sim.experiments.setup import Setup
+from mincam_sim.scene import objects
 
 setup = Setup()
 period_m, height_m, speed_m_s, rate_hz, n_frames = 0.2e-3, 0.3, 8.0, 2500.0, 256

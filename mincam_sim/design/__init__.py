@@ -1,8 +1,8 @@
 """Mask design by differentiable rendering through the mincam's real geometry.
 
 An upper floor beside the experiments: it imports the core (optics, masks, sensor, calibration) and the render
-layer, whose ``mincam_sim.render.differentiable`` holds the differentiable rendering and
-``mincam_sim.render.autodiff`` the Dr.Jit namespace the optimiser is written against (this floor imports no
+layer, whose ``mincam_sim.render.gradients.differentiable`` holds the differentiable rendering and
+``mincam_sim.render.gradients.autodiff`` the Dr.Jit namespace the optimiser is written against (this floor imports no
 renderer itself).
 
 * :mod:`.tracking`: the task (four mixels 3.3 cm apart, objects 1-15 cm at 0.35-0.7 m on black or grey
@@ -16,8 +16,21 @@ renderer itself).
   contrast), the baseline (ramps of ``cross_layout``, Eq. 7, cubic calibration) beside the design.
 * :mod:`.gradcheck`: AD against central finite differences.
 * :mod:`.run`: one run and its outputs (``mincam-sim design TASK``).
+Files:
+
+* ``tracking.py``: the task ``tracking``: four mixels 3.3 cm apart (paper Sec. 4.2) and its training distribution.
+* ``parameterization.py``: masks as a coarse grid of logits onto the printer's dots and grey values.
+* ``problem.py``: the design problem as plain arrays (linear forward model, film, sensor noise, targets).
+* ``optimiser.py``: Adam on the mask logits through the forward model, with a decoder fitted in the loop.
+* ``optimise.py``: the tracking problem built from traced samples, and the optimiser run on it.
+* ``decoder.py``: a learned decoder in plain numpy (a polynomial of gain-free mixel ratios).
+* ``gradcheck.py``: gradients against central finite differences with the same seed.
+* ``evaluate.py``: physical evaluation of a tracking mincam on held-out scenes (response maps, 12-bit sensor).
+* ``suite.py``: the held-out suite of a design report, designed masks beside the paper's ramps.
+* ``report.py``: figures of a design run.
+* ``run.py``: one design run: gradient check, optimisation, held-out evaluation and the outputs.
 """
 
-from .run import TASKS, run_design
+from mincam_sim.design.run import TASKS, run_design
 
 __all__ = ["TASKS", "run_design"]

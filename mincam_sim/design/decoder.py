@@ -3,23 +3,14 @@
 from __future__ import annotations
 
 import json
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from .. import polynomial
-from ..atomic import atomic_write_json
-from . import tracking as tr
-
-
-def poly_terms(variables: list[np.ndarray], degree: int) -> np.ndarray:
-    """Deprecated: ``np.stack(mincam_sim.polynomial.poly_terms(*variables, degree=degree), axis=-1)``."""
-    warnings.warn("mincam_sim.design.decoder.poly_terms is deprecated and will be removed in the next release: "
-                  "use np.stack(mincam_sim.polynomial.poly_terms(*variables, degree=degree), axis=-1)",
-                  DeprecationWarning, stacklevel=2)
-    return np.stack(polynomial.poly_terms(*variables, degree=degree), axis=-1)
+from mincam_sim.design import tracking as tr
+from mincam_sim.estimation import polynomial
+from mincam_sim.storage.atomic import atomic_write_json
 
 
 @dataclass

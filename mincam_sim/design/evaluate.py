@@ -12,14 +12,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..budget import Budget
-from ..calibration import Calibration2D, ExtrapolationWarning
-from ..geometry import Pose
-from ..metrics import error_rates
-from ..optics import Mincam
-from ..progress import progress
-from ..scene.display import Screen, coverage
-from . import tracking as tr
+from mincam_sim.budget import Budget
+from mincam_sim.design import tracking as tr
+from mincam_sim.estimation.calibration import Calibration2D, ExtrapolationWarning
+from mincam_sim.estimation.metrics import error_rates
+from mincam_sim.model.geometry import Pose
+from mincam_sim.model.optics import Mincam
+from mincam_sim.progress import progress
+from mincam_sim.scene.display import Screen, coverage
 
 
 @dataclass
@@ -57,7 +57,7 @@ def _frames(screen: Screen, centers_m: np.ndarray, sizes_m: np.ndarray, radiance
 def irradiances(cam: Mincam, depth_m: float, centers_m: np.ndarray, sizes_m: np.ndarray, radiance: np.ndarray,
                 task: tr.TrackingTask, seed: int) -> np.ndarray:
     """Irradiance (n, 4) [W/m^2] of every object on a display at ``depth_m`` (response-map form)."""
-    from ..render.simulation import Simulation
+    from mincam_sim.render.simulation import Simulation
 
     screen = _screen(depth_m, task.screen_texels)
     maps = Simulation(cam, screen=screen).response_maps(Budget(samples_per_texel=task.samples_per_texel, seed=seed))

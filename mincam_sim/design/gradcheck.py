@@ -11,15 +11,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..masks import Mask
-from . import tracking as tr
+from mincam_sim.design import tracking as tr
+from mincam_sim.masks import Mask
 
 STEPS = {"texel": 5e-2, "d_f_m": 2e-5, "position_m": 2e-5}  # central-difference steps [1, m, m]
 
 
 def check_gradients(seed: int = 0, strata: int = 48, n_texels: int = 3) -> dict:
     """Return ``{"max_rel_error", "n_checked", "checks": [{parameter, rel_error, ad, fd}, ...]}``."""
-    from ..render import differentiable as dz
+    from mincam_sim.render.gradients import differentiable as dz
 
     rng = np.random.default_rng([seed, 3])
     texels0 = rng.uniform(0.1, 0.9, (8, 8))

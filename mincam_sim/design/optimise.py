@@ -1,5 +1,5 @@
 """Build the tracking design problem from traced samples and run the optimiser (Dr.Jit AD in
-``mincam_sim.render.differentiable``), from the paper's ramps as the starting point."""
+``mincam_sim.render.gradients.differentiable``), from the paper's ramps as the starting point."""
 
 from __future__ import annotations
 
@@ -7,12 +7,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..masks import Mask
-from ..polynomial import poly_terms
-from . import parameterization as par
-from . import tracking as tr
-from .decoder import Decoder
-from .problem import DesignProblem
+from mincam_sim.design import parameterization as par
+from mincam_sim.design import tracking as tr
+from mincam_sim.design.decoder import Decoder
+from mincam_sim.design.problem import DesignProblem
+from mincam_sim.estimation.polynomial import poly_terms
+from mincam_sim.masks import Mask
 
 
 @dataclass
@@ -90,7 +90,7 @@ def training_set(task: tr.TrackingTask) -> tuple[TrainingFrames, np.ndarray]:
     in ``background_contrast_range`` on a background (capped at a radiance of 1); positions uniform in the
     working disc, not overlapping.
     """
-    from ..render.differentiable import SquareScenes
+    from mincam_sim.render.gradients.differentiable import SquareScenes
 
     rng = np.random.default_rng([task.seed, 11])
     depths = np.asarray(task.train_depths_m, dtype=np.float64)
@@ -144,7 +144,7 @@ def training_set(task: tr.TrackingTask) -> tuple[TrainingFrames, np.ndarray]:
 
 def plane_scene(depth_m: float):
     """A uniform plane of unit radiance covering every mixel's field of view at ``depth_m`` (the background)."""
-    from ..render.differentiable import SquareScenes
+    from mincam_sim.render.gradients.differentiable import SquareScenes
 
     return SquareScenes(depth_m, np.zeros((1, 2)), 2.0 * (0.6 * depth_m + 0.05), 1.0)
 
@@ -162,8 +162,8 @@ def build_problem(task: tr.TrackingTask, show_progress: bool = False):
     """Trace the training objects and backgrounds through the mincam geometry, bin them into per-mixel linear
     models, and set each frame's exposure and noise (its background and the brightest reading of a clear
     print: the brightest reading fills ``EXPOSURE_FILL``)."""
-    from ..progress import progress
-    from ..render import differentiable as dz
+    from mincam_sim.progress import progress
+    from mincam_sim.render.gradients import differentiable as dz
 
     dots = task.dot_shape()
     film = task.film()
@@ -226,7 +226,7 @@ STARTS = {"paper": (False, False), "x pair swapped": (True, False), "y pair swap
 
 def design(task: tr.TrackingTask, show_progress: bool = False) -> Design:
     """Optimise the four masks (and the calibration in the loop) for the tracking task."""
-    from .optimiser import optimise_masks
+    from mincam_sim.design.optimiser import optimise_masks
 
     problem = build_problem(task, show_progress)
     # Multi-start: the paper's ramps under the four assignments of each pair's two ramps to its two mixels

@@ -1,18 +1,19 @@
 """Adam on the mask logits through the linear forward model, the film, the sensor noise and a decoder fitted in
-the loop: the design logic, written against the Dr.Jit array namespace of :func:`mincam_sim.render.autodiff.namespace`
+the loop: the design logic, written against the Dr.Jit array namespace of
+:func:`mincam_sim.render.gradients.autodiff.namespace`
 (so that this floor imports no renderer)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..polynomial import poly_terms
-from ..progress import bar
-from .problem import DesignProblem, DesignResult
+from mincam_sim.design.problem import DesignProblem, DesignResult
+from mincam_sim.estimation.polynomial import poly_terms
+from mincam_sim.progress import bar
 
 
 def _namespace():
-    from ..render import autodiff
+    from mincam_sim.render.gradients import autodiff
 
     return autodiff.namespace()
 
@@ -20,7 +21,7 @@ def _namespace():
 def masks_from_logits(problem: DesignProblem, logits: list, straight_through: bool = True, ad=None) -> list:
     """Dr.Jit transmissions of the printed dots from parameter logits (sigmoid -> levels -> film).
 
-    ``ad`` is the array namespace (:func:`mincam_sim.render.autodiff.namespace`, made when not given). With
+    ``ad`` is the array namespace (:func:`mincam_sim.render.gradients.autodiff.namespace`, made when not given). With
     ``straight_through`` the printer's grey levels quantise the forward pass and pass the gradient unchanged.
     """
     ad = ad if ad is not None else _namespace()

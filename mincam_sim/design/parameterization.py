@@ -9,14 +9,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..masks import Mask, PrintedFilm
+from mincam_sim.masks import Mask, PrintedFilm
 
 
 def bilinear_upsample(grid: int, dots: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
     """Indices (D, 4) into a ``grid x grid`` array and weights (D, 4) of its bilinear value at each dot centre.
 
     Grid nodes sit at texel centres ``(i + 0.5) / grid`` (clamped at the border), as Mitsuba's bilinear
-    ``bitmap`` with ``clamp`` and :func:`mincam_sim.render.differentiable.lookup`.
+    ``bitmap`` with ``clamp`` and :func:`mincam_sim.render.gradients.differentiable.lookup`.
     """
     if int(grid) != grid or grid < 1:
         raise ValueError(f"grid must be a positive integer number of nodes per side, got {grid!r}")

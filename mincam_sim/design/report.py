@@ -10,8 +10,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ..atomic import atomic_path  # noqa: E402
-from ..masks import Mask  # noqa: E402
+from mincam_sim.masks import Mask  # noqa: E402
+from mincam_sim.storage.atomic import atomic_path  # noqa: E402
 
 
 def _save(fig, path: Path) -> Path:

@@ -10,13 +10,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_path, atomic_save_npz, atomic_write_json
-from ..errors import StaleResultError
-from ..identity import build_identity
-from ..masks import export_print_png
-from ..masks.sheet import write_print_sheet
-from ..store import check_identity
-from . import tracking as tr
+from mincam_sim.design import tracking as tr
+from mincam_sim.errors import StaleResultError
+from mincam_sim.masks import export_print_png
+from mincam_sim.masks.sheet import write_print_sheet
+from mincam_sim.storage.atomic import atomic_path, atomic_save_npz, atomic_write_json
+from mincam_sim.storage.identity import build_identity
+from mincam_sim.storage.store import check_identity
 
 TASKS = ("tracking",)
 
@@ -45,7 +45,7 @@ def make_task(quick: bool = False, seed: int = 0, **overrides) -> tr.TrackingTas
     ``depth_range_m`` alone spreads the training planes evenly over it)."""
     from dataclasses import fields
 
-    from ..errors import ConfigError
+    from mincam_sim.errors import ConfigError
 
     known = {f.name for f in fields(tr.TrackingTask)}
     unknown = sorted(set(overrides) - known)
@@ -69,7 +69,7 @@ def suite_entries(task: tr.TrackingTask, designed: list, decoder, ramps_decoder=
     with the experiments' Eq. 7 and cubic calibration), the designed masks as printed with ``decoder``, the
     baseline's masks with the same kind of learned decoder (``ramps_decoder``, where given), and the mirrored
     layout the package built before (a labelled extra row)."""
-    from .suite import Entry
+    from mincam_sim.design.suite import Entry
 
     film = task.film()
     current = [film.print(m) for m in task.baseline_masks()]
@@ -102,8 +102,8 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
     overrides
         Fields of ``TrackingTask`` (training distribution, geometry, film; ``make_task``).
     """
-    from .gradcheck import check_gradients
-    from .optimise import design
+    from mincam_sim.design.gradcheck import check_gradients
+    from mincam_sim.design.optimise import design
 
     _check_request(task_name, dpi, overrides)
     out = Path(out_dir)
@@ -176,8 +176,8 @@ class _Evaluation:
 def _evaluate(task: tr.TrackingTask, result, show_progress: bool) -> _Evaluation:
     """Measure the printed current, mirrored and designed masks on the held-out draw (response maps), score
     them (with the references that split the gain between masks and decoder) and run the held-out suite."""
-    from .evaluate import HeldOut, measure, score
-    from .suite import evaluate_suite
+    from mincam_sim.design.evaluate import HeldOut, measure, score
+    from mincam_sim.design.suite import evaluate_suite
 
     film = task.film()
     held_out = HeldOut.draw(task)
@@ -204,7 +204,7 @@ def _evaluate(task: tr.TrackingTask, result, show_progress: bool) -> _Evaluation
 
 def _write_figures_and_data(out: Path, task: tr.TrackingTask, result, ev: _Evaluation) -> list[str]:
     """The print-ready PNG masks, the decoder, the figures and ``design_data.npz``; returns the mixels' labels."""
-    from .report import plot_error_vs_depth, plot_loss, plot_masks, plot_suite
+    from mincam_sim.design.report import plot_error_vs_depth, plot_loss, plot_masks, plot_suite
 
     film = task.film()
     for mask, name in zip(result.printer_masks, tr.POSITIONS, strict=True):

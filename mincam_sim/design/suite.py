@@ -2,7 +2,7 @@
 physical simulator (response maps of the masks as printed,
 :meth:`mincam_sim.render.simulation.Simulation.response_maps`) with the 12-bit sensor, for the designed masks
 and, beside them, the baseline: the paper's ramps in the layout the package builds
-(:func:`mincam_sim.optics.cross_layout`) with Eq. 7 and the cubic calibration on a sweep of 3 cm squares at
+(:func:`mincam_sim.model.optics.cross_layout`) with Eq. 7 and the cubic calibration on a sweep of 3 cm squares at
 0.5 m on a black plane (the experiments' protocol).
 
 Every frame's target is the centroid of the *change* (radiance change times area, over all its objects,
@@ -23,12 +23,12 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from ..calibration import Calibration2D, ExtrapolationWarning
-from ..geometry import Pose
-from ..optics import Mincam
-from ..progress import progress
-from ..scene.display import Screen, coverage
-from . import tracking as tr
+from mincam_sim.design import tracking as tr
+from mincam_sim.estimation.calibration import Calibration2D, ExtrapolationWarning
+from mincam_sim.model.geometry import Pose
+from mincam_sim.model.optics import Mincam
+from mincam_sim.progress import progress
+from mincam_sim.scene.display import Screen, coverage
 
 N_BACKGROUND_FRAMES = 16
 TILT_DEG = 18.0  # the tilted case: plane rotated about the vertical axis
@@ -303,8 +303,8 @@ def evaluate_suite(entries: list[Entry], task: tr.TrackingTask, n_frames: int, t
     Returns ``{"cases": [{name, description, setup, rows: {label: row}, "ratio_to_baseline": {label: r}}],
     "errors": {case: {label: (n,) errors [%]}}}`` (``errors`` for figures and the NumPy archive).
     """
-    from ..budget import Budget
-    from ..render.simulation import Simulation
+    from mincam_sim.budget import Budget
+    from mincam_sim.render.simulation import Simulation
 
     maps_cache: dict = {}
     budget = Budget(samples_per_texel=samples_per_texel, seed=task.seed + 7)

@@ -15,12 +15,12 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .. import masks as masks_mod
-from .. import paper
-from ..geometry import Pose
-from ..masks import Mask, PrintedFilm
-from ..optics import Mincam, layout, seen_whole_by_every_mixel
-from ..sensor import SensorModel
+from mincam_sim import masks as masks_mod
+from mincam_sim import paper
+from mincam_sim.masks import Mask, PrintedFilm
+from mincam_sim.model.geometry import Pose
+from mincam_sim.model.optics import Mincam, layout, seen_whole_by_every_mixel
+from mincam_sim.model.sensor import SensorModel
 
 SPACING_M = paper.SPACING_M  # [m] distance from the centre to each mixel (paper's prototype)
 D_F_M = paper.D_F_M  # [m] mask-to-detector distance
@@ -132,7 +132,7 @@ class TrackingTask:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        from ..errors import ConfigError
+        from mincam_sim.errors import ConfigError
 
         def bad(field: str, what: str) -> None:
             raise ConfigError(f"TrackingTask.{field} {what}, got {getattr(self, field)!r}")
@@ -203,7 +203,7 @@ def mincam(masks: list[Mask], spacing_m: float = SPACING_M, d_f_m: float = D_F_M
 
 def paper_masks(resolution: int = 256) -> list[Mask]:
     """The paper's hand-derived ramps x, 1 - x, y, 1 - y (exact profiles), x on the left mixel: the layout
-    :func:`~mincam_sim.optics.cross_layout` built before 2026-12 (the design's baseline, kept so that its
+    :func:`~mincam_sim.model.optics.cross_layout` built before 2026-12 (the design's baseline, kept so that its
     numbers stay comparable)."""
     return [masks_mod.ramp(k, resolution, MASK_SIZE_M) for k in NAMES]
 
@@ -211,14 +211,14 @@ def paper_masks(resolution: int = 256) -> list[Mask]:
 def paper_masks_swapped_x(resolution: int = 256) -> list[Mask]:
     """The paper's ramps with the x pair exchanged (1 - x on the left mixel, x on the right): then, as for the
     y pair, each ramp is brightest on its own mixel's side, where that mixel sees objects nearest its axis
-    (found by this design; :func:`~mincam_sim.optics.cross_layout` builds this layout since 2026-12)."""
+    (found by this design; :func:`~mincam_sim.model.optics.cross_layout` builds this layout since 2026-12)."""
     return [masks_mod.ramp(k, resolution, MASK_SIZE_M) for k in ("1-x", "x", "y", "1-y")]
 
 
 def current_layout_masks(resolution: int = 256, spacing_m: float = SPACING_M) -> list[Mask]:
-    """The ramps of the layout the package builds (:func:`~mincam_sim.optics.cross_layout` at this spacing and
+    """The ramps of the layout the package builds (:func:`~mincam_sim.model.optics.cross_layout` at this spacing and
     aperture), in :data:`POSITIONS` order (taken from where ``cross_layout`` puts each mixel): the baseline."""
-    from ..optics import cross_layout
+    from mincam_sim.model.optics import cross_layout
 
     cam = cross_layout(spacing_m, resolution=resolution, mask_size_m=MASK_SIZE_M)
     where = {(int(np.sign(round(m.pose.position_m[0], 9))), int(np.sign(round(m.pose.position_m[1], 9)))): m
@@ -249,7 +249,7 @@ def random_objects(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.nda
 def calibration_positions(n_per_axis: int) -> np.ndarray:
     """Square centres [m] of the calibration sweep at 0.5 m: a grid clipped to the working disc
     (``WORKING_RADIUS`` of the 50 cm field, the range in which objects are tracked), without the squares that
-    some mixel does not see whole through its full aperture (:func:`~mincam_sim.optics.seen_whole_by_every_mixel`:
+    some mixel does not see whole through its full aperture (:func:`~mincam_sim.model.optics.seen_whole_by_every_mixel`:
     there Eq. 7's ratio folds, and such points bend the whole cubic)."""
     half = WORKING_RADIUS * FIELD_M * CALIBRATION_DEPTH_M / CALIBRATION_DEPTH_M
     g = np.linspace(-half, half, n_per_axis)

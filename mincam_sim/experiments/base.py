@@ -14,9 +14,9 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ..schema import dataclass_from_section
-from .setup import Setup
-from .study_targets import StudyExperiment, figures_not_saved, numeric_details
+from mincam_sim.configuration.schema import dataclass_from_section
+from mincam_sim.experiments.setup import Setup
+from mincam_sim.experiments.study_targets import StudyExperiment, figures_not_saved, numeric_details
 
 #: Set-up fields that are no study parameter: the study's own seed and quick mode, and non-numeric fields.
 _SETUP_NOT_STUDIED = frozenset({"seed", "quick", "screen_resolution", "dp_estimator"})
@@ -63,7 +63,7 @@ class ExperimentResult:
 
     @classmethod
     def from_rates(cls, name: str, rates: dict, paper: PaperNumbers | None, details: dict) -> ExperimentResult:
-        """From an error-rate dict (:func:`~mincam_sim.metrics.error_rates`) plus details; rates of ``None``
+        """From an error-rate dict (:func:`~mincam_sim.estimation.metrics.error_rates`) plus details; rates of ``None``
         (nothing could be scored) stay ``None`` and ``n`` is then 0."""
         def number(key: str) -> float | None:
             return None if rates.get(key) is None else float(rates[key])

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..render import scene_dicts
-from .setup import Setup
+from mincam_sim.experiments.setup import Setup
+from mincam_sim.render.scene import scene_dicts
 
 
 @dataclass(frozen=True)

@@ -7,19 +7,20 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import objects
-from ..calibration import Calibration1D
-from ..estimators import intrusion_position
-from ..paper import CALIBRATION_SQUARE_M, INTRUSION_AVG_ERROR_PCT, INTRUSION_BOUNDARY_X_M, INTRUSION_MAX_ERROR_PCT
-from ..plots import plot_calibration_1d, plot_overlays
-from ..render.elements import toy_updates
-from .base import Experiment, ExperimentResult, PaperNumbers
-from .ground_truth import GroundTruthCamera
-from .layouts import intrusion_mincam
-from .pipeline import LocateOptions, locate_in_world
-from .screen_calibration import fit_calibration_1d, screen_sweep_1d, sweep_change_dn, visible_sweep
-from .setup import Setup
-from .tabletop_world import (
+from mincam_sim.estimation.calibration import Calibration1D
+from mincam_sim.estimation.estimators import intrusion_position
+from mincam_sim.experiments.base import Experiment, ExperimentResult, PaperNumbers
+from mincam_sim.experiments.ground_truth import GroundTruthCamera
+from mincam_sim.experiments.layouts import intrusion_mincam
+from mincam_sim.experiments.pipeline import LocateOptions, locate_in_world
+from mincam_sim.experiments.screen_calibration import (
+    fit_calibration_1d,
+    screen_sweep_1d,
+    sweep_change_dn,
+    visible_sweep,
+)
+from mincam_sim.experiments.setup import Setup
+from mincam_sim.experiments.tabletop_world import (
     DEFAULT_LIGHT_SIZE_M,
     DEFAULT_TABLE_ALBEDO,
     check_contrast,
@@ -27,6 +28,15 @@ from .tabletop_world import (
     placed_meshes,
     tabletop_world,
 )
+from mincam_sim.paper import (
+    CALIBRATION_SQUARE_M,
+    INTRUSION_AVG_ERROR_PCT,
+    INTRUSION_BOUNDARY_X_M,
+    INTRUSION_MAX_ERROR_PCT,
+)
+from mincam_sim.plotting.plots import plot_calibration_1d, plot_overlays
+from mincam_sim.render.scene.elements import toy_updates
+from mincam_sim.scene import objects
 
 
 @dataclass(frozen=True)

@@ -6,12 +6,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import masks
-from ..geometry import Pose
-from ..masks import Mask
-from ..masks.profiles import Band, Ramp
-from ..optics import Mincam, Mixel, cross_layout, layout
-from .setup import Setup
+from mincam_sim import masks
+from mincam_sim.experiments.setup import Setup
+from mincam_sim.masks import Mask
+from mincam_sim.masks.profiles import Band, Ramp
+from mincam_sim.model.geometry import Pose
+from mincam_sim.model.optics import Mincam, Mixel, cross_layout, layout
 
 
 def band_ramp(setup: Setup, kind: str, boundary_x_m: float, band_m: float) -> Mask:

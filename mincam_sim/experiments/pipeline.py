@@ -8,16 +8,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..budget import Budget
-from ..changes import RunInfo
-from ..estimators import detect_change
-from ..metrics import error_rates
-from ..progress import progress
-from ..readout import propagate_sigma, read_out
-from ..render.simulation import Simulation
-from ..render.solvers import PlainChange, StratifiedChange
-from .ground_truth import GroundTruthCamera
-from .setup import Setup
+from mincam_sim.budget import Budget
+from mincam_sim.changes import RunInfo
+from mincam_sim.estimation.estimators import detect_change
+from mincam_sim.estimation.metrics import error_rates
+from mincam_sim.experiments.ground_truth import GroundTruthCamera
+from mincam_sim.experiments.setup import Setup
+from mincam_sim.model.readout import propagate_sigma, read_out
+from mincam_sim.progress import progress
+from mincam_sim.render.simulation import Simulation
+from mincam_sim.render.solvers import PlainChange, StratifiedChange
 
 GROUND_TRUTH_SPP = 32  # camera samples per pixel
 GROUND_TRUTH_THRESHOLD = 0.02  # binary detection: |change| > this fraction of the brightest background pixel
@@ -321,7 +321,7 @@ def _summary_extras(seen: _Observed, truths: _Truths, truth: np.ndarray, ok: np.
         "noise_sigma_median_pct": float(100 * np.median(sigma_norm[ok]) / setup.field_m) if ok.any() else None,
         "dP_worst_rel_stderr": float(np.nanmax(dp_rel[ok])) if ok.any() else None,
         "spp_per_mixel_per_frame": rays,
-        "dP_estimator": seen.info.estimator,
+        "dP_estimator": seen.info.solver,
         "rays_per_mixel_per_frame": seen.info.rays_per_mixel_per_frame,
         "launches": seen.info.launches,
         "exposure_s": seen.readout.sensor.exposure_s,

@@ -19,19 +19,19 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from ..atomic import atomic_write_text
-from ..config import dataclass_from_section, read_sections
-from ..errors import ConfigError, StaleResultError, StoreError
-from ..identity import build_identity, fingerprint
-from ..render import backend
-from ..store import check_identity
-from .base import Experiment, ExperimentResult
-from .intrusion import Intrusion
-from .setup import Setup
-from .spacing import Spacing
-from .speed import Speed
-from .study_targets import StudyExperiment, design_target, render_target_from_ref
-from .tracking import Tracking
+from mincam_sim.configuration.config import dataclass_from_section, read_sections
+from mincam_sim.errors import ConfigError, StaleResultError, StoreError
+from mincam_sim.experiments.base import Experiment, ExperimentResult
+from mincam_sim.experiments.intrusion import Intrusion
+from mincam_sim.experiments.setup import Setup
+from mincam_sim.experiments.spacing import Spacing
+from mincam_sim.experiments.speed import Speed
+from mincam_sim.experiments.study_targets import StudyExperiment, design_target, render_target_from_ref
+from mincam_sim.experiments.tracking import Tracking
+from mincam_sim.render import backend
+from mincam_sim.storage.atomic import atomic_write_text
+from mincam_sim.storage.identity import build_identity, fingerprint
+from mincam_sim.storage.store import check_identity
 
 REGISTRY: dict[str, Experiment] = {e.name: e for e in (Intrusion(), Tracking(), Speed(), Spacing())}
 #: The paper's experiments, in the paper's order (what ``reproduce all`` runs).

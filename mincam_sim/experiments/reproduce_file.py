@@ -11,10 +11,10 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, get_args
 
-from ..errors import ConfigError
-from ..schema import Part, Schema, toml_value
-from .registry import REGISTRY
-from .setup import Setup
+from mincam_sim.configuration.schema import Part, Schema, toml_value
+from mincam_sim.errors import ConfigError
+from mincam_sim.experiments.registry import REGISTRY
+from mincam_sim.experiments.setup import Setup
 
 TITLE = (
     "mincam-sim reproduce --config FILE (written by `mincam-sim config-example --reproduce`).\n"
@@ -54,7 +54,7 @@ def check_reproduce(setup: Setup, params: dict[str, Any]) -> None:
     """Refuse, as one :class:`~mincam_sim.errors.ConfigError` line naming the section and key, the values of a
     reproduce file that the experiments would only refuse deep inside (after minutes, as a bare ``ValueError``):
     the set-up's mincam and screen, the tracking toys, the speed experiment's sampling of its mask."""
-    from ..optics import cross_layout
+    from mincam_sim.model.optics import cross_layout
 
     try:
         cross_layout(setup.spacing_m, 8, setup.mask_size_m, d_f_m=setup.d_f_m, detector_size_m=setup.detector_size_m)
@@ -72,7 +72,7 @@ def check_reproduce(setup: Setup, params: dict[str, Any]) -> None:
 
 
 def _check_toys(tracking: Any) -> None:
-    from ..objects import windup_toy
+    from mincam_sim.scene.objects import windup_toy
 
     kinds = get_args(windup_toy.__annotations__.get("kind", "")) or ("robot", "chick", "frog")
     unknown = [t for t in tracking.toys if t not in kinds]
@@ -82,7 +82,7 @@ def _check_toys(tracking: Any) -> None:
 
 
 def _check_speed(setup: Setup, speed: Any) -> None:
-    from .speed import check_nyquist
+    from mincam_sim.experiments.speed import check_nyquist
 
     try:
         check_nyquist(setup, speed)

@@ -5,16 +5,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..budget import Budget
-from ..calibration import Calibration1D, Calibration2D
-from ..errors import ConfigError
-from ..optics import seen_whole_by_every_mixel
-from ..readout import read_out
-from ..render.simulation import Simulation
-from ..render.solvers import ResponseMap
-from ..scene.display import Sweep, grid_sweep, line_sweep
-from .layouts import mincam_on_screen
-from .setup import Setup
+from mincam_sim.budget import Budget
+from mincam_sim.errors import ConfigError
+from mincam_sim.estimation.calibration import Calibration1D, Calibration2D
+from mincam_sim.experiments.layouts import mincam_on_screen
+from mincam_sim.experiments.setup import Setup
+from mincam_sim.model.optics import seen_whole_by_every_mixel
+from mincam_sim.model.readout import read_out
+from mincam_sim.render.simulation import Simulation
+from mincam_sim.render.solvers import ResponseMap
+from mincam_sim.scene.display import Sweep, grid_sweep, line_sweep
 
 
 def screen_sweep_1d(setup: Setup, boundary_x_m: float, n: int, square_m: float) -> Sweep:
@@ -38,7 +38,7 @@ def seen_by_every_mixel(mincam, setup: Setup, sweep: Sweep) -> np.ndarray:
     by every point of a mixel's detector, through the mask, within ``|x - p_x| <= d tan_x`` with
     ``tan_x = (mask_width - detector_size) / (2 d_f)`` (and likewise in y); beyond that lies the penumbra, where
     the housing cuts the view until, at ``(mask_width + detector_size) / (2 d_f)``
-    (:meth:`~mincam_sim.optics.Mixel.half_fov_tan`), nothing is seen. Eq. 4 / 7 assume every mixel sees the
+    (:meth:`~mincam_sim.model.optics.Mixel.half_fov_tan`), nothing is seen. Eq. 4 / 7 assume every mixel sees the
     whole change: a square in one mixel's penumbra or out of its view reads a ratio folded towards the wrong
     end (with the tracking cross at 0.5 m, the square at x = -25 cm, out of the right-hand 1 - x mixel's view,
     read x_obs = 1), and such points corrupt the whole cubic fit, so the calibration leaves them out.

@@ -14,12 +14,12 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from .. import paper
-from ..geometry import Pose
-from ..masks import DEFAULT_MASK_SIZE_M, DEFAULT_RESOLUTION
-from ..optics import DEFAULT_D_F_M, DEFAULT_DETECTOR_SIZE_M, PAPER_SPACING_M
-from ..scene.display import DEFAULT_SCREEN_RESOLUTION, Screen
-from ..sensor import SensorModel
+from mincam_sim import paper
+from mincam_sim.masks import DEFAULT_MASK_SIZE_M, DEFAULT_RESOLUTION
+from mincam_sim.model.geometry import Pose
+from mincam_sim.model.optics import DEFAULT_D_F_M, DEFAULT_DETECTOR_SIZE_M, PAPER_SPACING_M
+from mincam_sim.model.sensor import SensorModel
+from mincam_sim.scene.display import DEFAULT_SCREEN_RESOLUTION, Screen
 
 
 @dataclass
@@ -41,7 +41,7 @@ class Setup:
     field_m : float
         Calibrated range [m]: the paper's 50 cm boundary / field of view; error rates are % of it.
     bit_depth : int
-        ADC bits (paper: 12); the sensor is :meth:`~mincam_sim.sensor.SensorModel.paper_prototype` (48 x 48
+        ADC bits (paper: 12); the sensor is :meth:`~mincam_sim.model.sensor.SensorModel.paper_prototype` (48 x 48
         pixels averaged).
     exposure_fill : float
         Auto-exposure: the brightest reading fills this fraction of the ADC range, in (0, 1].

@@ -13,7 +13,7 @@ detector's blur.
 As a study target (``[study] experiment = "spacing"``) one point is one (spacing, calibration depth, depth,
 sensor) of this same code: the calibration of ``Spacing.calibrate``, the errors of ``Spacing.score``
 on the noiseless read-out, and the same errors on a noisy read-out (``noisy_`` metrics, with the sensor's
-read noise ``read_noise_e``; :func:`~mincam_sim.readout.read_out`: the dark frame is measured with the same
+read noise ``read_noise_e``; :func:`~mincam_sim.model.readout.read_out`: the dark frame is measured with the same
 sensor, its mean subtracted, and frames whose change stays within its noise carry no position).
 """
 
@@ -26,21 +26,21 @@ from pathlib import Path
 
 import numpy as np
 
-from ..budget import Budget
-from ..calibration import Calibration1D
-from ..estimators import intrusion_position
-from ..geometry import Pose
-from ..metrics import error_rates
-from ..paper import CALIBRATION_SQUARE_M, SPACING_M
-from ..plots import plot_spacing
-from ..progress import progress
-from ..readout import read_out
-from ..render.simulation import Simulation
-from ..scene.display import Screen
-from .base import Experiment, ExperimentResult
-from .layouts import intrusion_mincam, mincam_on_screen
-from .screen_calibration import fit_calibration_1d, screen_sweep_1d
-from .setup import Setup
+from mincam_sim.budget import Budget
+from mincam_sim.estimation.calibration import Calibration1D
+from mincam_sim.estimation.estimators import intrusion_position
+from mincam_sim.estimation.metrics import error_rates
+from mincam_sim.experiments.base import Experiment, ExperimentResult
+from mincam_sim.experiments.layouts import intrusion_mincam, mincam_on_screen
+from mincam_sim.experiments.screen_calibration import fit_calibration_1d, screen_sweep_1d
+from mincam_sim.experiments.setup import Setup
+from mincam_sim.model.geometry import Pose
+from mincam_sim.model.readout import read_out
+from mincam_sim.paper import CALIBRATION_SQUARE_M, SPACING_M
+from mincam_sim.plotting.plots import plot_spacing
+from mincam_sim.progress import progress
+from mincam_sim.render.simulation import Simulation
+from mincam_sim.scene.display import Screen
 
 
 @dataclass(frozen=True)

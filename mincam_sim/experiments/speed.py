@@ -20,10 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import objects
-from ..budget import Budget
-from ..errors import ConfigError
-from ..estimators import (
+from mincam_sim.budget import Budget
+from mincam_sim.errors import ConfigError
+from mincam_sim.estimation.estimators import (
     AliasingError,
     check_below_nyquist,
     nyquist_speed,
@@ -32,22 +31,23 @@ from ..estimators import (
     speed_from_signal,
     trajectory_from_speeds,
 )
-from ..geometry import Pose
-from ..metrics import speed_error_rates
-from ..optics import Mincam
-from ..paper import SPEED_AVG_ERROR_PCT, SPEED_MAX_ERROR_PCT
-from ..plots import plot_spectrum, plot_speed
-from ..progress import progress
-from ..readout import read_out
-from ..render import scene_dicts as sd
-from ..render.elements import road_elements
-from ..render.simulation import Simulation
-from ..render.solvers import PlaneReplay
-from ..scene.road import Road
-from .base import Experiment, ExperimentResult, PaperNumbers
-from .display_timing import DisplayTiming, displayed_readings, sample_times_s
-from .layouts import sinusoid_mixel
-from .setup import Setup
+from mincam_sim.estimation.metrics import speed_error_rates
+from mincam_sim.experiments.base import Experiment, ExperimentResult, PaperNumbers
+from mincam_sim.experiments.display_timing import DisplayTiming, displayed_readings, sample_times_s
+from mincam_sim.experiments.layouts import sinusoid_mixel
+from mincam_sim.experiments.setup import Setup
+from mincam_sim.model.geometry import Pose
+from mincam_sim.model.optics import Mincam
+from mincam_sim.model.readout import read_out
+from mincam_sim.paper import SPEED_AVG_ERROR_PCT, SPEED_MAX_ERROR_PCT
+from mincam_sim.plotting.plots import plot_spectrum, plot_speed
+from mincam_sim.progress import progress
+from mincam_sim.render.scene import scene_dicts as sd
+from mincam_sim.render.scene.elements import road_elements
+from mincam_sim.render.simulation import Simulation
+from mincam_sim.render.solvers import PlaneReplay
+from mincam_sim.scene import objects
+from mincam_sim.scene.road import Road
 
 
 @dataclass(frozen=True)

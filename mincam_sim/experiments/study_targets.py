@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ConfigError
+from mincam_sim.errors import ConfigError
 
 PointFunction = Callable[[dict, int, bool], dict]
 
@@ -82,8 +82,8 @@ def numeric_details(result: dict) -> dict:
 @contextlib.contextmanager
 def figures_not_saved() -> Iterator[None]:
     """A study keeps an experiment's numbers, not its per-run figures (drawing them is most of a quick point's
-    time): while a point runs, :mod:`mincam_sim.plots` closes its figures instead of saving them."""
-    from .. import plots
+    time): while a point runs, :mod:`mincam_sim.plotting.plots` closes its figures instead of saving them."""
+    from mincam_sim.plotting import plots
 
     def close(fig, path):
         plots.plt.close(fig)
@@ -99,7 +99,7 @@ def figures_not_saved() -> Iterator[None]:
 
 # ------------------------------------------------------------------------------------------ render config
 def _flat_numeric(raw: dict) -> dict:
-    from ..config import _SCHEMA
+    from mincam_sim.configuration.config import _SCHEMA
 
     out = {}
     for section, defaults in _SCHEMA.items():
@@ -113,9 +113,9 @@ def _flat_numeric(raw: dict) -> dict:
 
 def _render_point(config_path: str) -> PointFunction:
     def point(params: dict, seed: int, quick: bool) -> dict:
-        from ..config import load_config
-        from ..render.simulation import Simulation
-        from ..toml_files import read_toml_file
+        from mincam_sim.configuration.config import load_config
+        from mincam_sim.configuration.toml_files import read_toml_file
+        from mincam_sim.render.simulation import Simulation
 
         raw = read_toml_file(config_path, "[study] config")
         for key, value in params.items():
@@ -138,8 +138,8 @@ def _render_point(config_path: str) -> PointFunction:
 
 def render_target(config_path: str | Path) -> StudyExperiment:
     """A render config as a study target: every numeric key (``section.key``) is a parameter."""
-    from ..config import load_config
-    from ..toml_files import read_toml_file
+    from mincam_sim.configuration.config import load_config
+    from mincam_sim.configuration.toml_files import read_toml_file
 
     path = Path(config_path)
     if not path.is_file():
@@ -162,7 +162,7 @@ def render_target_from_ref(ref: dict) -> StudyExperiment:
 
 # ----------------------------------------------------------------------------------------------- design
 def _design_point(params: dict, seed: int, quick: bool) -> dict:
-    from ..design import run_design
+    from mincam_sim.design import run_design
 
     with tempfile.TemporaryDirectory(prefix="study_design_") as tmp:
         r = run_design("tracking", tmp, quick=quick, seed=int(seed), dpi=float(params["dpi"]))
@@ -177,7 +177,7 @@ def _design_point(params: dict, seed: int, quick: bool) -> dict:
 def design_target(ref: dict | None = None) -> StudyExperiment:
     """The mask design task for tracking (differentiable rendering) over its printer resolution (default: the
     design task's own)."""
-    from ..design.tracking import TrackingTask
+    from mincam_sim.design.tracking import TrackingTask
 
     return StudyExperiment(
         name="design", description="mask design for tracking (differentiable rendering) vs printer resolution",

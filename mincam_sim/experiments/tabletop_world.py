@@ -8,13 +8,13 @@ from collections.abc import Mapping
 import numpy as np
 import trimesh
 
-from .. import objects
-from ..optics import Mincam
-from ..render.elements import tabletop_elements
-from ..render.simulation import Simulation
-from ..scene.tabletop import Tabletop
-from .ground_truth import GroundTruthCamera
-from .setup import Setup
+from mincam_sim.experiments.ground_truth import GroundTruthCamera
+from mincam_sim.experiments.setup import Setup
+from mincam_sim.model.optics import Mincam
+from mincam_sim.render.scene.elements import tabletop_elements
+from mincam_sim.render.simulation import Simulation
+from mincam_sim.scene import objects
+from mincam_sim.scene.tabletop import Tabletop
 
 TABLE_SIDE_M = 1.2
 #: The tabletop's contrast where the paper is silent (it describes neither its background nor its lamp): a

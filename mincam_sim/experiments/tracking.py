@@ -8,19 +8,20 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import objects
-from ..calibration import Calibration2D
-from ..estimators import track_4
-from ..paper import CALIBRATION_SQUARE_M, TRACKING_AVG_ERROR_PCT, TRACKING_MAX_ERROR_PCT
-from ..plots import plot_calibration_2d, plot_overlays, plot_tracks
-from ..render.elements import toy_updates
-from .base import Experiment, ExperimentResult, PaperNumbers
-from .ground_truth import GroundTruthCamera
-from .layouts import tracking_mincam
-from .pipeline import LocateOptions, locate_in_world
-from .screen_calibration import fit_calibration_2d, screen_sweep_2d, sweep_change_dn, visible_sweep
-from .setup import Setup
-from .tabletop_world import (
+from mincam_sim.estimation.calibration import Calibration2D
+from mincam_sim.estimation.estimators import track_4
+from mincam_sim.experiments.base import Experiment, ExperimentResult, PaperNumbers
+from mincam_sim.experiments.ground_truth import GroundTruthCamera
+from mincam_sim.experiments.layouts import tracking_mincam
+from mincam_sim.experiments.pipeline import LocateOptions, locate_in_world
+from mincam_sim.experiments.screen_calibration import (
+    fit_calibration_2d,
+    screen_sweep_2d,
+    sweep_change_dn,
+    visible_sweep,
+)
+from mincam_sim.experiments.setup import Setup
+from mincam_sim.experiments.tabletop_world import (
     DEFAULT_LIGHT_SIZE_M,
     DEFAULT_TABLE_ALBEDO,
     check_contrast,
@@ -29,6 +30,10 @@ from .tabletop_world import (
     tabletop_world,
     with_height_scale,
 )
+from mincam_sim.paper import CALIBRATION_SQUARE_M, TRACKING_AVG_ERROR_PCT, TRACKING_MAX_ERROR_PCT
+from mincam_sim.plotting.plots import plot_calibration_2d, plot_overlays, plot_tracks
+from mincam_sim.render.scene.elements import toy_updates
+from mincam_sim.scene import objects
 
 
 @dataclass(frozen=True)
@@ -61,7 +66,7 @@ class TrackingParams:
         table is largely cancelled by its shadow and dark sides.
     toy_albedos : tuple of float
         Albedo of each toy, one per entry of ``toys``; empty (the default): each kind's own
-        (:data:`~mincam_sim.objects.DEFAULT_TOY_ALBEDO`: robot 0.75, chick 0.9, frog 0.7).
+        (:data:`~mincam_sim.scene.objects.DEFAULT_TOY_ALBEDO`: robot 0.75, chick 0.9, frog 0.7).
     toy_height_scale : float
         Scale of the toys' heights (1: as modelled; e.g. 0.02: flat prints of their footprints, no shadow).
     light_size_m : float

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import profiles as prof
-from .mask import DEFAULT_MASK_SIZE_M, DEFAULT_RESOLUTION, Mask, _check_resolution, _normalized_grid
+from mincam_sim.masks import profiles as prof
+from mincam_sim.masks.mask import DEFAULT_MASK_SIZE_M, DEFAULT_RESOLUTION, Mask, _check_resolution, _normalized_grid
 
 
 def _to_physical_points(

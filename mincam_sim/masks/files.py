@@ -6,9 +6,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import imageio
-from ..atomic import atomic_path
-from .mask import Mask
+from mincam_sim.masks.mask import Mask
+from mincam_sim.storage import imageio
+from mincam_sim.storage.atomic import atomic_path
 
 _LUMA_709 = np.array([0.2126, 0.7152, 0.0722])
 

@@ -7,11 +7,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import imageio
-from ..atomic import atomic_path
-from .curves import circular_ramp
-from .files import save_exr
-from .mask import DEFAULT_MASK_SIZE_M, DEFAULT_RESOLUTION, Mask, constant, ramp, sinusoid
+from mincam_sim.masks.curves import circular_ramp
+from mincam_sim.masks.files import save_exr
+from mincam_sim.masks.mask import DEFAULT_MASK_SIZE_M, DEFAULT_RESOLUTION, Mask, constant, ramp, sinusoid
+from mincam_sim.storage import imageio
+from mincam_sim.storage.atomic import atomic_path
 
 LIBRARY_SINUSOID_PERIOD_M = 0.5e-3  # [m] period of the library sinusoid (omega = 2 pi / 0.5 mm)
 

@@ -16,15 +16,14 @@ profiles are :mod:`mincam_sim.masks.profiles`) and area-averaged resampling.
 
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import sparse
 
-from .. import paper
-from . import profiles as prof
-from .profiles import MaskProfile
+from mincam_sim import paper
+from mincam_sim.masks import profiles as prof
+from mincam_sim.masks.profiles import MaskProfile
 
 DEFAULT_MASK_SIZE_M = paper.MASK_SIZE_M  # [m] square mask side: with d_f = 2 mm, a ~53 degree field of view
 DEFAULT_RESOLUTION = 256  # texels per side of generated masks
@@ -129,17 +128,6 @@ class Mask:
     def is_analytic(self) -> bool:
         """True when the renderer evaluates the mask exactly (a profile), not from its texel array."""
         return self.profile is not None
-
-    def fingerprint_parts(self) -> dict:
-        """Everything that determines what this mask transmits (for run identities)."""
-        return {
-            "transmission_sha256": hashlib.sha256(np.ascontiguousarray(self.transmission).tobytes()).hexdigest(),
-            "shape": list(self.shape),
-            "width_m": self.width_m,
-            "height_m": self.height_m,
-            "profile": None if self.profile is None else self.profile.describe(),
-            "interpolation": self.interpolation,
-        }
 
     def normalized_coords(self) -> tuple[np.ndarray, np.ndarray]:
         """Texel-centre coordinates (x, y) in [0, 1], x left to right, y bottom to top, each (H, W)."""

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import imageio
-from ..atomic import atomic_path
-from .mask import MAX_TEXELS, Mask, resample
+from mincam_sim.masks.mask import MAX_TEXELS, Mask, resample
+from mincam_sim.storage import imageio
+from mincam_sim.storage.atomic import atomic_path
 
 _BAYER8 = np.array(
     [

@@ -19,10 +19,10 @@ from typing import Any
 
 import numpy as np
 
-from .. import imageio
-from ..atomic import atomic_path, atomic_write_text
-from .mask import MAX_TEXELS, Mask, resample
-from .printing import PrintedFilm, _dot_grid, png_bit_depth
+from mincam_sim.masks.mask import MAX_TEXELS, Mask, resample
+from mincam_sim.masks.printing import PrintedFilm, _dot_grid, png_bit_depth
+from mincam_sim.storage import imageio
+from mincam_sim.storage.atomic import atomic_path, atomic_write_text
 
 MM = 1e-3
 MARGIN_M = 8 * MM  # [m] blank border around the masks: crop marks and registration marks live in it
@@ -72,7 +72,7 @@ def write_print_sheet(masks: Sequence[Mask], positions_m: Sequence[Sequence[floa
         The masks, as seen from the detector looking out (row 0 at the top).
     positions_m : sequence of (x, y)
         Each mask's centre [m] in the mincam's plane: x right, y up, as seen from the detectors looking out (the
-        in-plane offsets of :func:`mincam_sim.optics.layout`).
+        in-plane offsets of :func:`mincam_sim.model.optics.layout`).
     dpi : float
         Printer resolution [dots per inch]; the PNG records it so that printing at 100 % keeps every size.
     film : PrintedFilm or None

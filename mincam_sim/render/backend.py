@@ -20,7 +20,7 @@ from functools import cache
 from pathlib import Path
 from types import ModuleType
 
-from ..errors import BackendUnavailableError
+from mincam_sim.errors import BackendUnavailableError
 
 ENV_VARIANT = "MINCAM_VARIANT"
 SUPPORTED_VARIANTS = ("cuda_ad_mono", "llvm_ad_mono", "scalar_rgb")

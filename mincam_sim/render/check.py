@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import argparse
 
-from . import backend
-from .scene_dicts import irradiancemeter
+from mincam_sim.render import backend
+from mincam_sim.render.scene.scene_dicts import irradiancemeter
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -15,7 +15,7 @@ Display scenes measure frames (radiance images, row 0 at the top); world scenes 
 (``"name.parameter" -> value``, positions in world coordinates [m], as :attr:`Simulation.params` reads them),
 absolutely (:meth:`Simulation.measure`) or as changes against a background (:meth:`Simulation.measure_changes`).
 Each measurement is ``solver.plan(self, frames, budget)`` run through a sink (:mod:`mincam_sim.frames`).
-Persistence (the identity, the lock, resume) is the business of :class:`mincam_sim.run.Run`; a simulation
+Persistence (the identity, the lock, resume) is the business of :class:`mincam_sim.runs.run.Run`; a simulation
 builds no identity, it only says what determines its scene's numbers (:meth:`Simulation.identity`).
 
 A world scene is built around the mincam: Mitsuba offsets every secondary ray by ~1e-4 x (1 + max|p|) scene
@@ -35,24 +35,24 @@ from pathlib import Path
 
 import numpy as np
 
-from ..budget import Budget
-from ..changes import Changes
-from ..errors import InputError
-from ..frames import FrameSink, MemorySink, collect
-from ..identity import display_frames_identity, fingerprint, scene_file_digests, updates_fingerprint
-from ..measurements import Measurements
-from ..optics import Mincam
-from ..scene.display import FrameSource, Screen, as_frame_source
-from . import backend
-from .change_geometry import change_points_of, delta_surfaces
-from .change_region import ApertureRegions, mixel_regions
-from .guided_path import guide_spheres, spheres_of
-from .mincam_scene import CAMERA_KEY, SENSOR_KEY, MincamScene
-from .response_map import FRAME_CHUNK_BYTES, check_radiance
-from .scene_dicts import mincam_body_shapes
-from .solvers import Aperture, ResponseMap, Solver, StratifiedChange
-from .stratified import buffers_key
-from .world_input import check_radiant_params, check_update, expand_elements
+from mincam_sim.budget import Budget
+from mincam_sim.changes import Changes
+from mincam_sim.errors import InputError
+from mincam_sim.frames import FrameSink, MemorySink, collect
+from mincam_sim.measurements import Measurements
+from mincam_sim.model.optics import Mincam
+from mincam_sim.render import backend
+from mincam_sim.render.kernels.change_geometry import change_points_of, delta_surfaces
+from mincam_sim.render.kernels.change_region import ApertureRegions, mixel_regions
+from mincam_sim.render.kernels.guided_path import guide_spheres, spheres_of
+from mincam_sim.render.kernels.map_tracing import FRAME_CHUNK_BYTES, check_radiance
+from mincam_sim.render.kernels.stratified import buffers_key
+from mincam_sim.render.scene.mincam_scene import CAMERA_KEY, SENSOR_KEY, MincamScene
+from mincam_sim.render.scene.scene_dicts import mincam_body_shapes
+from mincam_sim.render.scene.world_input import check_radiant_params, check_update, expand_elements
+from mincam_sim.render.solvers import Aperture, ResponseMap, Solver, StratifiedChange
+from mincam_sim.scene.display import FrameSource, Screen, as_frame_source
+from mincam_sim.storage.identity import display_frames_identity, fingerprint, scene_file_digests, updates_fingerprint
 
 Updates = Mapping[str, np.ndarray]
 DEFAULT_SOLVERS = {"display": ResponseMap, "world": Aperture}  # Simulation.measure's solver by scene kind
@@ -73,7 +73,7 @@ class Simulation:
     max_depth : int
         World scenes: longest path, in segments from the mask (2 = direct light only; 3 adds one bounce).
     camera : dict, optional
-        World scenes: a ground-truth pinhole camera (``mincam_sim.render.scene_dicts.pinhole_camera``).
+        World scenes: a ground-truth pinhole camera (``mincam_sim.render.scene.scene_dicts.pinhole_camera``).
     """
 
     def __init__(self, mincam: Mincam, *, screen: Screen | None = None, world=None, max_depth: int = 3,
@@ -90,7 +90,7 @@ class Simulation:
         self._display_scene: MincamScene | None = None
         if world is not None:
             if isinstance(world, (str, PathLike)):
-                from .scene_files import load_scene_file
+                from mincam_sim.render.scene.scene_files import load_scene_file
 
                 self.source = Path(world)
                 world = {"scene": load_scene_file(self.source)}
@@ -262,9 +262,12 @@ class Simulation:
         """What determines this scene's numbers (JSON-able): the mincam and the screen (displays); the mincam,
         the scene's content as built and, for a world from a file, every file it names, recursively
         (``<include>``d files, meshes and textures, also through ``$parameter`` defaults)."""
+        # the masks again by mixel, so that a refusal names the masks that changed rather than "the mincam"
+        masks = {m.name: fingerprint(m.mask) for m in self.mincam}
         if self.kind == "display":
-            return {"kind": "display", "mincam": fingerprint(self.mincam), "screen": fingerprint(self.screen)}
-        out = {"kind": "world", "mincam": fingerprint(self.mincam), "scene": self._content_key}
+            return {"kind": "display", "mincam": fingerprint(self.mincam), "masks": masks,
+                    "screen": fingerprint(self.screen)}
+        out = {"kind": "world", "mincam": fingerprint(self.mincam), "masks": masks, "scene": self._content_key}
         if self.source is not None:
             top = self.source.resolve().parent
             out["files"] = {os.path.relpath(k, top): v for k, v in scene_file_digests(self.source).items()}
@@ -331,7 +334,7 @@ class Simulation:
         default solver :class:`~.solvers.ResponseMap` (its result carries the maps as ``m.maps``). World scenes:
         ``frames`` are parameter updates, each applied to the scene as built; solver :class:`~.solvers.Aperture`,
         or :class:`~.solvers.PlaneReplay` for frames that only move one textured plane within its plane.
-        ``sink`` (:class:`mincam_sim.frames.FrameSink`) takes the per-frame rows; :class:`mincam_sim.run.Run`
+        ``sink`` (:class:`mincam_sim.frames.FrameSink`) takes the per-frame rows; :class:`mincam_sim.runs.run.Run`
         hands one that keeps them on disk and resumes.
         """
         return self._solve(self.solver_for(solver), frames, self._budget(budget), None, sink, show_progress)
@@ -352,7 +355,7 @@ class Simulation:
         budget : Budget
             ``spp`` rays per mixel per frame and pass (or a target), replicates (default 8), seed.
         sink : FrameSink, optional
-            Takes the per-frame rows (:class:`mincam_sim.run.Run` hands one on disk). Default: in memory.
+            Takes the per-frame rows (:class:`mincam_sim.runs.run.Run` hands one on disk). Default: in memory.
         """
         return self._solve(self.solver_for(solver, changes=True), frames, self._budget(budget),
                            {} if background is None else background, sink, show_progress)

@@ -1,10 +1,18 @@
 """Pure scene descriptions (no renderer): displays and sweeps, tabletops, roads.
 
 The render layer (:mod:`mincam_sim.render`) turns them into Mitsuba elements; nothing here imports Mitsuba.
+Files:
+
+* ``display.py``: flat emissive displays and the frames shown on them (pure numpy).
+* ``objects.py``: scene content for the paper's experiments: toy meshes, printed/road textures and object
+  trajectories.
+* ``road.py``: a textured road under an overcast sky, moving under a mixel (pure description, metres and seconds).
+* ``tabletop.py``: a tabletop world, described without any renderer: a printed background, an area light, toys that
+  move.
 """
 
-from .display import Screen, Sweep, grid_sweep, line_sweep
-from .road import Road
-from .tabletop import Tabletop
+from mincam_sim.scene.display import Screen, Sweep, grid_sweep, line_sweep
+from mincam_sim.scene.road import Road
+from mincam_sim.scene.tabletop import Tabletop
 
 __all__ = ["Road", "Screen", "Sweep", "Tabletop", "grid_sweep", "line_sweep"]

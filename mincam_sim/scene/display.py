@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import paper
-from ..geometry import Pose, clip_polygon_halfspace
+from mincam_sim import paper
+from mincam_sim.model.geometry import Pose, clip_polygon_halfspace
 
 INCH_M = 0.0254  # [m]
 
@@ -305,7 +305,8 @@ def visible_screen_polygon_local_m(screen: Screen, mixel) -> np.ndarray:
 
     A point ``p`` beyond the mask plane (``z > d_f (1 + 1e-9)``) is seen by some detector point through the aperture iff
     ``|x| <= tx z - s/2`` and ``|y| <= ty z - s/2`` (``tx, ty`` from
-    :meth:`~mincam_sim.optics.Mixel.half_fov_tan`, ``s`` the detector side): the union of the detector points' view
+    :meth:`~mincam_sim.model.optics.Mixel.half_fov_tan`, ``s`` the detector side): the union of the detector points'
+    view
     pyramids, whose apex lies at ``z = s / (2 tx)`` (slightly narrower than the pyramid of the widest rays from the
     origin). Mask transmission is ignored.
     """

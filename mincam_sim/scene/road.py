@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import Pose
+from mincam_sim.model.geometry import Pose
 
 
 @dataclass

@@ -2,8 +2,8 @@
 
 World frame: the table is the plane ``z = 0`` with ``+z`` up; lengths in metres. Toys are ``trimesh`` meshes in
 their object frame (resting on ``z = 0``, facing ``+x``); a placement ``(position (2,), heading)`` puts one on the
-table (:func:`mincam_sim.objects.mesh_at`), ``None`` parks it far outside every field of view. The render layer
-turns a :class:`Tabletop` into Mitsuba elements (``mincam_sim.render.elements.tabletop_elements``).
+table (:func:`mincam_sim.scene.objects.mesh_at`), ``None`` parks it far outside every field of view. The render layer
+turns a :class:`Tabletop` into Mitsuba elements (``mincam_sim.render.scene.elements.tabletop_elements``).
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import objects
+from mincam_sim.scene import objects
 
 Placement = tuple[np.ndarray, float] | None
 

@@ -11,10 +11,10 @@ import typer
 def run_study_command(study_file: Path, workers: int | None, scheduler: str | None, out_dir: Path | None,
                       quick: bool, overwrite: bool, quiet: bool = False, max_points: int | None = None) -> None:
     """Run a parameter study on dask.distributed; results.zarr (xarray), summary.json and a plot in --out."""
-    from ..errors import ConfigError, StoreError
-    from .plots import plot_study
-    from .runner import run_study
-    from .spec import DEFAULT_MAX_POINTS, load_study
+    from mincam_sim.errors import ConfigError, StoreError
+    from mincam_sim.studies.plots import plot_study
+    from mincam_sim.studies.runner import run_study
+    from mincam_sim.studies.spec import DEFAULT_MAX_POINTS, load_study
 
     if workers is not None and workers < 1:  # before anything is read or started
         raise ConfigError(f"--workers must be an integer >= 1 (1 = in this process), got {workers}")

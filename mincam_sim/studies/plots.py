@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_path
+from mincam_sim.storage.atomic import atomic_path
 
 _LENGTH_SCALES = ((2e-2, 1e3, "mm"), (0.2, 1e2, "cm"))
 
@@ -28,7 +28,7 @@ def display_scale(values, unit: str) -> tuple[float, str]:
 def axis_label(name: str, unit: str) -> str:
     """``name (unit)`` with the unit suffix dropped from the name (``spacing_m`` -> ``spacing (cm)``);
     dimensionless quantities get no unit."""
-    from ..experiments.study_targets import _SUFFIX_UNITS
+    from mincam_sim.experiments.study_targets import _SUFFIX_UNITS
 
     text = name
     for suffix, _ in _SUFFIX_UNITS:

@@ -32,13 +32,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_write_json, atomic_write_text
-from ..errors import ConfigError, OutDirLockedError, StaleResultError, StoreError
-from ..identity import build_identity, canonical, diff_identities, fingerprint
-from ..progress import progress
-from ..store import lock_out_dir
-from .points import study_target, unit_of
-from .spec import StudySpec
+from mincam_sim.errors import ConfigError, OutDirLockedError, StaleResultError, StoreError
+from mincam_sim.experiments.registry import study_target
+from mincam_sim.experiments.study_targets import unit_of
+from mincam_sim.progress import progress
+from mincam_sim.storage.atomic import atomic_write_json, atomic_write_text
+from mincam_sim.storage.identity import build_identity, canonical, diff_identities, fingerprint
+from mincam_sim.storage.store import lock_out_dir
+from mincam_sim.studies.spec import StudySpec
 
 ENV_THREADS = "MINCAM_DRJIT_THREADS"
 STORE_NAME = "results.zarr"
@@ -68,13 +69,13 @@ def variables(spec: StudySpec) -> list[str]:
 def compute_point(ref: dict, params: dict, seeds: list[int], quick: bool, metrics: list[str]) -> dict:
     """Run one point's replicates (on a worker or here): ``{metric: mean, metric_stderr: standard error}``.
     Caps Dr.Jit's threads first when the runner asked for it."""
-    from ..render import backend
+    from mincam_sim.render import backend
 
     backend.configure_libllvm()  # before Dr.Jit is first imported in this process (Debian's LLVM 15 crashes it)
     threads = os.environ.get(ENV_THREADS)
     if threads:
         backend.cap_threads(int(threads))
-    from ..calibration import ExtrapolationWarning
+    from mincam_sim.estimation.calibration import ExtrapolationWarning
 
     target = study_target(ref)
     with warnings.catch_warnings():  # studies use calibrations away from their range on purpose: the error shows it

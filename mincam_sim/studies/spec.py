@@ -25,10 +25,21 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ConfigError
-from ..schema import Flag, Integer, Part, Schema, Text, closest, read_section, setting, toml_value
-from ..toml_files import read_document
-from .points import StudyExperiment, study_target, target_names
+from mincam_sim.configuration.schema import (
+    Flag,
+    Integer,
+    Part,
+    Schema,
+    Text,
+    closest,
+    read_section,
+    setting,
+    toml_value,
+)
+from mincam_sim.configuration.toml_files import read_document
+from mincam_sim.errors import ConfigError
+from mincam_sim.experiments.registry import study_target, target_names
+from mincam_sim.experiments.study_targets import StudyExperiment
 
 DEFAULT_MAX_POINTS = 10_000
 MAX_REPLICATES = 1000

@@ -30,14 +30,29 @@ mask feature and the aperture rim here (checked against the 2D solver in the tes
 films, halftones, circular ramps) are solved in 2D.
 
 The silicon quantum-efficiency curve for spectral weighting is a model, documented in :func:`silicon_qe`.
+Files:
+
+* ``geometric.py``: the ray model's answer for the same mixel: detector averages of T(x_d + d_f t), exact
+  quadrature.
+* ``propagation.py``: band-limited angular-spectrum propagation of tilted plane waves through the aperture to the
+  detector.
+* ``report.py``: numbers of the README's wave-optics section (pure numpy): the default sinusoid's contrast, the
+  Talbot curve, the aperture rim, printed films against their geometric model.
+* ``response.py``: the detector-averaged power behind the mask for plane waves from given directions (the public
+  entry).
+* ``sampling.py``: the computational grid of the wave solver and the mask's amplitude on it (one-axis masks, print
+  dots).
+* ``spectrum.py``: spectral weighting of the wave response: a silicon quantum-efficiency model and band weights.
+* ``table.py``: a mixel's response tabulated over its field of view, for the renderer.
+* ``validity.py``: how far the ray model is from the wave response for a mixel, and why (u, dot pitch, rim).
 """
 
 from __future__ import annotations
 
-from .geometric import geometric_response, open_fraction
-from .propagation import axis_wavelength
-from .response import MAX_CELLS_2D, OPTICS, WaveInfo, angular_response
-from .sampling import (
+from mincam_sim.wave.geometric import geometric_response, open_fraction
+from mincam_sim.wave.propagation import axis_wavelength
+from mincam_sim.wave.response import MAX_CELLS_2D, OPTICS, WaveInfo, angular_response
+from mincam_sim.wave.sampling import (
     BAND_MARGIN,
     DOMAIN_FACTOR,
     Sampling,
@@ -46,7 +61,7 @@ from .sampling import (
     separable_axis,
     transmission_on_cells,
 )
-from .spectrum import (
+from mincam_sim.wave.spectrum import (
     DEFAULT_WAVELENGTHS_M,
     SI_COLLECTION_DEPTH_M,
     SI_DEAD_LAYER_M,
@@ -54,8 +69,15 @@ from .spectrum import (
     silicon_qe,
     spectral_weights,
 )
-from .table import ResponseTable, response_table
-from .validity import U_ONE_PERCENT, VALIDITY_TOLERANCE, quick_check, rim_onset_deg, talbot_parameter, validity
+from mincam_sim.wave.table import ResponseTable, response_table
+from mincam_sim.wave.validity import (
+    U_ONE_PERCENT,
+    VALIDITY_TOLERANCE,
+    quick_check,
+    rim_onset_deg,
+    talbot_parameter,
+    validity,
+)
 
 __all__ = [
     "BAND_MARGIN",

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..masks import Mask
-from ..masks import profiles as prof
-from ..optics import Mixel
-from .sampling import separable_axis
+from mincam_sim.masks import Mask
+from mincam_sim.masks import profiles as prof
+from mincam_sim.model.optics import Mixel
+from mincam_sim.wave.sampling import separable_axis
 
 
 def _clip_interval(lo: np.ndarray, hi: np.ndarray, a: float, b: float) -> tuple[np.ndarray, np.ndarray]:

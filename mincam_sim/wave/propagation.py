@@ -8,7 +8,7 @@ from collections.abc import Sequence
 import numpy as np
 from scipy import fft as sfft
 
-from .sampling import Sampling, _cell_centres
+from mincam_sim.wave.sampling import Sampling, _cell_centres
 
 
 def _kz_minus(f2: np.ndarray, f02: float, inv_lam2: float) -> np.ndarray:

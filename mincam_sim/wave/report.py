@@ -2,7 +2,7 @@
 the aperture rim, printed films against their geometric model.
 
 ``python -m mincam_sim.wave.report`` prints them (JSON); ``mincam-sim figures --wave`` draws the figure
-(:func:`mincam_sim.figures.make_wave_figure`).
+(:func:`mincam_sim.plotting.figures.make_wave_figure`).
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ import math
 
 import numpy as np
 
-from .. import masks, paper, wave
-from ..optics import Mixel
+from mincam_sim import masks, paper, wave
+from mincam_sim.model.optics import Mixel
 
 DEFAULT_PERIOD_M = 0.2e-3  # [m] the README's default sinusoid
 CENTRAL_TAN = math.tan(math.radians(17.0))  # the central field used for contrast numbers

@@ -7,12 +7,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..masks import Mask
-from ..masks import profiles as prof
-from ..optics import Mixel
-from .geometric import _check_tan, geometric_response
-from .propagation import _response_1d, _response_2d, axis_wavelength
-from .sampling import (
+from mincam_sim.masks import Mask
+from mincam_sim.masks import profiles as prof
+from mincam_sim.model.optics import Mixel
+from mincam_sim.wave.geometric import _check_tan, geometric_response
+from mincam_sim.wave.propagation import _response_1d, _response_2d, axis_wavelength
+from mincam_sim.wave.sampling import (
     _align,
     _axis_profile_1d,
     choose_sampling,
@@ -20,7 +20,7 @@ from .sampling import (
     separable_axis,
     transmission_on_cells,
 )
-from .spectrum import DEFAULT_WAVELENGTHS_M, _check_wavelengths, silicon_qe, spectral_weights
+from mincam_sim.wave.spectrum import DEFAULT_WAVELENGTHS_M, _check_wavelengths, silicon_qe, spectral_weights
 
 OPTICS = ("geometric", "wave")
 

@@ -8,8 +8,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import fft as sfft
 
-from ..masks import Mask
-from ..masks import profiles as prof
+from mincam_sim.masks import Mask
+from mincam_sim.masks import profiles as prof
 
 BAND_MARGIN = 1.5  # keep directions up to this times the geometric reach (a hard cut right at it loses light)
 
@@ -73,7 +73,7 @@ def transmission_on_cells(mask: Mask, nx: int, ny: int) -> np.ndarray:
         t = np.broadcast_to(np.asarray(mask.profile.evaluate(gx, gy, prof.NUMPY_OPS), dtype=np.float64), gx.shape)
         return np.sqrt(np.clip(t, 0.0, 1.0))
     if mask.interpolation == "nearest":
-        from ..masks import resample
+        from mincam_sim.masks import resample
 
         amp = Mask(np.sqrt(mask.transmission), w, h, name=f"sqrt({mask.name})", interpolation="nearest")
         return resample(amp, (ny, nx))[::-1].copy()

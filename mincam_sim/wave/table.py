@@ -8,12 +8,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..optics import Mixel
-from .geometric import geometric_response, open_fraction
-from .propagation import _response_1d
-from .response import WaveInfo, _axis_setup, _uniform_value, angular_response
-from .sampling import dot_pitch_m, separable_axis
-from .spectrum import DEFAULT_WAVELENGTHS_M, _check_wavelengths, silicon_qe, spectral_weights
+from mincam_sim.model.optics import Mixel
+from mincam_sim.wave.geometric import geometric_response, open_fraction
+from mincam_sim.wave.propagation import _response_1d
+from mincam_sim.wave.response import WaveInfo, _axis_setup, _uniform_value, angular_response
+from mincam_sim.wave.sampling import dot_pitch_m, separable_axis
+from mincam_sim.wave.spectrum import DEFAULT_WAVELENGTHS_M, _check_wavelengths, silicon_qe, spectral_weights
 
 
 @dataclass(frozen=True, eq=False)
@@ -46,7 +46,7 @@ class ResponseTable:
         return np.where(self.open >= min_open, self.wave / np.maximum(self.open, min_open), 0.0)
 
     def fingerprint_parts(self) -> dict:
-        from ..identity import array_digest
+        from mincam_sim.storage.identity import array_digest
 
         return {"tan_x": array_digest(self.tan_x), "tan_y": array_digest(self.tan_y),
                 "wave": array_digest(self.wave), "meta": self.meta}

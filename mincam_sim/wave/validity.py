@@ -7,13 +7,13 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..masks import Mask
-from ..masks import profiles as prof
-from ..optics import Mixel
-from .geometric import geometric_response
-from .response import angular_response
-from .sampling import dot_pitch_m
-from .spectrum import DEFAULT_WAVELENGTHS_M, _check_wavelengths
+from mincam_sim.masks import Mask
+from mincam_sim.masks import profiles as prof
+from mincam_sim.model.optics import Mixel
+from mincam_sim.wave.geometric import geometric_response
+from mincam_sim.wave.response import angular_response
+from mincam_sim.wave.sampling import dot_pitch_m
+from mincam_sim.wave.spectrum import DEFAULT_WAVELENGTHS_M, _check_wavelengths
 
 VALIDITY_TOLERANCE = 0.01  # geometric optics is flagged when it is off by more than this (relative)
 
@@ -39,7 +39,7 @@ def rim_onset_deg(mixel: Mixel, wavelength_m: float = DEFAULT_WAVELENGTHS_M[0],
 
 
 def _open_like(mask: Mask) -> Mask:
-    from ..masks import constant
+    from mincam_sim.masks import constant
 
     return constant(1.0, 1, mask.width_m, mask.height_m)
 

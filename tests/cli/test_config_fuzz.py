@@ -14,7 +14,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from mincam_sim.config import _FRAME_KINDS, _MIXEL_KEYS, _SCHEMA, ConfigError, RenderConfig, load_config
+from mincam_sim.configuration.config import _FRAME_KINDS, _MIXEL_KEYS, _SCHEMA, ConfigError, RenderConfig, load_config
 
 HUGE = [10**9, 2**31, 2**62, -(2**63), 2**63 - 1]
 WORDS = ["pair", "cross", "custom", "response_map", "fast", "reference", "line_sweep", "grid_sweep", "npy",

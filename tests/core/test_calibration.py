@@ -1,4 +1,4 @@
-"""Tests of the position calibrations and error rates (mincam_sim.calibration)."""
+"""Tests of the position calibrations and error rates (mincam_sim.estimation.calibration)."""
 
 from __future__ import annotations
 
@@ -11,13 +11,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from mincam_sim.calibration import (
+from mincam_sim.estimation.calibration import (
     Calibration1D,
     Calibration2D,
     ExtrapolationWarning,
     bivariate_exponents,
 )
-from mincam_sim.metrics import error_rates, speed_error_rates
+from mincam_sim.estimation.metrics import error_rates, speed_error_rates
 
 coefficient = st.floats(min_value=-1.0, max_value=1.0, allow_nan=False)
 

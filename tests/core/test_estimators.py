@@ -1,4 +1,4 @@
-"""Tests of the estimators (mincam_sim.estimators) on ideal synthetic data with known answers."""
+"""Tests of the estimators (mincam_sim.estimation.estimators) on ideal synthetic data with known answers."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from mincam_sim.estimators import (
+from mincam_sim.estimation.estimators import (
     centroid,
     change_statistic,
     detect_change,
@@ -25,7 +25,7 @@ from mincam_sim.estimators import (
     trajectory_from_speeds,
     window_weights,
 )
-from mincam_sim.forward_model import ideal_measurement, speed_signal
+from mincam_sim.model.forward_model import ideal_measurement, speed_signal
 
 non_negative = st.floats(min_value=0.0, max_value=1e3, allow_nan=False, allow_infinity=False)
 

@@ -1,4 +1,4 @@
-"""Tests for mincam_sim.objects: toy meshes, procedural textures and trajectories (pure numpy/trimesh)."""
+"""Tests for mincam_sim.scene.objects: toy meshes, procedural textures and trajectories (pure numpy/trimesh)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from mincam_sim import objects as ob
+from mincam_sim.scene import objects as ob
 
 # ------------------------------------------------------------------------------------------------ meshes
 

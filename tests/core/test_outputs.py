@@ -15,13 +15,14 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from mincam_sim import atomic, masks
-from mincam_sim.config import EXAMPLE_TOML, load_config, traced_samples
+from mincam_sim import masks
+from mincam_sim.configuration.config import EXAMPLE_TOML, load_config, traced_samples
 from mincam_sim.errors import ConfigError, StaleResultError
 from mincam_sim.masks import PrintedFilm, export_print_png
 from mincam_sim.masks.files import srgb_to_linear
 from mincam_sim.masks.sheet import CROP_GAP_M, write_print_sheet
 from mincam_sim.measurements import Measurements
+from mincam_sim.storage import atomic
 
 SMALL = {"run": {"samples_per_texel": 16, "out_dir": "out"}, "frames": {"n": 2}, "screen": {"resolution": [32, 18]}}
 
@@ -112,7 +113,7 @@ def test_masks_export_cli_writes_a_sheet(tmp_path):
 def test_finished_design_of_another_seed_is_refused(tmp_path):
     from mincam_sim.design import tracking as tr
     from mincam_sim.design.run import IDENTITY_FILE, design_identity, run_design
-    from mincam_sim.store import check_identity
+    from mincam_sim.storage.store import check_identity
 
     task = replace(tr.TrackingTask.quick(0), dpi=600.0)
     (tmp_path / "design.json").write_text("{}")
@@ -287,7 +288,7 @@ def test_sinusoid_direction_out_of_range():
 
 
 def test_budget_guard_refuses_with_the_estimate():
-    from mincam_sim.jobs import check_budget, estimate_seconds
+    from mincam_sim.runs.jobs import check_budget, estimate_seconds
 
     cfg = load_config({"run": {"solver": "aperture", "spp": 2**40}, "frames": {"n": 2}})
     seconds, what = estimate_seconds(cfg)
@@ -335,7 +336,7 @@ def test_progress_off_a_terminal_is_periodic_lines(monkeypatch):
 
 
 def test_api_inputs_name_the_field():
-    from mincam_sim.optics import Mincam, Mixel, cross_layout, pair_layout
+    from mincam_sim.model.optics import Mincam, Mixel, cross_layout, pair_layout
 
     with pytest.raises(ConfigError, match="d_f_m .*no quotes, no units"):
         Mixel(masks.ramp("x"), d_f_m="2mm")
@@ -353,7 +354,7 @@ def test_api_inputs_name_the_field():
 
 
 def _capture(monkeypatch):
-    from mincam_sim import plots
+    from mincam_sim.plotting import plots
 
     figs = []
     monkeypatch.setattr(plots, "_save", lambda fig, path: figs.append(fig) or Path(path))
@@ -386,7 +387,7 @@ def test_calibration_2d_right_panel_has_axis_labels(monkeypatch):
 
 
 def test_spectrum_says_why_the_highest_peak_is_not_detected(monkeypatch):
-    from mincam_sim.estimators import spectrum
+    from mincam_sim.estimation.estimators import spectrum
 
     plots, figs = _capture(monkeypatch)
     t = np.arange(256) / 32.0
@@ -415,7 +416,7 @@ def test_design_json_not_needed_for_sheet_notes(tmp_path):
 
 
 def test_a_render_refused_by_the_budget_claims_nothing(tmp_path):
-    from mincam_sim.jobs import run_render_config
+    from mincam_sim.runs.jobs import run_render_config
 
     cfg = load_config({"run": {"solver": "aperture", "spp": 2**40, "out_dir": str(tmp_path / "out")},
                        "frames": {"n": 2}})

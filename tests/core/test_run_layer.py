@@ -15,18 +15,18 @@ import pytest
 import trimesh
 
 import mincam_sim as ms
-import mincam_sim.identity as idm
-from mincam_sim import store
-from mincam_sim.config import load_config
+import mincam_sim.storage.identity as idm
+from mincam_sim.configuration.config import load_config
 from mincam_sim.errors import OutDirLockedError, StaleResultError, StoreError
 from mincam_sim.frames import MemorySink, collect
-from mincam_sim.identity import IDENTITY_KINDS, build_identity, run_key
-from mincam_sim.jobs import run_render_config
-from mincam_sim.render import scene_dicts as sd
+from mincam_sim.render.scene import scene_dicts as sd
+from mincam_sim.render.scene.updates import vertex_update
 from mincam_sim.render.solvers import aperture, change
 from mincam_sim.render.solvers import response_map as rms
-from mincam_sim.render.updates import vertex_update
+from mincam_sim.runs.jobs import run_render_config
 from mincam_sim.scene.display import line_sweep
+from mincam_sim.storage import store
+from mincam_sim.storage.identity import IDENTITY_KINDS, build_identity, run_key
 
 ROOT = Path(__file__).resolve().parents[2]
 SCREEN = ms.Screen(resolution=(32, 18))
@@ -321,7 +321,7 @@ def test_no_module_builds_versions_into_an_identity_by_hand():
     """``library_versions()`` is read by the builder (and the response-map cache key) only."""
     users = sorted(p.relative_to(ROOT).as_posix() for p in (ROOT / "mincam_sim").rglob("*.py")
                    if "library_versions()" in p.read_text())
-    assert users == ["mincam_sim/identity.py", "mincam_sim/render/response_map.py"]
+    assert users == ["mincam_sim/storage/identity.py", "mincam_sim/render/kernels/map_tracing.py"]
 
 
 # Keys of the one identity of a run (kind "run", built by Run; library versions pinned), recorded when Run became

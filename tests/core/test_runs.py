@@ -9,9 +9,9 @@ import pytest
 import mincam_sim as ms
 from mincam_sim import Mincam, Mixel, Pose, Screen, masks, pair_layout
 from mincam_sim.errors import StaleResultError
-from mincam_sim.render import response_map as rm
-from mincam_sim.render.estimation import UnseenWarning
-from mincam_sim.run import Run
+from mincam_sim.render.kernels import map_tracing as rm
+from mincam_sim.render.kernels.monte_carlo import UnseenWarning
+from mincam_sim.runs.run import Run
 from mincam_sim.scene.display import FrameSource, line_sweep
 
 SCREEN = Screen(resolution=(64, 36))

@@ -1,4 +1,4 @@
-"""One config mechanism (mincam_sim.schema) for the render, world, reproduce and study files.
+"""One config mechanism (mincam_sim.configuration.schema) for the render, world, reproduce and study files.
 
 Each file kind's documented example is written from the same dataclasses that hold the defaults and the checks:
 the example must parse back to exactly the defaults, show every field with its comment, and every kind must
@@ -19,13 +19,13 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from mincam_sim.cli import app
-from mincam_sim.config import EXAMPLE_TOML, RENDER_SCHEMA, load_config
+from mincam_sim.configuration.config import EXAMPLE_TOML, RENDER_SCHEMA, load_config
+from mincam_sim.configuration.schema import Schema, field_comment, plain, read_section, toml_value
+from mincam_sim.configuration.world_config import WORLD_SCHEMA, load_world_config, world_example_toml
 from mincam_sim.errors import ConfigError
 from mincam_sim.experiments import REGISTRY, Setup, load_reproduce_config
 from mincam_sim.experiments.reproduce_file import reproduce_example_toml, reproduce_schema
-from mincam_sim.schema import Schema, field_comment, plain, read_section, toml_value
 from mincam_sim.studies.spec import StudySection, load_study, study_example_toml, study_schema
-from mincam_sim.world_config import WORLD_SCHEMA, load_world_config, world_example_toml
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -1,4 +1,4 @@
-"""Tests of the photodetector / readout model (mincam_sim.sensor).
+"""Tests of the photodetector / readout model (mincam_sim.model.sensor).
 
 Monte Carlo checks compare sample statistics with Poisson + read-noise theory using Z = 5 standard errors
 (two-sided false-failure probability ~6e-7 per comparison for normal sampling errors); seeds are fixed, so every
@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mincam_sim.sensor import PLANCK_J_S, SPEED_OF_LIGHT_M_S, SensorModel
+from mincam_sim.model.sensor import PLANCK_J_S, SPEED_OF_LIGHT_M_S, SensorModel
 
 Z = 5.0
 

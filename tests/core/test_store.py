@@ -14,7 +14,9 @@ import numpy as np
 import pytest
 
 from mincam_sim import Pose, Screen, masks, pair_layout
-from mincam_sim.atomic import (
+from mincam_sim.errors import MincamError, OutDirLockedError, StaleResultError, StoreError
+from mincam_sim.model.optics import Mixel
+from mincam_sim.storage.atomic import (
     atomic_path,
     atomic_save_npy,
     atomic_save_npz,
@@ -22,8 +24,7 @@ from mincam_sim.atomic import (
     atomic_write_text,
     leftover_temporaries,
 )
-from mincam_sim.errors import MincamError, OutDirLockedError, StaleResultError, StoreError
-from mincam_sim.identity import (
+from mincam_sim.storage.identity import (
     StreamingHash,
     canonical,
     diff_identities,
@@ -31,8 +32,7 @@ from mincam_sim.identity import (
     frames_fingerprint,
     library_versions,
 )
-from mincam_sim.optics import Mixel
-from mincam_sim.store import CacheWarning, ContentCache, ResultStore, check_identity, clear_store
+from mincam_sim.storage.store import CacheWarning, ContentCache, ResultStore, check_identity, clear_store
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -112,7 +112,7 @@ def test_streaming_hash_does_not_depend_on_chunking():
 
 
 def test_library_versions_without_importing_mitsuba():
-    code = ("import sys; from mincam_sim.identity import library_versions; v = library_versions(); "
+    code = ("import sys; from mincam_sim.storage.identity import library_versions; v = library_versions(); "
             "assert 'mitsuba' not in sys.modules and 'drjit' not in sys.modules; print(sorted(v))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert "mitsuba" in out and "drjit" in out and "numpy" in out and "mincam_sim" in out
@@ -253,7 +253,7 @@ def test_same_process_reopen_supersedes_the_older_store(tmp_path):
 _HOLDER = """
 import sys, time
 import numpy as np
-from mincam_sim.store import ResultStore
+from mincam_sim.storage.store import ResultStore
 store = ResultStore(sys.argv[1], 3, ["a"], {"seed": 0})
 print("locked", flush=True)
 time.sleep(60)
@@ -261,7 +261,7 @@ time.sleep(60)
 
 _OPENER = """
 import sys
-from mincam_sim.store import ResultStore
+from mincam_sim.storage.store import ResultStore
 from mincam_sim.errors import OutDirLockedError
 try:
     ResultStore(sys.argv[1], 3, ["a"], {"seed": 0}).close()
@@ -305,7 +305,7 @@ def test_lock_of_a_killed_process_is_released(tmp_path):
 def test_rows_survive_a_kill(tmp_path):
     code = """
 import os, sys, numpy as np
-from mincam_sim.store import ResultStore
+from mincam_sim.storage.store import ResultStore
 store = ResultStore(sys.argv[1], 5, ["a"], {"seed": 0})
 store.write([0, 1], np.array([[1.0], [2.0]]), np.array([[0.1], [0.2]]))
 os.kill(os.getpid(), 9)

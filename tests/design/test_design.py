@@ -56,7 +56,7 @@ def test_forward_model_matches_response_maps():
     from mincam_sim import Budget, Simulation
     from mincam_sim.design.evaluate import _frames, _screen
     from mincam_sim.render import backend
-    from mincam_sim.render import differentiable as dz
+    from mincam_sim.render.gradients import differentiable as dz
 
     mi = backend.mitsuba()
     cam = tr.mincam(tr.paper_masks(256))
@@ -85,7 +85,7 @@ def test_design_matrix_is_the_same_forward_model():
     a nearest-dot mask (same samples), to float32 rounding."""
     _needs_jit()
     from mincam_sim.render import backend
-    from mincam_sim.render import differentiable as dz
+    from mincam_sim.render.gradients import differentiable as dz
 
     mi = backend.mitsuba()
     rng = np.random.default_rng(0)
@@ -189,7 +189,7 @@ def test_cli_design_tracking_quick(tmp_path):
     from typer.testing import CliRunner
 
     from mincam_sim.cli import app
-    from mincam_sim.metrics import error_rates
+    from mincam_sim.estimation.metrics import error_rates
 
     out = tmp_path / "design"
     r = CliRunner().invoke(app, ["--quiet", "design", "tracking", "--quick", "--out", str(out)])
@@ -230,7 +230,7 @@ def test_poly_terms_is_one_implementation_for_numpy_and_drjit():
     on Dr.Jit arrays gives the same float32 values (only * and + are used); the old names warn and delegate."""
     import warnings
 
-    from mincam_sim.polynomial import poly_terms
+    from mincam_sim.estimation.polynomial import poly_terms
 
     rng = np.random.default_rng(3)
     x, y = rng.uniform(-2, 2, (2, 50))
@@ -242,16 +242,6 @@ def test_poly_terms_is_one_implementation_for_numpy_and_drjit():
     assert len(poly_terms(x, y, rng.uniform(size=50), degree=3)) == 20  # C(3 + 3, 3)
     with pytest.raises(ValueError, match="degree"):
         poly_terms(x, degree=-1)
-    from mincam_sim.design import decoder
-    from mincam_sim.render import differentiable
-
-    with pytest.warns(DeprecationWarning, match="mincam_sim.polynomial"):
-        stacked = decoder.poly_terms([x, y], 3)
-    np.testing.assert_array_equal(stacked, np.stack(got, axis=-1))
-    with pytest.warns(DeprecationWarning, match="mincam_sim.polynomial"):
-        assert differentiable.poly_terms is poly_terms
-    with pytest.raises(ImportError, match="mincam_sim.design.optimiser"):
-        from mincam_sim.render.differentiable import optimise_masks  # noqa: F401
     _needs_jit()
     from mincam_sim.render import backend
 

@@ -12,7 +12,7 @@ import pytest
 from mincam_sim.design import suite as su
 from mincam_sim.design import tracking as tr
 from mincam_sim.errors import ConfigError
-from mincam_sim.optics import cross_layout
+from mincam_sim.model.optics import cross_layout
 from mincam_sim.scene.display import coverage
 
 

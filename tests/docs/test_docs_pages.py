@@ -49,7 +49,7 @@ def test_performance_tables_follow_the_json(gen):
 
 
 def test_cli_and_config_reference_come_from_the_code(gen):
-    from mincam_sim.config import EXAMPLE_TOML
+    from mincam_sim.configuration.config import EXAMPLE_TOML
     from mincam_sim.experiments import REGISTRY
 
     cli = gen.cli_reference()

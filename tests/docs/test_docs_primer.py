@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from mincam_sim import Screen
-from mincam_sim.closed_forms import open_aperture_irradiance, point_to_parallel_rect
-from mincam_sim.sensor import SensorModel
+from mincam_sim.model.sensor import SensorModel
+from mincam_sim.oracles.closed_forms import open_aperture_irradiance, point_to_parallel_rect
 
 PRIMER = Path(__file__).resolve().parents[2] / "docs" / "primer.md"
 

@@ -58,7 +58,7 @@ def test_config_reference_holds_the_world_schema():
         import gen_pages
     finally:
         sys.path.remove(str(ROOT / "docs"))
-    from mincam_sim.world_config import world_example_toml
+    from mincam_sim.configuration.world_config import world_example_toml
 
     text = gen_pages.config_reference()
     assert world_example_toml().rstrip() in text

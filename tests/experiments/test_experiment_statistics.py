@@ -10,6 +10,7 @@ import trimesh
 from scipy.spatial import ConvexHull
 
 from mincam_sim.errors import ConfigError
+from mincam_sim.estimation.metrics import error_rates
 from mincam_sim.experiments import load_reproduce_config
 from mincam_sim.experiments.display_timing import (
     DisplayTiming,
@@ -22,8 +23,7 @@ from mincam_sim.experiments.layouts import tracking_mincam
 from mincam_sim.experiments.pipeline import GROUND_TRUTH_SPP, GROUND_TRUTH_THRESHOLD
 from mincam_sim.experiments.setup import Setup
 from mincam_sim.experiments.tabletop_world import make_tabletop, placed_meshes, tabletop_world
-from mincam_sim.metrics import error_rates
-from mincam_sim.render.elements import toy_updates
+from mincam_sim.render.scene.elements import toy_updates
 
 
 def _polygon_centroid(points: np.ndarray) -> tuple[np.ndarray, float]:

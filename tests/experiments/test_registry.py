@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 
 from mincam_sim import paper
-from mincam_sim.calibration import ExtrapolationWarning
 from mincam_sim.errors import StaleResultError
+from mincam_sim.estimation.calibration import ExtrapolationWarning
 from mincam_sim.experiments import REGISTRY, Setup, reproduce
 from mincam_sim.experiments.spacing import Spacing, SpacingParams
 from mincam_sim.studies import load_study, run_study, study_target, target_names
@@ -133,12 +133,12 @@ for key, value in json.loads(sys.argv[2]).items():
 sys.modules["mincam_sim.paper"] = paper  # before the package: every module reads the changed values
 
 from mincam_sim import masks
-from mincam_sim.config import load_config
+from mincam_sim.configuration.config import load_config
 from mincam_sim.design import tracking as tr
 from mincam_sim.experiments import REGISTRY, Setup
-from mincam_sim.optics import Mixel, pair_layout
+from mincam_sim.model.optics import Mixel, pair_layout
 from mincam_sim.scene.display import Screen
-from mincam_sim.sensor import SensorModel
+from mincam_sim.model.sensor import SensorModel
 from mincam_sim.studies import study_target
 
 s, proto, generic = Setup(), Setup().sensor(), SensorModel()

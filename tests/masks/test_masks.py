@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mincam_sim import imageio
 from mincam_sim import masks as M
+from mincam_sim.storage import imageio
 
 # ------------------------------------------------------------------------------------------- generators
 
@@ -353,7 +353,7 @@ def test_generate_library_writes_readable_deterministic_files(tmp_path):
 
 
 def test_plot_mask(tmp_path):
-    from mincam_sim.plots import plot_mask
+    from mincam_sim.plotting.plots import plot_mask
 
     ax = plot_mask(M.circular_ramp(resolution=32, width_m=3e-3))
     assert ax.get_xlabel() == "x [mm]"

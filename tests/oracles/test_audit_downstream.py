@@ -14,9 +14,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from mincam_sim.calibration import Calibration1D, Calibration2D, ExtrapolationWarning, NonMonotonicCalibrationWarning
 from mincam_sim.errors import ConfigError
-from mincam_sim.estimators import (
+from mincam_sim.estimation.calibration import (
+    Calibration1D,
+    Calibration2D,
+    ExtrapolationWarning,
+    NonMonotonicCalibrationWarning,
+)
+from mincam_sim.estimation.estimators import (
     AliasingError,
     aliased_speed,
     centroid,
@@ -28,10 +33,10 @@ from mincam_sim.estimators import (
     track_3,
     track_4,
 )
-from mincam_sim.forward_model import ideal_measurement, speed_signal
-from mincam_sim.metrics import error_rates, speed_error_rates
-from mincam_sim.readout import Readout
-from mincam_sim.sensor import SensorModel
+from mincam_sim.estimation.metrics import error_rates, speed_error_rates
+from mincam_sim.model.forward_model import ideal_measurement, speed_signal
+from mincam_sim.model.readout import Readout
+from mincam_sim.model.sensor import SensorModel
 
 Z = 5.0
 
@@ -361,7 +366,7 @@ def test_two_objects_entering_at_once_give_the_weighted_mean_of_their_centroids(
 def test_read_out_edge_inputs():
     """An empty frame set reads out (background and threshold only); all-dark input and NaN irradiances are
     refused with a message that says so (they failed with numpy's 'zero-size array' or an exposure error)."""
-    from mincam_sim.readout import read_out
+    from mincam_sim.model.readout import read_out
 
     sensor = SensorModel.paper_prototype()
     empty = read_out(np.zeros((0, 2)), np.ones(2), sensor, np.random.default_rng(0))

@@ -1,5 +1,5 @@
 """Audit of the display geometry: the exact visibility check (:func:`mincam_sim.scene.display.check_visible`), the
-exact-shadow quadrature oracle (:func:`mincam_sim.quadrature.mixel_irradiance_polygon`) against closed forms,
+exact-shadow quadrature oracle (:func:`mincam_sim.oracles.quadrature.mixel_irradiance_polygon`) against closed forms,
 and every render form against that oracle on geometries the other tests never used (tilted and rolled mixels,
 off-axis screens cut by the view, a screen a few mask widths away, d_f from 0.05 mm to 60 mm, 2 x 3 mm masks,
 a ramp and an off-axis sinusoid). Monte Carlo tolerances: Z = 4.5 estimated standard errors (conftest)."""
@@ -11,10 +11,10 @@ import pytest
 from conftest import assert_close_mc
 
 from mincam_sim import Aperture, Budget, Mincam, Mixel, Pose, Reference, ResponseMap, Screen, Simulation, masks, single
-from mincam_sim.closed_forms import open_aperture_irradiance
-from mincam_sim.geometry import look_at
-from mincam_sim.optics import cross_layout, pair_layout
-from mincam_sim.quadrature import (
+from mincam_sim.model.geometry import look_at
+from mincam_sim.model.optics import cross_layout, pair_layout
+from mincam_sim.oracles.closed_forms import open_aperture_irradiance
+from mincam_sim.oracles.quadrature import (
     mixel_irradiance_gl,
     mixel_irradiance_polygon,
     open_aperture_view_factor_irradiance,

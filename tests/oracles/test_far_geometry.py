@@ -9,8 +9,8 @@ import pytest
 from conftest import assert_close_mc
 
 from mincam_sim import Aperture, Budget, ResponseMap, Simulation
-from mincam_sim.geometry import Pose
-from mincam_sim.optics import pair_layout
+from mincam_sim.model.geometry import Pose
+from mincam_sim.model.optics import pair_layout
 from mincam_sim.scene.display import Screen
 
 FORWARD = np.array([0.3, -0.2, -1.0]) / np.linalg.norm([0.3, -0.2, -1.0])

@@ -11,7 +11,7 @@ from conftest import Z, assert_close_mc
 from scipy.optimize import curve_fit
 
 from mincam_sim import Aperture, Budget, Mincam, Mixel, Pose, Reference, Screen, Simulation, masks, single
-from mincam_sim.closed_forms import open_aperture_irradiance
+from mincam_sim.oracles.closed_forms import open_aperture_irradiance
 from mincam_sim.scene.display import vertical_line, white_square
 
 SPP = 1 << 18

@@ -13,12 +13,12 @@ from front import changes, estimates
 import mincam_sim as ms
 from mincam_sim import Pose, cross_layout
 from mincam_sim.render import backend
-from mincam_sim.render import scene_dicts as sd
-from mincam_sim.render import stratified as st
-from mincam_sim.render.change_geometry import changed_shapes
-from mincam_sim.render.elements import transform_update
+from mincam_sim.render.kernels import stratified as st
+from mincam_sim.render.kernels.change_geometry import changed_shapes
+from mincam_sim.render.scene import scene_dicts as sd
+from mincam_sim.render.scene.elements import transform_update
+from mincam_sim.render.scene.updates import vertex_update
 from mincam_sim.render.solvers.change import STRATA_EXPANSIONS
-from mincam_sim.render.updates import vertex_update
 
 pytestmark = pytest.mark.skipif(not backend.is_jit(), reason="needs a JIT variant (LLVM or CUDA)")
 
@@ -247,7 +247,7 @@ def test_a_turning_smooth_mesh_on_a_far_tilted_rig_gives_the_traced_numbers():
 def test_vertex_updates_never_write_into_the_callers_arrays():
     """Dr.Jit maps a float32 numpy array without copying, and vertex updates are written in place: the scene
     holds a private copy, so the arrays a caller built (the scene's and every frame's) stay as they were."""
-    from mincam_sim.render.mincam_scene import MincamScene
+    from mincam_sim.render.scene.mincam_scene import MincamScene
 
     placed = [np.asarray(TOY.vertices + [0.01 * k, 0.0, 0.0], dtype=np.float32) for k in range(4)]
     kept = [p.copy() for p in placed]
@@ -264,7 +264,7 @@ def test_vertex_updates_never_write_into_the_callers_arrays():
 def test_frozen_paired_launches_of_several_sizes_equal_the_traced_ones(monkeypatch):
     """With a lane limit that splits a pass into launches of unequal sizes (the last one shorter), and a frame
     that moves nothing, frozen paired launches still give the traced, full numbers bit for bit."""
-    from mincam_sim.render import tracing
+    from mincam_sim.render.kernels import tracing
 
     world, frames, background = _world(ball=False)
     frames = [*frames[:2], dict(background), frames[2]]  # the third frame is the background itself

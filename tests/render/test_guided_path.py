@@ -14,7 +14,7 @@ import pytest
 from conftest import assert_close_mc
 
 from mincam_sim.render import backend
-from mincam_sim.render.guided_path import MAX_GUIDED_DEPTH, guide_sphere, guided_radiance, supports
+from mincam_sim.render.kernels.guided_path import MAX_GUIDED_DEPTH, guide_sphere, guided_radiance, supports
 
 BLOCKS = 4
 REPLICATES = 16

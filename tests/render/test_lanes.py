@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mincam_sim.optics import pair_layout
+from mincam_sim.model.optics import pair_layout
 from mincam_sim.scene.display import Screen
 
 
@@ -24,7 +24,8 @@ def _needs_jit():
 def test_lane_sampler_draws_what_the_launch_sampler_draws(seed, launch):
     """Lane i of launch g, drawn among other launches' lanes, equals lane i of ``seeded_sampler(seed, g, n)``."""
     _needs_jit()
-    from mincam_sim.render import backend, tracing
+    from mincam_sim.render import backend
+    from mincam_sim.render.kernels import tracing
 
     mi = backend.mitsuba()
 
@@ -55,8 +56,8 @@ def test_response_maps_do_not_depend_on_the_lane_limit(monkeypatch, kw):
     """A limit of a few texels per launch (chunks that start mid-row) gives the maps of one launch, bit for bit,
     and every launch stays within the limit."""
     _needs_jit()
-    from mincam_sim.render import tracing
-    from mincam_sim.render.response_map import response_maps
+    from mincam_sim.render.kernels import tracing
+    from mincam_sim.render.kernels.map_tracing import response_maps
 
     screen = Screen(resolution=(16, 9))
     one = response_maps(pair_layout(), screen, **kw)
@@ -80,8 +81,8 @@ def test_response_maps_do_not_depend_on_the_lane_limit(monkeypatch, kw):
 def test_ray_groups_launch_within_the_lane_limit(monkeypatch):
     """``trace_groups`` (fast and reference forms) splits its groups at the same limit."""
     _needs_jit()
-    from mincam_sim.render import tracing
-    from mincam_sim.render.mincam_scene import MincamScene
+    from mincam_sim.render.kernels import tracing
+    from mincam_sim.render.scene.mincam_scene import MincamScene
 
     scene = MincamScene.display(pair_layout(), Screen(resolution=(16, 9)))
     scene.set_frame(np.ones((9, 16)))
@@ -105,8 +106,8 @@ def test_stratified_passes_launch_within_the_lane_limit(monkeypatch):
     import drjit as dr
     from test_moving import _world
 
-    from mincam_sim.render import stratified, tracing
-    from mincam_sim.render.change_region import ApertureRegions
+    from mincam_sim.render.kernels import stratified, tracing
+    from mincam_sim.render.kernels.change_region import ApertureRegions
 
     world, _, bg = _world({}, (0.06, 0.06, 0.03))
     world.update(bg)

@@ -11,11 +11,11 @@ from front import changes, estimates
 
 import mincam_sim as ms
 from mincam_sim import Pose
-from mincam_sim.optics import cross_layout
+from mincam_sim.model.optics import cross_layout
 from mincam_sim.render import backend
-from mincam_sim.render import scene_dicts as sd
-from mincam_sim.render.change_region import ApertureRegions, change_points, mixel_regions
-from mincam_sim.render.updates import vertex_update
+from mincam_sim.render.kernels.change_region import ApertureRegions, change_points, mixel_regions
+from mincam_sim.render.scene import scene_dicts as sd
+from mincam_sim.render.scene.updates import vertex_update
 
 HEIGHT = 0.4  # [m] mixels above the table
 PARK = np.array([5.0, 5.0, 0.0])  # [m] where moving objects wait out of view
@@ -88,7 +88,7 @@ def test_light_partly_blocked():
 def test_wrong_region_costs_variance_not_bias():
     """Bounds that miss the object entirely (or are empty) still give an unbiased estimate: the other strata
     cover the whole aperture."""
-    from mincam_sim.render.stratified import stratified_estimates
+    from mincam_sim.render.kernels.stratified import stratified_estimates
 
     world, frames, bg = _world({}, (0.06, 0.06, 0.03))
     world.update({**bg, **frames([(0.05, 0.0, 0.0)])[0]})
@@ -118,7 +118,7 @@ def test_reported_sigma_matches_spread_over_seeds():
 def test_jittered_background_agrees_with_plain_and_reports_its_spread():
     """The background's whole-aperture value of the stratified runs (aperture points on a jittered grid) is the
     independent estimator's value within sigma, and its reported sigma is the spread over 8 seeds."""
-    from mincam_sim.render.stratified import whole_aperture_estimates
+    from mincam_sim.render.kernels.stratified import whole_aperture_estimates
 
     world, frames, bg = _world({}, (0.04, 0.02, 0.02))
     world.update(bg)
@@ -138,7 +138,7 @@ def test_jittered_background_agrees_with_plain_and_reports_its_spread():
 def test_guide_sphere_holds_the_mover_and_its_shadow_in_scene_coordinates():
     """The guide of a frame holds the moved box's corners and the shadow they cast on the table from the light's
     corners (scene coordinates: the world shifted by minus the mincam's centre); unbounded changes have none."""
-    from mincam_sim.render.change_region import box_corners
+    from mincam_sim.render.kernels.change_region import box_corners
 
     world, frames, bg = _world({}, (0.04, 0.02, 0.02))
     world.update({**bg, **frames([(0.05, -0.03, 0.0)])[0]})
@@ -161,7 +161,7 @@ def test_same_seed_same_numbers():
     b, pb = changes(world, fr, bg, spp=1 << 12, seed=5, solver=ms.StratifiedChange())
     np.testing.assert_array_equal(a.irradiance_w_m2, b.irradiance_w_m2)
     np.testing.assert_array_equal(pa.stderr_w_m2, pb.stderr_w_m2)
-    assert a.meta["estimator"] == "stratified" and a.meta["rays_per_mixel_per_frame"] > 0
+    assert a.meta["solver"] == "stratified_change" and a.meta["rays_per_mixel_per_frame"] > 0
     assert a.meta["guide_bounces"] and a.meta["guided_frames"] == 1
 
 
@@ -198,8 +198,8 @@ def test_small_box_high_precision_and_what_the_region_leaves_out():
     """The benchmark's kind of scene (a 4 x 2 x 2 cm box): stratified vs plain resolving 1 % of the largest
     change, and the part of dP outside the region bounds (light the box reflects onto the table) is many sigma
     from zero: an estimator of the region alone would be biased; the rings and the rest keep it unbiased."""
+    from mincam_sim.render.kernels.stratified import stratified_estimates
     from mincam_sim.render.solvers.change import STRATA_EXPANSIONS
-    from mincam_sim.render.stratified import stratified_estimates
 
     world, frames, bg = _world({}, (0.04, 0.02, 0.02))
     fr = frames([(0.03, 0.02, 0.0), (-0.06, -0.01, 0.0)])
@@ -224,7 +224,7 @@ def test_small_box_high_precision_and_what_the_region_leaves_out():
 def test_only_shapes_that_differ_from_the_background_bound_the_region():
     """Updates that re-set a parked shape to its background value do not move it (tracking frames re-park every
     toy but the active one): only the active shape's bounds enter the region."""
-    from mincam_sim.render.change_geometry import changed_shapes
+    from mincam_sim.render.kernels.change_geometry import changed_shapes
 
     bg = {"a.vertex_positions": np.zeros(6, np.float32), "b.vertex_positions": np.ones(6, np.float32)}
     frame = {"a.vertex_positions": np.full(6, 2.0, np.float32), "b.vertex_positions": np.ones(6, np.float32),
@@ -250,8 +250,8 @@ def _tilted_mincam():
     """Two mixels at ~0.3 m looking obliquely down at the table, rolled, with different d_f, non-square masks
     (2 x 3 mm), an off-axis sinusoid and a 0.2 mm detector."""
     from mincam_sim import masks
-    from mincam_sim.geometry import look_at
-    from mincam_sim.optics import Mincam, Mixel
+    from mincam_sim.model.geometry import look_at
+    from mincam_sim.model.optics import Mincam, Mixel
 
     first = look_at((0.12, -0.08, 0.3), (-0.03, 0.04, 0.0), up=(0.5, 1.0, 0.2))
     left, _, _ = first.axes()

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from mincam_sim.render.estimation import TARGET_MARGIN, UNSEEN_GROWTH, pilot_to_target
+from mincam_sim.render.kernels.monte_carlo import TARGET_MARGIN, UNSEEN_GROWTH, pilot_to_target
 
 TARGET = 0.01
 
@@ -56,8 +56,8 @@ def test_a_missed_target_is_a_warning_not_silence(monkeypatch):
     """Response maps at their sample cap: the reached noise is above the target, and the run says so."""
     import pytest
 
-    from mincam_sim.optics import pair_layout
-    from mincam_sim.render.estimation import TargetNotReachedWarning
+    from mincam_sim.model.optics import pair_layout
+    from mincam_sim.render.kernels.monte_carlo import TargetNotReachedWarning
     from mincam_sim.render.solvers import response_map
     from mincam_sim.scene.display import Screen
 
@@ -77,7 +77,7 @@ def _map_measure(mincam, screen, frames, **budget):
 
 
 def test_the_budgets_replicates_reach_the_response_maps():
-    from mincam_sim.optics import pair_layout
+    from mincam_sim.model.optics import pair_layout
     from mincam_sim.scene.display import Screen
 
     screen = Screen(resolution=(16, 9))
@@ -90,7 +90,7 @@ def test_the_budgets_replicates_reach_the_response_maps():
 def test_the_response_map_search_always_moves_on(monkeypatch):
     """Samples per texel are traced as replicates x k^2: doubling 16 (k = 2) rounds back to 16, and the search
     for a target just out of reach used to repeat that attempt forever. Each step now adds a stratum."""
-    from mincam_sim.optics import pair_layout
+    from mincam_sim.model.optics import pair_layout
     from mincam_sim.scene.display import Screen
 
     screen = Screen(resolution=(32, 18))
@@ -111,7 +111,7 @@ def test_a_store_of_other_replicates_is_not_reused(tmp_path):
 
     import mincam_sim as ms
     from mincam_sim.errors import StoreError
-    from mincam_sim.optics import pair_layout
+    from mincam_sim.model.optics import pair_layout
     from mincam_sim.scene.display import Screen
 
     screen = Screen(resolution=(16, 9))
@@ -181,7 +181,7 @@ def test_the_response_map_search_traces_stratum_steps():
     """The maps' search (the same rule): every attempt is replicates x k^2 samples per texel, more each step,
     and its last maps reach the target."""
     import mincam_sim as ms
-    from mincam_sim.optics import pair_layout
+    from mincam_sim.model.optics import pair_layout
     from mincam_sim.render.solvers.response_map import maps_to_target
     from mincam_sim.scene.display import Screen
 

@@ -1,5 +1,5 @@
 """Every form unbiased on geometries that couple detector and screen, against independent float64 oracles
-(:mod:`mincam_sim.quadrature`): tilted mixels, rotated screens, off-axis sinusoids, mixels that shadow each
+(:mod:`mincam_sim.oracles.quadrature`): tilted mixels, rotated screens, off-axis sinusoids, mixels that shadow each
 other, a close occluder, exact masks. Tolerances: Z = 4.5 estimated standard errors (conftest)."""
 
 from __future__ import annotations
@@ -10,10 +10,10 @@ from conftest import Z, assert_close_mc
 
 import mincam_sim as ms
 from mincam_sim import Mincam, Mixel, Pose, Screen, masks
-from mincam_sim.geometry import look_at
 from mincam_sim.masks import Mask
-from mincam_sim.quadrature import mixel_irradiance_gl, open_aperture_view_factor_irradiance
-from mincam_sim.render.response_map import response_maps  # the map kernel
+from mincam_sim.model.geometry import look_at
+from mincam_sim.oracles.quadrature import mixel_irradiance_gl, open_aperture_view_factor_irradiance
+from mincam_sim.render.kernels.map_tracing import response_maps  # the map kernel
 from mincam_sim.scene.display import coverage
 
 TILT_SCREEN = Screen(width_m=0.4, height_m=0.3, resolution=(80, 60),

@@ -11,11 +11,11 @@ import trimesh
 
 import mincam_sim as ms
 from mincam_sim.errors import InputError, StaleResultError
-from mincam_sim.render import scene_dicts as sd
-from mincam_sim.render.estimation import replicate_mean_stderr
-from mincam_sim.render.mincam_scene import MincamScene
-from mincam_sim.render.response_map import response_maps
-from mincam_sim.render.updates import vertex_update
+from mincam_sim.render.kernels.map_tracing import response_maps
+from mincam_sim.render.kernels.monte_carlo import replicate_mean_stderr
+from mincam_sim.render.scene import scene_dicts as sd
+from mincam_sim.render.scene.mincam_scene import MincamScene
+from mincam_sim.render.scene.updates import vertex_update
 
 
 def _frames(screen, n=3):
@@ -59,7 +59,7 @@ def test_world_changes_are_typed(solver):
     cam, elements, frames = _world_parts()
     ch = ms.Simulation(cam, world=elements).measure_changes(frames, solver=solver, budget=ms.Budget(spp=1 << 12))
     assert isinstance(ch.info, ms.RunInfo) and ch.dp.meta["solver"] == solver.name
-    assert ch.info.estimator == solver.name and ch.info.rays_per_mixel_per_frame > 0
+    assert ch.info.solver == solver.name and ch.info.rays_per_mixel_per_frame > 0
     assert ch.info.reached_rel_stderr is not None and ch.info.replicates == 8
     assert np.all(np.abs(ch.dp.irradiance_w_m2) > 3 * ch.dp.stderr_w_m2)
 

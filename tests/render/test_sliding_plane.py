@@ -16,10 +16,10 @@ import trimesh
 import mincam_sim as ms
 from mincam_sim import Pose, masks
 from mincam_sim.errors import InputError
-from mincam_sim.optics import Mincam, Mixel
+from mincam_sim.model.optics import Mincam, Mixel
 from mincam_sim.render import backend
-from mincam_sim.render import scene_dicts as sd
-from mincam_sim.render.estimation import replicate_mean_stderr
+from mincam_sim.render.kernels.monte_carlo import replicate_mean_stderr
+from mincam_sim.render.scene import scene_dicts as sd
 from mincam_sim.render.solvers.plane_replay import SlidingPlane
 
 pytestmark = pytest.mark.skipif(not backend.is_jit(), reason="needs a JIT variant (LLVM or CUDA)")

@@ -11,11 +11,11 @@ from conftest import assert_close_mc
 
 import mincam_sim as ms
 from mincam_sim import Pose
-from mincam_sim.optics import cross_layout
-from mincam_sim.render import scene_dicts as sd
-from mincam_sim.render.change_region import ApertureRegions
+from mincam_sim.model.optics import cross_layout
+from mincam_sim.render.kernels.change_region import ApertureRegions
+from mincam_sim.render.kernels.stratified import stratified_estimates
+from mincam_sim.render.scene import scene_dicts as sd
 from mincam_sim.render.solvers.change import STRATA_EXPANSIONS
-from mincam_sim.render.stratified import stratified_estimates
 
 REPLICATES = 16
 

@@ -9,11 +9,11 @@ from conftest import assert_close_mc
 
 import mincam_sim as ms
 from mincam_sim import Pose, masks, single
-from mincam_sim.closed_forms import open_aperture_irradiance
 from mincam_sim.errors import InputError
-from mincam_sim.optics import cross_layout
-from mincam_sim.render import scene_dicts as sd
-from mincam_sim.render.updates import vertex_update
+from mincam_sim.model.optics import cross_layout
+from mincam_sim.oracles.closed_forms import open_aperture_irradiance
+from mincam_sim.render.scene import scene_dicts as sd
+from mincam_sim.render.scene.updates import vertex_update
 
 HEIGHT = 0.5
 PARK = np.array([5.0, 5.0, 0.0])

@@ -14,12 +14,12 @@ import trimesh
 from conftest import assert_close_mc
 
 import mincam_sim as ms
+from mincam_sim.configuration.world_config import load_world_config, world_example_toml
 from mincam_sim.errors import ConfigError, InputError, StaleResultError
-from mincam_sim.estimators import intrusion_position
-from mincam_sim.jobs import run_world_config
-from mincam_sim.render import scene_dicts as sd
-from mincam_sim.render.updates import vertex_update
-from mincam_sim.world_config import load_world_config, world_example_toml
+from mincam_sim.estimation.estimators import intrusion_position
+from mincam_sim.render.scene import scene_dicts as sd
+from mincam_sim.render.scene.updates import vertex_update
+from mincam_sim.runs.jobs import run_world_config
 
 ROOM = Path(__file__).resolve().parents[2] / "scenes" / "world"
 CAM = ms.pair_layout(center=ms.Pose((0.0, 0.0, 0.4), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)))
@@ -71,7 +71,7 @@ def test_a_mesh_read_by_trimesh_measures_as_mitsubas_own_loader(tmp_path, fmt):
     same file through Mitsuba's obj / ply plugin with face normals. (Mitsuba's loaders smooth the normals across
     vertices that faces share by default: on this box-shaped car that read 1.1-2.3 % brighter, 7-11 sigma;
     a trimesh mesh is shaded flat, as its geometry is: mitsuba3 #1787.)"""
-    from mincam_sim.render.scene_files import read_mesh
+    from mincam_sim.render.scene.scene_files import read_mesh
 
     path = tmp_path / f"toy.{fmt}"
     car = trimesh.load(ROOM / "toy_car.obj", force="mesh", process=False)
@@ -133,7 +133,7 @@ def test_a_y_up_scene_measures_as_its_z_up_twin(tmp_path):
     z_up = ms.Simulation(CAM, world=ROOM / "room.xml")
     config = _room_copy(tmp_path, _y_up)
     cfg = load_world_config(config)
-    from mincam_sim.jobs import build_elements
+    from mincam_sim.runs.jobs import build_elements
 
     cfg.up = "y"
     turned = ms.Simulation(CAM, world=build_elements(cfg))
@@ -187,7 +187,7 @@ def test_bad_files_are_one_clear_error(tmp_path):
     _write(tmp_path, "junk.obj", "this is not a mesh\n")
     cfg = load_world_config(_write(tmp_path, "d.toml", '[world]\n[[world.object]]\nid = "junk"\nmesh = "junk.obj"\n'
                                                        '[[world.mover]]\nid = "junk"\noffsets_m = [[0, 0, 0]]\n'))
-    from mincam_sim.jobs import build_elements
+    from mincam_sim.runs.jobs import build_elements
 
     with pytest.raises(InputError, match="junk.obj"):
         build_elements(cfg)
@@ -230,7 +230,7 @@ def test_measure_changes_in_world_coordinates_from_python():
     v0 = sim.params["toy_car.vertex_positions"].reshape(-1, 3)
     frames = [vertex_update("toy_car", v0 + [dx, 0.0, 0.0]) for dx in (0.05, 0.1)]
     ch = sim.measure_changes(frames, background={}, budget=ms.Budget(spp=1 << 12))
-    assert ch.dp.irradiance_w_m2.shape == (2, 2) and ch.info.estimator == "stratified"
+    assert ch.dp.irradiance_w_m2.shape == (2, 2) and ch.info.solver == "stratified_change"
 
 
 _TOP = """<scene version="3.0.0">

@@ -18,13 +18,13 @@ from rare_paths import rare_scene, tail_counts
 import mincam_sim as ms
 from mincam_sim import Pose, masks
 from mincam_sim.errors import InputError
-from mincam_sim.optics import Mincam, Mixel, cross_layout
-from mincam_sim.quadrature import open_aperture_view_factor_irradiance
+from mincam_sim.model.optics import Mincam, Mixel, cross_layout
+from mincam_sim.oracles.quadrature import open_aperture_view_factor_irradiance
 from mincam_sim.render import backend
-from mincam_sim.render import scene_dicts as sd
-from mincam_sim.render.estimation import dominance_threshold, heavy_tailed
+from mincam_sim.render.kernels.monte_carlo import dominance_threshold, heavy_tailed
+from mincam_sim.render.scene import scene_dicts as sd
+from mincam_sim.render.scene.updates import vertex_update
 from mincam_sim.render.solvers.change import FallbackWarning
-from mincam_sim.render.updates import vertex_update
 from mincam_sim.scene.display import Screen
 
 

@@ -148,7 +148,7 @@ def test_a_full_disk_names_the_file_and_leaves_nothing_half_written(tmp_path, mo
 
 def test_a_second_study_in_a_locked_out_dir_is_refused_naming_its_holder(tmp_path):
     holder = subprocess.Popen(
-        [sys.executable, "-c", "import sys, time; from mincam_sim.store import lock_out_dir; "
+        [sys.executable, "-c", "import sys, time; from mincam_sim.storage.store import lock_out_dir; "
          f"lock = lock_out_dir({str(tmp_path)!r}); print('locked', flush=True); time.sleep(60)"],
         stdout=subprocess.PIPE, text=True, cwd=ROOT, env={"PYTHONPATH": str(ROOT), "PATH": ""})
     try:

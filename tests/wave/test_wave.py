@@ -17,7 +17,7 @@ from scipy.special import fresnel
 
 from mincam_sim import masks, wave
 from mincam_sim.masks.profiles import NUMPY_OPS, Band, Constant, MaskProfile
-from mincam_sim.optics import Mixel
+from mincam_sim.model.optics import Mixel
 
 LAM = 550e-9  # [m]
 
@@ -294,7 +294,7 @@ def test_rendered_wave_measurement_matches_quadrature_of_the_response():
     from conftest import assert_close_mc
 
     from mincam_sim import Aperture, Budget, Simulation, single
-    from mincam_sim.render.mask_eval import wave_table  # the ray model's table: the quadrature's integrand
+    from mincam_sim.render.kernels.mask_eval import wave_table  # the ray model's table: the quadrature's integrand
     from mincam_sim.scene.display import Screen
 
     screen = Screen()
@@ -336,7 +336,7 @@ def test_reference_form_refuses_wave_optics():
 
 
 def test_config_selects_wave_optics():
-    from mincam_sim.config import load_config
+    from mincam_sim.configuration.config import load_config
     from mincam_sim.errors import ConfigError
 
     cfg = load_config('[mincam]\noptics = "wave"\nwavelengths_m = [500e-9, 600e-9]\n')
@@ -355,7 +355,7 @@ def test_config_selects_wave_optics():
 
 
 def test_optics_enters_run_identities_only_when_not_default():
-    from mincam_sim.identity import canonical, fingerprint
+    from mincam_sim.storage.identity import canonical, fingerprint
 
     geo = Mixel(masks.ramp("x"))
     assert "optics" not in canonical(geo) and "wavelengths_m" not in canonical(geo)  # older stores stay valid

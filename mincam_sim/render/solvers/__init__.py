@@ -15,7 +15,7 @@ file                   role
 ``reference.py``       :class:`Reference` (displays): the literal scene per mixel, Mitsuba's irradiance meter
 ``aperture.py``        :class:`Aperture` (displays and worlds): rays started on the mask aperture (fast form)
 ``response_map.py``    :class:`ResponseMap` (displays): maps over the screen's texels, the quantised target search;
-                       a frame is ``sum(W * frame)`` (kernel: ``mincam_sim.render.response_map``)
+                       a frame is ``sum(W * frame)`` (kernel: ``mincam_sim.render.kernels.map_tracing``)
 ``change.py``          :class:`PlainChange`, :class:`StratifiedChange` (worlds): dP against a background, the
                        pilots, the retry of heavy-tailed frames, the typed :class:`~mincam_sim.changes.RunInfo`
 ``plane_replay.py``    :class:`PlaneReplay` (worlds): the aperture's rays traced once, a frame that moves a
@@ -23,13 +23,13 @@ file                   role
 =====================  ===========================================================================================
 """
 
-from ..response_map import ResponseMaps
-from .aperture import Aperture
-from .base import Plan, Solver
-from .change import FallbackWarning, HeavyTailWarning, PlainChange, StratifiedChange
-from .plane_replay import PlaneReplay, SlidingPlane
-from .reference import Reference
-from .response_map import ResponseMap
+from mincam_sim.render.kernels.map_tracing import ResponseMaps
+from mincam_sim.render.solvers.aperture import Aperture
+from mincam_sim.render.solvers.base import Plan, Solver
+from mincam_sim.render.solvers.change import FallbackWarning, HeavyTailWarning, PlainChange, StratifiedChange
+from mincam_sim.render.solvers.plane_replay import PlaneReplay, SlidingPlane
+from mincam_sim.render.solvers.reference import Reference
+from mincam_sim.render.solvers.response_map import ResponseMap
 
 SOLVERS = (Reference, Aperture, ResponseMap, PlainChange, StratifiedChange, PlaneReplay)
 """Every public solver class (the contract test crosses them with its scenes)."""

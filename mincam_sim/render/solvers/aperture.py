@@ -13,11 +13,11 @@ from typing import ClassVar
 
 import numpy as np
 
-from ...budget import Budget
-from ...measurements import Measurements
-from .. import backend
-from ..estimation import replicate_mean_stderr
-from .base import DisplayRaySolver, Plan, Row, check_update_frames
+from mincam_sim.budget import Budget
+from mincam_sim.measurements import Measurements
+from mincam_sim.render import backend
+from mincam_sim.render.kernels.monte_carlo import replicate_mean_stderr
+from mincam_sim.render.solvers.base import DisplayRaySolver, Plan, Row, check_update_frames
 
 DEFAULT_WORLD_REPLICATES = 8
 

@@ -5,7 +5,7 @@ A :class:`Solver` is a small frozen dataclass of options. :meth:`Solver.plan` lo
 the budget (pilots, target searches) and returns a :class:`Plan`: how many rows (frames) it measures, their
 columns, the rows themselves (``rows(pending)``, for the frames still to do), and the typed result built from every
 row (``result(values, errors)``). :meth:`Simulation.measure` runs a plan through a
-:class:`~mincam_sim.frames.FrameSink`; a :class:`mincam_sim.run.Run` hands it a store that resumes.
+:class:`~mincam_sim.frames.FrameSink`; a :class:`mincam_sim.runs.run.Run` hands it a store that resumes.
 
 The display ray solvers (:class:`~.aperture.Aperture` and :class:`~.reference.Reference`) share
 :class:`DisplayRayPlan` here: each says only how one frame's replicate estimates are traced.
@@ -19,12 +19,13 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ...budget import Budget
-from ...errors import InputError
-from ...measurements import Measurements
-from ...progress import progress
-from .. import backend
-from ..estimation import (
+from mincam_sim.budget import Budget
+from mincam_sim.errors import InputError
+from mincam_sim.measurements import Measurements
+from mincam_sim.progress import progress
+from mincam_sim.render import backend
+from mincam_sim.render.kernels.mask_eval import mask_model_meta
+from mincam_sim.render.kernels.monte_carlo import (
     check_counts,
     derive_seed,
     pilot_to_target,
@@ -33,8 +34,7 @@ from ..estimation import (
     warn_unreached,
     worst_relative_stderr,
 )
-from ..mask_eval import mask_model_meta
-from ..mincam_scene import geometry_meta
+from mincam_sim.render.scene.mincam_scene import geometry_meta
 
 Row = tuple[Any, np.ndarray, np.ndarray]
 DEFAULT_RAY_REPLICATES = 8  # display rays: independent groups per measurement

@@ -7,11 +7,12 @@ per-replicate differences, so it includes that correlation.
 * :class:`PlainChange` (the reference): every frame traced over the whole aperture with the background's seed;
   the background traced once.
 * :class:`StratifiedChange`: per frame and mixel, the aperture region where the frame can differ from the
-  background (``mincam_sim.render.change_geometry``, ``change_region``: the moving shapes' bounds and their shadow
+  background (``mincam_sim.render.kernels.change_geometry``, ``change_region``: the moving shapes' bounds and their
+  shadow
   volumes from the emitting shapes, for both the frame and the background) gets most rays, the rest of the
-  aperture a few, both strata unbiased (``mincam_sim.render.stratified``). The frame and the background are
+  aperture a few, both strata unbiased (``mincam_sim.render.kernels.stratified``). The frame and the background are
   traced with the same seed, counts and regions, so their rays pair up lane by lane; inter-reflection bounces
-  are guided toward the moving shapes (``mincam_sim.render.guided_path``); the background's whole-aperture
+  are guided toward the moving shapes (``mincam_sim.render.kernels.guided_path``); the background's whole-aperture
   value (for ``P``) is traced once per run, on a jittered aperture grid with at least
   ``BACKGROUND_MIN_SPP`` rays. Kernels are compiled once and reused; each frame costs one parameter update
   for the frame and one back to the background.
@@ -29,15 +30,17 @@ from typing import ClassVar
 
 import numpy as np
 
-from ...budget import Budget
-from ...changes import Changes, RunInfo
-from ...errors import InputError
-from ...frames import MemoryTable, collect
-from ...measurements import Measurements
-from ...progress import progress
-from .. import backend
-from ..change_geometry import changed_shapes, emitters_among, moving_shapes, watch_box
-from ..estimation import (
+from mincam_sim.budget import Budget
+from mincam_sim.changes import Changes, RunInfo
+from mincam_sim.errors import InputError
+from mincam_sim.frames import MemoryTable, collect
+from mincam_sim.measurements import Measurements
+from mincam_sim.progress import progress
+from mincam_sim.render import backend
+from mincam_sim.render.kernels.change_geometry import changed_shapes, emitters_among, moving_shapes, watch_box
+from mincam_sim.render.kernels.guided_path import supports as guided_path_supports
+from mincam_sim.render.kernels.mask_eval import mask_model_meta
+from mincam_sim.render.kernels.monte_carlo import (
     check_counts,
     derive_seed,
     heavy_tailed,
@@ -46,12 +49,15 @@ from ..estimation import (
     warn_unreached,
     worst_relative_stderr,
 )
-from ..guided_path import supports as guided_path_supports
-from ..mask_eval import mask_model_meta
-from ..mincam_scene import geometry_meta
-from ..stratified import check_strata, frozen_recordings, stratified_lanes, whole_aperture_estimates
-from ..world_input import check_frames
-from .base import Plan, Row, Solver
+from mincam_sim.render.kernels.stratified import (
+    check_strata,
+    frozen_recordings,
+    stratified_lanes,
+    whole_aperture_estimates,
+)
+from mincam_sim.render.scene.mincam_scene import geometry_meta
+from mincam_sim.render.scene.world_input import check_frames
+from mincam_sim.render.solvers.base import Plan, Row, Solver
 
 MAX_SPP = 1 << 26  # cap of the target-noise budget, samples per mixel per frame
 STRATA_EXPANSIONS = (1.0, 2.0, 4.0, 8.0)  # nested rectangles: the change region, then scaled about its centre
@@ -145,7 +151,7 @@ class ChangeSolver(Solver):
 class PlainChange(ChangeSolver):
     """dP with whole-aperture rays per frame, traced with the background's seed (the reference)."""
 
-    name: ClassVar[str] = "plain"
+    name: ClassVar[str] = "plain_change"
 
     def background_estimates(self, sim, spp, seed, replicates):
         return spp, sim.mincam_scene.fast_estimates(spp, replicates, seed)
@@ -167,7 +173,8 @@ class StratifiedChange(ChangeSolver):
         Scale factors of the nested rectangles about the region's centre, from 1 (one fewer than the shares).
     guide_bounces : bool
         Draw half the inter-reflection bounces toward spheres around the moving shapes
-        (``mincam_sim.render.guided_path``; unbiased). Ignored at a ``max_depth`` the guided path does not cover.
+        (``mincam_sim.render.kernels.guided_path``; unbiased). Ignored at a ``max_depth`` the guided path does not
+        cover.
     correlated : bool
         As ``ChangeSolver``.
     """
@@ -175,7 +182,7 @@ class StratifiedChange(ChangeSolver):
     strata_shares: Sequence[float] = STRATA_SHARES
     strata_expansions: Sequence[float] = STRATA_EXPANSIONS
     guide_bounces: bool = True
-    name: ClassVar[str] = "stratified"
+    name: ClassVar[str] = "stratified_change"
 
     def _check(self, frames, background, spp, replicates, target) -> None:
         super()._check(frames, background, spp, replicates, target)
@@ -228,7 +235,7 @@ class ChangePlan(Plan):
         sim, run, bg = self.sim, self.run, self.bg
         sim.update(self.background)
         n, names = len(sim.mincam), sim.mincam.names
-        meta = {"form": "fast_world", "estimator": self.solver.name, "solver": self.solver.name,
+        meta = {"form": "fast_world", "solver": self.solver.name,
                 **run.meta(values[:, 2 * n:]),
                 "spp_per_mixel_per_frame": self.spp, "background_spp_per_mixel": int(self.bg_spp), "seed": self.seed,
                 "correlated_seeds": self.solver.correlated, "replicates": self.replicates,
@@ -244,7 +251,7 @@ class ChangePlan(Plan):
         dp = Measurements(values[:, :n], errors[:, :n], names, {**meta, "quantity": "dP = P(frame) - P(background)"})
         p = Measurements(values[:, n:2 * n], errors[:, n:2 * n], names, {**meta, "quantity": "P(frame)"})
         info = RunInfo(
-            estimator=self.solver.name, seed=int(self.seed), replicates=int(self.replicates),
+            solver=self.solver.name, seed=int(self.seed), replicates=int(self.replicates),
             rays_per_mixel_per_frame=int(meta["rays_per_mixel_per_frame"]), spp_per_mixel_per_frame=self.spp,
             target_rel_stderr=float(self.target), reached_rel_stderr=meta["reached_rel_stderr"],
             retried_frames=tuple(int(i) for i in meta["retried_frames"]),

@@ -25,13 +25,13 @@ from typing import ClassVar
 
 import numpy as np
 
-from ...budget import Budget
-from ...errors import InputError
-from ...measurements import Measurements
-from .. import backend
-from ..estimation import replicate_mean_stderr
-from ..tracing import lane_sums, sensor_launches
-from .base import Plan, Row, Solver, check_update_frames
+from mincam_sim.budget import Budget
+from mincam_sim.errors import InputError
+from mincam_sim.measurements import Measurements
+from mincam_sim.render import backend
+from mincam_sim.render.kernels.monte_carlo import replicate_mean_stderr
+from mincam_sim.render.kernels.tracing import lane_sums, sensor_launches
+from mincam_sim.render.solvers.base import Plan, Row, Solver, check_update_frames
 
 PLANE_TOLERANCE = 1e-6  # [rad], and [m] per metre from the origin: placements off the first one's plane by more
 # are not in-plane motion (the scene holds its matrices in float32, ~1e-7 relative)
@@ -266,7 +266,7 @@ def _check_scene(world, name: str):
                          "replay only a plane that reflects")
     if bsdf.class_name() != "SmoothDiffuse" or f"{name}.bsdf.reflectance.data" not in world.mincam_scene.params:
         raise InputError(f"SlidingPlane: element {name!r} needs a diffuse BSDF with a bitmap reflectance "
-                         "(mincam_sim.render.scene_dicts.textured_plane), got "
+                         "(mincam_sim.render.scene.scene_dicts.textured_plane), got "
                          f"{bsdf.class_name()}")
     reflecting = sorted(s.id() for s in world.scene.shapes() if s.id() != name and not _black(backend.mitsuba(), s))
     if reflecting:

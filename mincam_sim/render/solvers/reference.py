@@ -9,7 +9,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from .base import DisplayRaySolver
+from mincam_sim.render.solvers.base import DisplayRaySolver
 
 
 @dataclass(frozen=True)

@@ -1,8 +1,8 @@
 """The response-map solver: each mixel's map over the screen's texels (stratified, with its variance), then any
 frame is ``sum(W * frame)``, exact in expectation.
 
-The kernel (:class:`~mincam_sim.render.response_map.ResponseMaps`, the stratified tracer and its content cache)
-is ``mincam_sim.render.response_map``; this module plans a measurement with it: maps at the budget's samples
+The kernel (:class:`~mincam_sim.render.kernels.map_tracing.ResponseMaps`, the stratified tracer and its content cache)
+is ``mincam_sim.render.kernels.map_tracing``; this module plans a measurement with it: maps at the budget's samples
 per texel, or the quantised search for the samples per texel whose measurements of the frames reach the
 budget's target (:func:`maps_to_target`), then the frames measured through the maps chunk by chunk.
 """
@@ -15,11 +15,10 @@ from typing import ClassVar
 
 import numpy as np
 
-from ...budget import DEFAULT_SAMPLES_PER_TEXEL, Budget
-from ...measurements import Measurements
-from ...progress import progress
-from ..estimation import pilot_to_target
-from ..response_map import (
+from mincam_sim.budget import DEFAULT_SAMPLES_PER_TEXEL, Budget
+from mincam_sim.measurements import Measurements
+from mincam_sim.progress import progress
+from mincam_sim.render.kernels.map_tracing import (
     FIRST_SAMPLES_PER_TEXEL,
     FRAME_CHUNK_BYTES,
     MAX_SAMPLES_PER_TEXEL,
@@ -29,7 +28,8 @@ from ..response_map import (
     ResponseMaps,
     response_maps,
 )
-from .base import Plan, Row, Solver, finish_display
+from mincam_sim.render.kernels.monte_carlo import pilot_to_target
+from mincam_sim.render.solvers.base import Plan, Row, Solver, finish_display
 
 DEFAULT_MAP_BLOCKS = 4  # independent blocks of samples per texel
 FRAME_CHUNK = 64  # frames measured per row chunk (at most FRAME_CHUNK_BYTES of frame data)

@@ -3,7 +3,8 @@
 
 Each (solver, scene) pair must
 
-* agree with the scene's independent oracle (:mod:`mincam_sim.closed_forms`, :mod:`mincam_sim.quadrature`:
+* agree with the scene's independent oracle (:mod:`mincam_sim.oracles.closed_forms`,
+:mod:`mincam_sim.oracles.quadrature`:
   float64 quadrature sharing no code with the renderer) within the Monte Carlo error (``assert_close_mc``,
   Z = 4.5 estimated standard errors);
 * give the same numbers for the same seed (and the scene be left as it was found);
@@ -30,14 +31,14 @@ from conftest import assert_close_mc
 
 import mincam_sim as ms
 from mincam_sim import masks
-from mincam_sim.closed_forms import open_aperture_irradiance
 from mincam_sim.errors import InputError
-from mincam_sim.geometry import look_at
-from mincam_sim.optics import Mincam, Mixel
-from mincam_sim.quadrature import mixel_irradiance_gl, open_aperture_view_factor_irradiance
+from mincam_sim.model.geometry import look_at
+from mincam_sim.model.optics import Mincam, Mixel
+from mincam_sim.oracles.closed_forms import open_aperture_irradiance
+from mincam_sim.oracles.quadrature import mixel_irradiance_gl, open_aperture_view_factor_irradiance
 from mincam_sim.render import backend
-from mincam_sim.render import scene_dicts as sd
 from mincam_sim.render import simulation as simulation_module
+from mincam_sim.render.scene import scene_dicts as sd
 from mincam_sim.render.solvers import SOLVERS, ResponseMaps, Solver
 from mincam_sim.scene.display import coverage
 
@@ -280,7 +281,7 @@ def test_results_are_typed(entry, scene):
     if entry.solver.changes:
         assert isinstance(result, ms.Changes) and isinstance(result.info, ms.RunInfo)
         info = result.info
-        assert info.estimator == entry.solver.name and info.seed == entry.budget.seed
+        assert info.solver == entry.solver.name and info.seed == entry.budget.seed
         assert info.replicates == entry.budget.replicates and info.spp_per_mixel_per_frame == entry.budget.spp
         assert isinstance(info.rays_per_mixel_per_frame, int) and info.rays_per_mixel_per_frame > 0
         assert isinstance(info.retried_frames, tuple) and isinstance(info.fallbacks, tuple)

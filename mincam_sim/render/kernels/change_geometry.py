@@ -1,0 +1,172 @@
+"""The geometry oracle of the change solvers: where a frame's change can reach in a world scene.
+
+The scene's delta surfaces (mirrors, glass) and their images, the corner points of the moving shapes with their
+shadow volumes from every light (:func:`change_points_of`), where lights shine from (:func:`light_bounds`), which
+shapes an update moves or changes, and the boxes a path must cross to meet a shape. Read by
+``mincam_sim.render.solvers.change`` and by :class:`~mincam_sim.render.simulation.Simulation` (its change regions
+and guides).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from mincam_sim.render import backend
+from mincam_sim.render.kernels.change_region import box_corners, change_points
+from mincam_sim.render.kernels.guided_path import guide_sphere
+from mincam_sim.render.scene.mincam_scene import CAMERA_KEY, SENSOR_KEY
+
+Updates = Mapping[str, np.ndarray]
+
+
+class DeltaSurfaces:
+    """The scene's delta surfaces (mirrors, glass, null BSDFs): planar ones by their plane, which mirrors a
+    change into an image the mixels can see; curved ones by their bounding box (rays that reach them may go
+    anywhere after)."""
+
+    def __init__(self, planes: dict[str, tuple[np.ndarray, float]], boxes: dict[str, np.ndarray]) -> None:
+        self.planes, self.boxes = planes, boxes
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.planes or name in self.boxes
+
+    def images(self, points: np.ndarray, exclude: str = "") -> list[np.ndarray]:
+        """Point sets to add to a change's region: its mirror images in each planar delta surface, and the
+        boxes of the curved ones (``exclude``: the moving shape itself)."""
+        return self.reflect(points, exclude) + [box for name, box in self.boxes.items() if name != exclude]
+
+    def reflect(self, points: np.ndarray, exclude: str = "") -> list[np.ndarray]:
+        """``points`` (m, 3) mirrored in each planar delta surface's plane but ``exclude``'s."""
+        return [points - 2.0 * (points @ n - c)[:, None] * n for name, (n, c) in self.planes.items() if name != exclude]
+
+    def with_images(self, boxes: list, directions: list) -> tuple[list, list]:
+        """Light boxes and directions plus their images in each planar delta surface (first-order reflections):
+        the shadow a mover casts in light that a mirror throws."""
+        images = [(im.min(axis=0), im.max(axis=0)) for lo, hi in boxes for im in self.reflect(box_corners(lo, hi))]
+        turned = [d - 2.0 * (np.asarray(d) @ n) * n for d in directions for n, _ in self.planes.values()]
+        return boxes + images, list(directions) + turned
+
+    def light_image_spheres(self, scene) -> list[tuple[np.ndarray, float]]:
+        """Spheres around the images of the scene's emitting shapes and point lights in each planar delta
+        surface: the direction in which a bounce meets a light through a mirror."""
+        if not self.planes:
+            return []
+        lights, _ = light_bounds(scene)
+        boxes = [] if lights is None else list(lights[0])
+        boxes += [(np.array(s.bbox().min, dtype=float), np.array(s.bbox().max, dtype=float))
+                  for s in scene.shapes() if s.is_emitter()]
+        return [guide_sphere(im) for lo, hi in boxes for im in self.reflect(box_corners(lo, hi))]
+
+
+def delta_surfaces(scene) -> DeltaSurfaces:
+    """The scene's delta surfaces, planar or not, from 64 points sampled on each."""
+    mi = backend.mitsuba()
+    planes, boxes = {}, {}
+    for shape in scene.shapes():
+        bsdf = shape.bsdf()
+        if shape.is_emitter() or shape.is_sensor() or bsdf is None:
+            continue
+        if not int(bsdf.flags()) & int(mi.BSDFFlags.Delta):
+            continue
+        bb = shape.bbox()
+        lo, hi = np.array(bb.min, dtype=float), np.array(bb.max, dtype=float)
+        g = np.linspace(0.05, 0.95, 8)
+        uu, vv = np.meshgrid(g, g)
+        ps = shape.sample_position(0.0, mi.Point2f(uu.ravel(), vv.ravel()))
+        p = np.array(ps.p, dtype=float).reshape(3, -1).T
+        n = np.array(ps.n, dtype=float).reshape(3, -1).T
+        normal = n[0] / np.linalg.norm(n[0])
+        size = max(float(np.linalg.norm(hi - lo)), 1e-9)
+        if np.all(np.abs(n @ normal) > 1 - 1e-6) and np.all(np.abs((p - p[0]) @ normal) < 1e-6 * size):
+            planes[shape.id()] = (normal, float(p[0] @ normal))
+        else:
+            boxes[shape.id()] = box_corners(lo, hi)
+    return DeltaSurfaces(planes, boxes)
+
+
+def watch_box(shape) -> tuple[np.ndarray, np.ndarray]:
+    """The shape's bounding box (scene coordinates [m]) grown by a margin past Mitsuba's ray offsets: a path that
+    stays out of it cannot meet the shape."""
+    box = shape.bbox()
+    lo, hi = np.array(box.min, dtype=float).ravel(), np.array(box.max, dtype=float).ravel()
+    margin = 1e-3 * (1.0 + float(np.max(np.abs(np.concatenate([lo, hi])))))
+    return lo - margin, hi + margin
+
+
+def emitters_among(scene, names) -> bool:
+    """True if one of the named shapes emits light (its sampling tables are rebuilt when it moves, at
+    addresses a frozen launch cannot see: such runs are traced unfrozen)."""
+    return any(s.id() in names and s.emitter() is not None for s in scene.shapes())
+
+
+def moving_shapes(updates: Sequence[Updates]) -> set[str]:
+    """Names of the shapes whose parameters the updates set (the part before the first dot of each key)."""
+    return {key.split(".", 1)[0] for u in updates for key in u} - {SENSOR_KEY, CAMERA_KEY}
+
+
+def changed_shapes(update: Updates, background: Updates) -> set[str]:
+    """Names of the shapes that ``update``, applied on top of ``background``, sets to other values."""
+    names = set()
+    for key, value in update.items():
+        same = False
+        if key in background:
+            try:
+                same = np.array_equal(np.asarray(value), np.asarray(background[key]))
+            except (TypeError, ValueError):
+                same = False
+        if not same:
+            names.add(key.split(".", 1)[0])
+    return names - {SENSOR_KEY, CAMERA_KEY}
+
+
+def change_points_of(scene, moving, mirrors: DeltaSurfaces | None = None) -> tuple[np.ndarray | None, str]:
+    """Corner points whose hull holds the moving shapes and their shadow volumes [m] (from the lights and their
+    images in planar mirrors), or None and why the change is unbounded (an environment light, a moving emitter,
+    an emitter of a kind not bounded here, or a moved parameter that belongs to no shape)."""
+    shapes = {s.id(): s for s in scene.shapes()}
+    for name in moving:
+        if name not in shapes:
+            return None, (f"'{name}' is not a shape (a moving light or another parameter): its change reaches "
+                          "anywhere")
+        if shapes[name].is_emitter():
+            return None, f"'{name}' is an emitting shape: the light it moves reaches anywhere"
+    lights, why = light_bounds(scene)
+    if lights is None:
+        return None, why
+
+    def box(shape):
+        bb = shape.bbox()
+        return np.array(bb.min, dtype=float), np.array(bb.max, dtype=float)
+
+    objects = [box(shapes[name]) for name in sorted(moving)]
+    boxes, directions = lights
+    boxes = boxes + [box(s) for s in scene.shapes() if s.is_emitter()]
+    if mirrors is not None:
+        boxes, directions = mirrors.with_images(boxes, directions)
+    return change_points(objects, boxes, box(scene), directions), ""
+
+
+def light_bounds(scene) -> tuple[tuple[list, list] | None, str]:
+    """Where the scene's non-shape emitters shine from: point-like ones (point, spot) as zero-size boxes [m],
+    directional ones by the direction their rays travel; None (and why) for an environment light or any other
+    kind."""
+    mi = backend.mitsuba()
+    boxes, directions = [], []
+    for emitter in scene.emitters():
+        flags = int(emitter.flags())
+        if flags & int(mi.EmitterFlags.Surface):
+            continue  # an emitting shape: bounded by its shape's box
+        if emitter.is_environment():
+            return None, f"the environment light '{emitter.id()}' casts shadows anywhere"
+        params = mi.traverse(emitter)
+        if flags & int(mi.EmitterFlags.DeltaDirection) and "to_world" in params:
+            directions.append(np.array(params["to_world"].matrix, dtype=float).reshape(4, 4)[:3, 2])
+        elif flags & int(mi.EmitterFlags.DeltaPosition) and ("position" in params or "to_world" in params):
+            where = (np.array(params["position"], dtype=float).ravel() if "position" in params
+                     else np.array(params["to_world"].matrix, dtype=float).reshape(4, 4)[:3, 3])
+            boxes.append((where, where))
+        else:
+            return None, f"the light '{emitter.id()}' is of a kind not bounded here (an area light without a shape?)"
+    return (boxes, directions), ""

@@ -1,0 +1,432 @@
+"""Stratified estimates of the fast sensor: most rays where a frame can change things, a few everywhere else.
+
+For every ray the detector point ``x_d`` is drawn uniformly (as in :mod:`.mixel_sensor`); given ``x_d``, the
+aperture ``[0, 1]^2`` (aperture-sample units, the whole mask) is split into the *region* rectangle ``R(x_d)``
+(:mod:`.change_region`, clipped to the aperture) and its *rest* ``C(x_d)`` (up to four rectangles). A region ray
+draws its aperture point uniformly in ``R`` and is weighted by ``|R|``; a rest ray draws uniformly in ``C``
+(a rectangle picked in proportion to its area, then a uniform point in it) and is weighted by ``|C|``. For every
+``x_d`` both are exact stratum measures, so::
+
+    E = mean over region rays of |R| w L  +  mean over rest rays of |C| w L
+
+is unbiased for the sensor's irradiance whatever the region (a region that misses the change only costs
+variance; an empty region leaves the rest stratum the whole aperture). Each (mixel, replicate) group holds
+``n_region + n_rest`` lanes; the lane layout depends only on the counts, so two passes with the same seed, counts
+and regions (a frame and its background) draw the same random numbers lane by lane, and their difference cancels
+everywhere the scenes agree. Values are summed in float64 in a fixed order (as :mod:`.tracing`).
+
+The region's rays sit on a jittered grid in the region's own coordinates (every cell the same number of times,
+a uniform point in it): unbiased, and less variance from where the object's edges cut the region. The detector
+point stays independent per ray, so no fixed pairing of strata across factors arises. Where a stratum is
+empty for a detector point (a ring beyond the aperture's edge; a region that is empty, off the aperture, or
+unbounded and so the whole aperture) its rays pool with the outermost non-empty stratum's, weighted by their
+share of that stratum's rays: again unbiased, and no ray is spent on nothing. Rays are traced by the scene's
+integrator, or by :mod:`.guided_path` when a guide is given (inter-reflection bounces drawn partly toward the
+moving shapes; same expectation).
+"""
+
+from __future__ import annotations
+
+import gc
+import math
+from collections import OrderedDict
+from collections.abc import Sequence
+from contextlib import contextmanager
+from typing import NamedTuple
+
+import numpy as np
+
+from mincam_sim.model.optics import Mincam
+from mincam_sim.render import backend
+from mincam_sim.render.kernels import guided_path, tracing
+from mincam_sim.render.kernels.change_region import ApertureRegions
+from mincam_sim.render.kernels.tracing import LaneSampler, launch_seed
+
+DETECTOR_SHRINK = 1 - 2e-6  # as mixel_sensor.mixel_position_sample: keeps x strictly inside the mixel's film cell
+
+
+def check_strata(counts: Sequence[int], expansions: Sequence[float]) -> None:
+    """Raise a ``ValueError`` naming the field unless every stratum has >= 1 ray and the expansions grow."""
+    if len(counts) != len(expansions) + 1:
+        raise ValueError(f"counts (rays per replicate and mixel in each stratum) needs one entry per expansion "
+                         f"plus one for the rest of the aperture: got {len(counts)} counts, {len(expansions)} "
+                         "expansions")
+    for j, value in enumerate(counts):
+        if isinstance(value, bool) or int(value) != value or value < 1:
+            raise ValueError(f"counts[{j}] (rays per replicate and mixel in stratum {j}) must be an integer >= 1, "
+                             f"got {value!r}; every stratum needs rays, or the estimate is biased")
+    if not expansions or expansions[0] != 1.0 or any(b <= a for a, b in zip(expansions, expansions[1:], strict=False)):
+        raise ValueError(f"expansions (region scale factors of the nested strata) must start at 1 and grow, "
+                         f"got {list(expansions)!r}")
+
+
+def stratified_estimates(scene, sensor, mincam: Mincam, regions: ApertureRegions, replicates: int,
+                         counts: Sequence[int], seed: int, expansions: Sequence[float] = (1.0,),
+                         by_stratum: bool = False, jitter: bool = True, guide=None,
+                         max_depth: int | None = None, freeze: tuple | None = None) -> np.ndarray:
+    """(replicates, n_mixels) independent stratified estimates of each mixel's irradiance [W/m^2].
+
+    Parameters
+    ----------
+    scene, sensor
+        The fast scene and its mixel-array sensor (:class:`.mincam_scene.MincamScene`).
+    regions : ApertureRegions
+        Per-mixel region bounds (aperture-sample units, affine in the detector point).
+    replicates : int
+        Independent groups per mixel (their spread gives the standard error).
+    counts : sequence of int
+        Rays per (mixel, replicate) in each stratum: the region, each ring, the rest of the aperture.
+    expansions : sequence of float
+        Scale factors (about the region's centre) of the nested rectangles: ``(1.0,)`` = region and rest;
+        ``(1.0, 3.0)`` adds the ring between the region and the region scaled 3 times (indirect light near it).
+    seed : int
+        Seed of the launch; same seed, counts and regions give the same random numbers lane by lane.
+    by_stratum : bool
+        Return (replicates, n_mixels, n_strata): each stratum's part; their sum is the estimate.
+    jitter : bool
+        Region rays on a jittered grid (one per cell of the largest square grid that fits, the remainder
+        uniform): still unbiased (every cell equally often, a uniform point in it), less variance from
+        where in the region the object's edges lie.
+    guide : (centre (3,) [m], radius [m]), optional
+        Sphere toward which inter-reflection bounces are guided (:mod:`.guided_path`; the same for both passes of
+        a pair). Needs ``max_depth`` (the scene integrator's); without a guide, or at a depth the guided path does
+        not reproduce, the scene's own integrator traces the rays.
+    freeze : tuple, optional
+        Replay each launch from a recording (``dr.freeze``: no Python tracing per call) made with this key,
+        :func:`buffers_key` of every object whose parameters changed since the scene was loaded (None:
+        trace every launch). Same numbers bit for bit either way.
+    """
+    return stratified_lanes(scene, sensor, mincam, regions, replicates, counts, seed, expansions, jitter, guide,
+                            max_depth, freeze).estimates(by_stratum)
+
+
+class LaneValues:
+    """Every lane's ``scale x weight x L`` of one stratified pass (per launch, float64) and, where the pass
+    watched boxes, which lanes' paths met one (an ``mi.Bool`` per launch: a segment, shadow rays included,
+    crossing a box); ``traced`` lanes were traced (the others were taken from the pass it was paired with)."""
+
+    def __init__(self, n_mixels: int, replicates: int, counts: list[int], values: list[np.ndarray],
+                 touched: list | None, traced: int) -> None:
+        self.n_mixels, self.replicates, self.counts = n_mixels, replicates, counts
+        self.values, self.touched, self.traced = values, touched, traced
+
+    def estimates(self, by_stratum: bool = False) -> np.ndarray:
+        """(replicates, n_mixels) estimates [W/m^2], or (replicates, n_mixels, n_strata) their parts; lanes
+        summed in float64 in a fixed order."""
+        per = sum(self.counts)
+        rows = []
+        for value in self.values:
+            value = value.reshape(-1, per)
+            start, part = 0, []
+            for count in self.counts:
+                part.append(value[:, start:start + count].sum(axis=1) / count)
+                start += count
+            rows.append(np.stack(part, axis=1))
+        parts = np.concatenate(rows).reshape(self.n_mixels, self.replicates, len(self.counts)).transpose(1, 0, 2)
+        return parts if by_stratum else parts.sum(axis=2)
+
+
+def stratified_lanes(scene, sensor, mincam: Mincam, regions: ApertureRegions, replicates: int,
+                     counts: Sequence[int], seed: int, expansions: Sequence[float] = (1.0,), jitter: bool = True,
+                     guide=None, max_depth: int | None = None, freeze: tuple | None = None,
+                     watch: Sequence[tuple[np.ndarray, np.ndarray]] | None = None,
+                     pair: LaneValues | None = None) -> LaneValues:
+    """The lanes of :func:`stratified_estimates` (same parameters), with two more for a frame and its
+    background traced as a pair.
+
+    Parameters
+    ----------
+    watch : sequence of (lo (3,), hi (3,)) [m], optional
+        Boxes (scene coordinates) holding every shape that differs between the two passes, in both places:
+        the pass records which lanes' paths cross one. Needs the guided path (a guide and a depth it covers).
+    pair : LaneValues, optional
+        The other pass of the pair, traced with the same seed, counts, regions and guide, with ``watch``: only
+        its lanes that met a box are traced here, and every other lane takes its value. A path that crosses
+        none of the boxes meets the same surfaces, draws the same random numbers and casts the same shadow
+        rays in both scenes, so its value is the same: the result equals a full pass bit for bit.
+    """
+    counts = [int(c) for c in counts]
+    check_strata(counts, expansions)
+    mi = backend.mitsuba()
+    import drjit as dr
+
+    n = len(mincam)
+    per = sum(counts)
+    n_groups = n * int(replicates)
+    packed = np.concatenate([regions.packed(), 2.0 * regions.detector_half_m[:, None]], axis=1)  # (n, 9)
+    coeffs = mi.Float(np.ascontiguousarray(packed.ravel(), dtype=np.float32))
+    guided = guide is not None and max_depth is not None and guided_path.supports(max_depth)
+    if (watch is not None or pair is not None) and not guided:
+        raise ValueError("watch and pair need the guided path: a guide and a max_depth of 1 .. 5")
+    spheres = guided_path.opaque_spheres(guide) if guided else []
+    boxes = [tuple(mi.Point3f(*(dr.opaque(mi.Float, float(x)) for x in corner)) for corner in box)
+             for box in (watch or [])]
+    groups_per_launch = max(1, tracing.MAX_LANES // per)
+    trace = _launch if freeze is None else _frozen_launch(scene)
+    values, touched, traced = [], ([] if watch is not None else None), 0
+    for launch, g0 in enumerate(range(0, n_groups, groups_per_launch)):
+        ng = min(groups_per_launch, n_groups - g0)
+        value = None if pair is None else pair.values[launch].copy()
+        # lane indices made by Dr.Jit, not mapped from numpy (whose alignment would make a frozen launch record)
+        if pair is None or pair.touched is None:
+            lanes = dr.arange(mi.UInt32, ng * per)
+        else:
+            lanes = dr.compress(pair.touched[launch])
+        dr.make_opaque(lanes)
+        shape = _LaunchShape(0 if guided else ng * per, tuple(counts), int(replicates), n,
+                             tuple(float(e) for e in expansions), bool(jitter), int(max_depth) if guided else 0,
+                             getattr(sensor, "version", 0))
+        met = mi.Bool(False)
+        if dr.width(lanes):
+            with _no_cyclic_gc():
+                out, met = trace(scene, sensor, coeffs, dr.opaque(mi.UInt32, launch_seed(seed, launch)),
+                                 dr.opaque(mi.UInt32, g0), lanes, spheres, boxes, shape, freeze)
+            out = np.asarray(out, dtype=np.float64).reshape(-1)
+            traced += dr.width(lanes)
+            if value is None:
+                value = out
+            else:
+                value[np.asarray(lanes, dtype=np.int64)] = out
+        if touched is not None:
+            met = dr.zeros(mi.Bool, ng * per) | met  # no box (nothing differs): no lane met one
+            dr.eval(met)
+            touched.append(met)
+        values.append(value)
+    return LaneValues(n, int(replicates), counts, values, touched, traced)
+
+
+class _LaunchShape(NamedTuple):
+    """What fixes a launch's kernel code (plain Python values: a frozen launch records again when one
+    changes): lanes (0 on the guided path, whose lanes come as an array), rays per stratum, replicates,
+    mixels, expansions, jitter, guided depth (0 = the scene's integrator), the sensor's configuration version."""
+
+    lanes: int
+    counts: tuple[int, ...]
+    replicates: int
+    n_mixels: int
+    expansions: tuple[float, ...]
+    jitter: bool
+    guided_depth: int
+    sensor_version: int
+
+
+def _launch(scene, sensor, coeffs, seed, g0, lanes, spheres, boxes, shape: _LaunchShape,
+            buffers: tuple | None = None):
+    """``scale x weight x L`` of the given lanes of one launch (an ``mi.Float``) and whether each one's path
+    crossed one of ``boxes`` (an ``mi.Bool``; False without boxes): lane ``l`` is ray ``l % per`` of group
+    ``g0 + l // per``. Everything that varies from frame to frame comes in as a Dr.Jit value (``seed``,
+    ``g0``, ``lanes``, the region coefficients, the guide spheres, the boxes), so that a frozen launch replays
+    it; ``buffers`` only keys the recording (:func:`buffers_key`)."""
+    mi = backend.mitsuba()
+    import drjit as dr
+
+    counts = shape.counts
+    per = sum(counts)
+    if shape.guided_depth:
+        sampler = LaneSampler.for_launch(seed, lanes)  # any subset of lanes draws what a full launch draws there
+    else:
+        sampler = mi.load_dict({"type": "independent"})
+        sampler.seed(seed, shape.lanes)
+    per_o = dr.opaque(mi.UInt32, per)
+    group = lanes // per_o + g0
+    j = lanes % per_o
+    stratum = mi.UInt32(0)
+    for edge in np.cumsum(counts)[:-1]:
+        stratum += mi.UInt32(j >= dr.opaque(mi.UInt32, int(edge)))
+    k = group // dr.opaque(mi.UInt32, shape.replicates)
+    c = [dr.gather(mi.Float, coeffs, k * 9 + i) for i in range(9)]
+    u = sampler.next_2d()
+    v = sampler.next_2d()
+    if shape.jitter:
+        v = _jittered_region(dr, mi, v, j, counts[0])
+    pick = sampler.next_1d()
+    wavelength = sampler.next_1d()
+    position = mi.Point2f((mi.Float(k) + 0.5 + (u.x - 0.5) * DETECTOR_SHRINK) / shape.n_mixels, u.y)
+    x_d = (u.x - 0.5) * DETECTOR_SHRINK * c[8]
+    y_d = (u.y - 0.5) * c[8]
+    rays = [dr.opaque(mi.Float, float(count)) for count in counts]
+    aperture, scale = _stratum_sample(dr, mi, c, x_d, y_d, v, pick, stratum, list(shape.expansions), rays)
+    ray, weight = sensor.sample_ray_differential(0.0, wavelength, position, aperture)
+    if shape.guided_depth:
+        radiance, met = guided_path.guided_radiance_watched(scene, sampler, ray, shape.guided_depth, spheres,
+                                                            boxes)
+    else:
+        radiance, _, _ = scene.integrator().sample(scene, sampler, ray, None, True)
+        met = mi.Bool(False)
+    return scale * weight * radiance, met
+
+
+def buffers_key(objects) -> tuple:
+    """Where the parameters of Mitsuba ``objects`` (the shapes a run moves, or the whole scene) live now: the
+    address and width of every evaluated array (vertex positions and normals, textures, ...) and the value of
+    every scalar. A frozen launch replays only with the key it was recorded with.
+
+    Dr.Jit 1.5 / Mitsuba 3.9 replay a recording with the *addresses* its kernel read the shapes' arrays from
+    when it was recorded (the shapes are reached through virtual calls, not through the frozen function's
+    inputs). After a vertex update Dr.Jit's allocator hands out one of two addresses in turn, so a replay
+    keyed on the launch alone read the previous frame's vertices every other frame. Keyed on the addresses
+    as well, a moving mesh makes a recording per address, each replayed only while its address holds the
+    current values."""
+    import drjit as dr
+
+    mi = backend.mitsuba()
+    parts = []
+    for obj in objects:
+        params = mi.traverse(obj)
+        for key in params.keys():
+            value = params[key]
+            if dr.is_jit_v(value) and dr.depth_v(value) == 1 and dr.width(value) > 1:
+                dr.eval(value)
+                parts.append((key, int(np.from_dlpack(value).__array_interface__["data"][0]), dr.width(value)))
+            elif dr.is_jit_v(value):
+                parts.append((key, np.asarray(value).tobytes()))
+            else:
+                parts.append((key, repr(value)))
+    return tuple(parts)
+
+
+_FROZEN: OrderedDict[int, tuple] = OrderedDict()
+FROZEN_SCENES = 4  # scenes whose frozen launches are kept (each holds its recordings)
+FROZEN_RECORDINGS = 16  # recordings kept per scene (launch shapes x buffer addresses), least recently used dropped
+
+
+@contextmanager
+def _no_cyclic_gc():
+    """Python's cyclic garbage collector paused: collecting another scene (its Embree structure, its arrays)
+    while a frozen launch is being recorded aborts Dr.Jit."""
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
+
+
+def frozen_recordings(scene) -> int:
+    """How many times this scene's frozen launch has been recorded (0 if it never ran frozen)."""
+    entry = _FROZEN.get(id(scene))
+    return 0 if entry is None else int(entry[1].n_recordings)
+
+
+def _frozen_launch(scene):
+    """:func:`_launch` frozen (``dr.freeze``) for this scene: traced once per launch shape, then replayed.
+
+    One frozen function per scene object (kept while it is among the :data:`FROZEN_SCENES` last used), so a
+    recording is never replayed on another scene; the scene is an input, so its geometry and parameters as
+    updated before the call (acceleration structure rebuilt outside) are what the replay traces."""
+    import drjit as dr
+
+    key = id(scene)
+    if key in _FROZEN:
+        _FROZEN.move_to_end(key)
+    else:
+        _FROZEN[key] = (scene, dr.freeze(_launch, limit=FROZEN_RECORDINGS, warn_after=4 * FROZEN_RECORDINGS))
+        while len(_FROZEN) > FROZEN_SCENES:
+            _FROZEN.popitem(last=False)
+    return _FROZEN[key][1]
+
+
+def _jittered_region(dr, mi, v, j, n_region: int):
+    """Aperture samples of the region lanes ``j < n_region`` on a jittered ``side x side`` grid (normalised
+    region coordinates), for the largest complete set of cells; the other lanes keep ``v``."""
+    side = math.isqrt(int(n_region))
+    if side < 2:
+        return v
+    cells = side * side
+    on_grid = j < dr.opaque(mi.UInt32, (int(n_region) // cells) * cells)
+    cell = j % dr.opaque(mi.UInt32, cells)
+    side_u, side_f = dr.opaque(mi.UInt32, side), dr.opaque(mi.Float, float(side))
+    gx = (mi.Float(cell % side_u) + v.x) / side_f
+    gy = (mi.Float(cell // side_u) + v.y) / side_f
+    return mi.Point2f(dr.select(on_grid, gx, v.x), dr.select(on_grid, gy, v.y))
+
+
+def _stratum_sample(dr, mi, c, x_d, y_d, v, pick, stratum, expansions, rays):
+    """Aperture sample in [0, 1]^2 and its weight: stratum s is the ring between nested rectangle s - 1 (a
+    point for s = 0) and rectangle s (the whole aperture for the last), clipped to the aperture, weighted by
+    its measure.
+
+    For a detector point where a stratum is empty (a ring beyond the aperture's edge, a region off the
+    aperture or empty; an unbounded region is the whole aperture and leaves every ring empty) its rays
+    sample the outermost non-empty stratum instead, and every ray that samples a stratum ``e`` is weighted
+    by ``|e| n_own / M_e`` (``n_own`` the rays of its own stratum, ``M_e`` those of all strata that sample
+    ``e``): the strata's parts still sum to the aperture's integral for every detector point (unbiased), and
+    no ray is spent on nothing. ``rays`` holds each stratum's ray count per group."""
+    lo_x = c[0] + dr.minimum(c[4] * x_d, c[5] * x_d)
+    lo_y = c[1] + dr.minimum(c[6] * y_d, c[7] * y_d)
+    hi_x = c[2] + dr.maximum(c[4] * x_d, c[5] * x_d)
+    hi_y = c[3] + dr.maximum(c[6] * y_d, c[7] * y_d)
+    empty = ~((hi_x > lo_x) & (hi_y > lo_y) & dr.isfinite(hi_x - lo_x) & dr.isfinite(hi_y - lo_y))
+    full = ~(dr.isfinite(lo_x) & dr.isfinite(lo_y) & dr.isfinite(hi_x) & dr.isfinite(hi_y))
+    mid_x, mid_y = 0.5 * (lo_x + hi_x), 0.5 * (lo_y + hi_y)
+    half_x, half_y = 0.5 * (hi_x - lo_x), 0.5 * (hi_y - lo_y)
+
+    def rect(scale):
+        if scale is None:  # the whole aperture
+            return (mi.Float(0.0), mi.Float(0.0), mi.Float(1.0), mi.Float(1.0))
+        box = [mid_x - scale * half_x, mid_y - scale * half_y, mid_x + scale * half_x, mid_y + scale * half_y]
+        box = [dr.select(full, b, dr.clip(x, 0.0, 1.0)) for b, x in zip((0.0, 0.0, 1.0, 1.0), box, strict=True)]
+        return [dr.select(empty & ~full, 0.0, x) for x in box]
+
+    rects = [rect(e) for e in expansions] + [rect(None)]
+    n_strata = len(rects)
+
+    def bounds(s):
+        """(inner, outer) rectangles of stratum s; stratum 0 is a ring around a point at its corner."""
+        outer = list(rects[s])
+        inner = [outer[0], outer[1], outer[0], outer[1]] if s == 0 else list(rects[s - 1])
+        return inner, outer
+
+    def strips(inner, outer):
+        ix0, iy0, ix1, iy1 = inner
+        ox0, oy0, ox1, oy1 = outer
+        # bottom, top strips, then left and right of the inner rectangle
+        return ((ox1 - ox0) * (iy0 - oy0), (ox1 - ox0) * (oy1 - iy1), (ix0 - ox0) * (iy1 - iy0),
+                (ox1 - ix1) * (iy1 - iy0))
+
+    areas = [sum(strips(*bounds(s))) for s in range(n_strata)]
+    outermost = mi.UInt32(0)
+    for s in range(n_strata):
+        outermost = dr.select(areas[s] > 0.0, s, outermost)
+    # the stratum each stratum's rays sample here: their own, or the outermost non-empty one
+    target = [dr.select(areas[s] > 0.0, mi.UInt32(s), outermost) for s in range(n_strata)]
+    own_target = mi.UInt32(0)
+    own_rays = mi.Float(0.0)
+    for s in range(n_strata):
+        own_target = dr.select(stratum == s, target[s], own_target)
+        own_rays = dr.select(stratum == s, rays[s], own_rays)
+    sharing = mi.Float(0.0)  # rays of every stratum that samples the same stratum as this ray
+    for s in range(n_strata):
+        sharing += dr.select(target[s] == own_target, rays[s], 0.0)
+
+    inner, outer = bounds(0)
+    for s in range(1, n_strata):
+        sel = own_target == s
+        b_inner, b_outer = bounds(s)
+        inner = [dr.select(sel, a, b) for a, b in zip(b_inner, inner, strict=True)]
+        outer = [dr.select(sel, a, b) for a, b in zip(b_outer, outer, strict=True)]
+    ox0, oy0, ox1, oy1 = outer
+    ix0, iy0, ix1, iy1 = inner
+    a0, a1, a2, a3 = strips(inner, outer)
+    area = a0 + a1 + a2 + a3
+    t = pick * area
+    first, second, third = t < a0, t < a0 + a1, t < a0 + a1 + a2
+    x0 = dr.select(first | second | third, ox0, ix1)
+    x1 = dr.select(first | second, ox1, dr.select(third, ix0, ox1))
+    y0 = dr.select(first, oy0, dr.select(second, iy1, iy0))
+    y1 = dr.select(first, iy0, dr.select(second, oy1, iy1))
+    aperture = mi.Point2f(x0 + (x1 - x0) * v.x, y0 + (y1 - y0) * v.y)
+    return aperture, area * own_rays / sharing
+
+
+def whole_aperture_estimates(scene, sensor, mincam: Mincam, replicates: int, spp: int, seed: int) -> np.ndarray:
+    """(replicates, n_mixels) estimates of each mixel's irradiance [W/m^2] over the whole aperture, the aperture
+    points on a jittered grid (per replicate and mixel, ``spp / replicates`` rays; the detector point uniform).
+
+    Unbiased like the independent estimator of :mod:`.tracing`; on the tabletop of the benchmarks its standard
+    error is ~3x smaller at equal rays. It is :func:`stratified_estimates` with a region that is the whole
+    aperture: the rest stratum is then empty, and its one ray per group pools with the region's.
+    """
+    per = max(1, -(-int(spp) // int(replicates)))
+    return stratified_estimates(scene, sensor, mincam, ApertureRegions.full(mincam), replicates, [per, 1], seed)

@@ -1,0 +1,125 @@
+"""What a world scene accepts: elements, loaded scenes and parameter updates, checked at the boundary.
+
+Every check raises :class:`~mincam_sim.errors.InputError` naming the element or parameter and the fix, so a
+user's mistake is one clear line and never a silently wrong measurement (a NaN vertex rendered, a vertex array
+of another mesh's size accepted, a negative radiance giving negative irradiance, a loaded scene rendering 0).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from mincam_sim.errors import InputError
+from mincam_sim.render import backend
+
+RADIANT_PARTS = ("radiance", "intensity", "irradiance")  # emitter parameters that must be >= 0
+
+
+def expand_elements(elements) -> dict:
+    """``elements`` (name -> Mitsuba dict, Mitsuba object, or a loaded ``mi.Scene``) as a flat dict whose values
+    are dicts or single Mitsuba objects: a loaded scene contributes its shapes and its emitters that are not
+    attached to a shape, under their own ids (its sensors and integrator are the mincam's business)."""
+    if not isinstance(elements, Mapping):
+        raise InputError(f"elements must be a dict name -> Mitsuba dict or object, got {type(elements).__name__}")
+    mi = backend.mitsuba()
+    out: dict = {}
+
+    def add(name, value, origin: str) -> None:
+        if name in out:
+            raise InputError(f"element name {name!r} ({origin}) is used twice; rename one of them")
+        out[name] = value
+
+    for name, value in elements.items():
+        if not isinstance(name, str) or not name or "." in name:
+            raise InputError(f"element name {name!r} must be a non-empty string without '.' (parameters are "
+                             "addressed as 'name.parameter'); rename it")
+        if isinstance(value, mi.Scene):
+            for item in _scene_items(mi, value):
+                add(item.id(), item, f"from the loaded scene {name!r}")
+            continue
+        if isinstance(value, Mapping):
+            kind = value.get("type")
+            if not isinstance(kind, str) or not kind:
+                raise InputError(f"element {name!r} has no plugin 'type' (e.g. 'obj', 'rectangle', 'area'); "
+                                 "give one")
+            if kind == "scene":
+                raise InputError(f"element {name!r} is a whole scene dict; pass its shapes and emitters as "
+                                 "elements, or load it with mi.load_dict(..., optimize=False) and pass the scene")
+        elif not isinstance(value, mi.Object):
+            raise InputError(f"element {name!r} is a {type(value).__name__}, not a Mitsuba dict or object")
+        add(name, value, "given")
+    return out
+
+
+def _scene_items(mi, scene) -> list:
+    items = list(scene.shapes())
+    items += [e for e in scene.emitters() if not int(e.flags()) & int(mi.EmitterFlags.Surface)]
+    if not items:
+        raise InputError("a loaded scene passed as an element holds no shapes and no emitters")
+    for item in items:
+        if not item.id():
+            raise InputError("a shape or emitter of the loaded scene has no id; give every shape an id in the "
+                             "scene file")
+    return items
+
+
+def check_radiant_params(params, keys: Sequence[str] | None = None) -> None:
+    """Refuse a negative or non-finite emitter radiance / intensity / irradiance among ``keys`` (default:
+    every parameter)."""
+    for key in params.keys() if keys is None else keys:
+        parts = key.split(".")
+        if not any(p in RADIANT_PARTS for p in parts[1:]) or parts[-1] not in ("value", *RADIANT_PARTS):
+            continue
+        value = params[key]
+        try:
+            arr = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            continue  # a texture or bitmap: its values are checked where they are made
+        if arr.size and not (np.all(np.isfinite(arr)) and np.all(arr >= 0)):
+            raise InputError(f"{key} = {arr.ravel()[:4].tolist()} must be finite and >= 0 (a light cannot emit "
+                             "negative power); fix the emitter's value")
+
+
+def check_update(key: str, current, value) -> None:
+    """Refuse an update whose size does not match the parameter it replaces, or that is not finite."""
+    if not isinstance(value, np.ndarray):
+        try:
+            value = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            return  # a Mitsuba object of another kind: Mitsuba checks its type
+    if value.dtype.kind not in "biuf":
+        raise InputError(f"{key}: the update must be numeric, got an array of {value.dtype}")
+    if not np.all(np.isfinite(value)):
+        raise InputError(f"{key}: the update holds NaN or infinite values; give finite numbers")
+    if key.endswith(".to_world"):
+        if value.shape != (4, 4):
+            raise InputError(f"{key}: a transform must be a 4 x 4 matrix, got shape {value.shape}")
+        if abs(np.linalg.det(value[:3, :3])) < 1e-18:
+            raise InputError(f"{key}: the transform is singular (zero scale along some axis); fix the matrix")
+        return
+    if key.endswith(".vertex_positions"):
+        import drjit as dr
+
+        expected = int(dr.width(current))  # a flat Float: no copy of the mesh per update
+        if value.size != expected:
+            raise InputError(f"{key}: the mesh has {expected // 3} vertices ({expected} values), the update has "
+                             f"{value.size} values; an update moves the vertices of the same mesh (same count and "
+                             "order)")
+    if key.split(".")[-1] in ("value", *RADIANT_PARTS) and any(p in RADIANT_PARTS for p in key.split(".")[1:]):
+        if np.any(value < 0):
+            raise InputError(f"{key}: a light cannot emit negative power; give values >= 0")
+
+
+def check_frames(frames, background) -> None:
+    """Frames must be a sequence of parameter dicts and the background one dict."""
+    if isinstance(frames, (Mapping, str, bytes)) or not isinstance(frames, Sequence):
+        raise InputError(f"frames must be a list of parameter-update dicts (one per frame), got "
+                         f"{type(frames).__name__}; wrap a single frame as [update]")
+    for i, frame in enumerate(frames):
+        if not isinstance(frame, Mapping):
+            raise InputError(f"frames[{i}] must be a dict 'name.parameter' -> value, got {type(frame).__name__}")
+    if not isinstance(background, Mapping):
+        raise InputError(f"background must be a dict 'name.parameter' -> value ({{}} = the scene as built), got "
+                         f"{type(background).__name__}")

@@ -1,0 +1,444 @@
+"""Jobs: a validated config (display or world) becomes ``(Simulation, frames, solver, budget)`` and goes to
+:meth:`mincam_sim.runs.run.Run.measure` or :meth:`~mincam_sim.runs.run.Run.measure_changes`; the service behind
+``mincam-sim render`` and the Python API alike.
+
+* :func:`display_job` / :func:`world_job` build the :class:`Job` of a config (no rendering);
+* :func:`run_render_config` / :func:`run_world_config` run it in ``[run] out_dir`` through one ``Run`` (its
+  lock, its identity, its store: a killed run resumes, a finished one with the same identity is returned
+  without rendering, a different one is refused unless ``overwrite``) and add the job's own outputs: each
+  frame's position or time and movers' offsets in ``measurements.csv`` / ``.npz``, response maps (OpenEXR), a plot
+  of dP and the ground-truth camera's images;
+* :func:`estimate_seconds` / :func:`check_budget`: the same estimate-and-refuse rule for displays and worlds,
+  before anything is allocated or written; :func:`config_summary` / :func:`world_summary`: ``--check``.
+
+A job builds no identity of its own: the run's one identity is ``Run``'s.
+
+World outputs in ``[run] out_dir``: ``measurements.npz`` (``irradiance_w_m2`` / ``stderr_w_m2``: P;
+``delta_irradiance_w_m2`` / ``delta_stderr_w_m2``: dP; (n_frames, n_mixels) each), ``measurements.csv`` (frame,
+time, each mover's offset and centre, dP and P per mixel with their standard errors), ``dP.png``, and with a
+camera ``camera.npz`` (every frame's image and the background's) plus the change centroid per frame in the CSV.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mincam_sim.budget import Budget
+from mincam_sim.changes import Changes
+from mincam_sim.configuration.config import RenderConfig, solver_name, traced_samples
+from mincam_sim.configuration.world_config import CameraSpec, WorldConfig
+from mincam_sim.errors import ConfigError
+from mincam_sim.measurements import Measurements
+from mincam_sim.render import backend
+from mincam_sim.render.scene import scene_dicts as sd
+from mincam_sim.render.scene.scene_files import Y_UP_TO_Z_UP, load_scene_file, read_mesh, turn_scene
+from mincam_sim.render.simulation import Simulation
+from mincam_sim.render.solvers import Aperture, PlainChange, Reference, ResponseMap, Solver, StratifiedChange
+from mincam_sim.runs.run import Run
+from mincam_sim.storage.atomic import atomic_path, atomic_save_npz
+
+#: The store and result name of a job in its output directory: ``OUT/measurements/`` (per-frame rows, resume),
+#: ``OUT/measurements.npz`` / ``.csv`` (the finished result).
+RESULT = "measurements"
+
+
+@dataclass(frozen=True)
+class Job:
+    """What a config measures: the simulation, its frames, the solver and the budget; ``background`` (world
+    change runs; None for absolute measurements) and per-frame ``columns`` for the outputs (name -> array)."""
+
+    sim: Simulation
+    frames: Any
+    solver: Solver
+    budget: Budget
+    background: dict | None = None
+    columns: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+# ------------------------------------------------------------------------------------------------- displays
+def display_job(cfg: RenderConfig) -> Job:
+    """The job of a validated display config (nothing is rendered)."""
+    columns = {} if cfg.frame_positions_m is None else {"positions_m": np.asarray(cfg.frame_positions_m)}
+    return Job(Simulation(cfg.mincam, screen=cfg.screen), cfg.frames, cfg.run.solver, cfg.run.budget,
+               columns=columns)
+
+
+def run_render_config(cfg: RenderConfig, show_progress: bool = False, overwrite: bool = False,
+                      say: Callable[[str], None] | None = None,
+                      time_limit_s: float | None = None) -> tuple[Measurements, Any]:
+    """Render a validated :class:`~mincam_sim.configuration.config.RenderConfig`; write outputs; return (measurements,
+    maps).
+
+    With ``time_limit_s``, a render estimated to take longer (:func:`check_budget`) is refused before anything is
+    written. The output directory is one :class:`~mincam_sim.runs.run.Run`: a rerun resumes or returns the finished
+    result, a different run is refused unless ``overwrite``. ``say`` is told when the sample count traced
+    differs from the one asked (:func:`~mincam_sim.configuration.config.traced_samples`). ``maps`` are the response
+    maps the
+    measurements used (the ``response_map`` solver; also written as ``response_maps/*.exr``), else None.
+    """
+    if time_limit_s is not None:
+        check_budget(cfg, backend.variant(), time_limit_s)
+    out = Path(cfg.run.out_dir)
+    job = display_job(cfg)
+    _, rounding = traced_samples(cfg.run)
+    if rounding is not None and say is not None and (overwrite or not (out / RESULT).is_dir()):
+        say(f"mincam-sim: {rounding}")  # on a fresh start only: a resumed run said it when it started
+    with Run(out, overwrite=overwrite, show_progress=show_progress) as run:
+        m = run.measure(job.sim, job.frames, job.solver, job.budget, name=RESULT)
+        _say_if_reused(run, out, say)
+        # the ResponseMap solver's result carries the maps it used (None after a reuse: their figure stays)
+        maps = getattr(m, "maps", None)
+        if maps is not None:
+            maps.save_exr(out / "response_maps")
+        if "positions_m" in job.columns:
+            # Run wrote OUT/measurements.npz/.csv; the job writes them again with each frame's position (CSV
+            # columns position_x_m, position_y_m), keeping Run's meta (its identity key) as it is.
+            m.meta["frame_positions_m"] = job.columns["positions_m"].tolist()
+            with atomic_path(out / f"{RESULT}.csv") as tmp:
+                m.save_csv(tmp)
+            with atomic_path(out / f"{RESULT}.npz") as tmp:
+                m.save_npz(tmp)
+    return m, maps
+
+
+def _say_if_reused(run: Run, out: Path, say: Callable[[str], None] | None) -> None:
+    if RESULT in run.reused and say is not None:
+        say(f"mincam-sim: {out} holds this same run, finished: its results are shown again without rendering "
+            "(--overwrite recomputes)")
+
+
+# --------------------------------------------------------------------------------------------------- worlds
+def world_job(cfg: WorldConfig) -> Job:
+    """The job of a validated world config: the scene is built (Mitsuba), nothing is rendered."""
+    sim = Simulation(cfg.mincam, world=build_elements(cfg), max_depth=cfg.run.max_depth,
+                     camera=_camera_dict(cfg.camera) if cfg.camera else None)
+    frames, background, centres = mover_updates(sim, cfg)
+    columns = {"time_s": np.arange(cfg.n_frames) / cfg.frame_rate_hz}
+    for mover in cfg.movers:
+        for k, axis in enumerate("xyz"):
+            columns[f"{mover.id}_offset_{axis}_m"] = mover.offsets_m[:, k]
+        for k, axis in enumerate("xyz"):
+            columns[f"{mover.id}_centre_{axis}_m"] = centres[mover.id][:, k]
+    return Job(sim, frames, cfg.run.solver, cfg.run.budget, background, columns)
+
+
+def run_world_config(cfg: WorldConfig, show_progress: bool = False, overwrite: bool = False,
+                     say: Callable[[str], None] | None = None, time_limit_s: float | None = None) -> Changes:
+    """Render a validated :class:`~mincam_sim.configuration.world_config.WorldConfig`; write its outputs; return the
+    changes.
+
+    With ``time_limit_s``, a render estimated to take longer (:func:`check_budget`) is refused before the scene is
+    built. One :class:`~mincam_sim.runs.run.Run` holds the output directory (resume, reuse, refusal as for displays).
+    """
+    if time_limit_s is not None:
+        check_budget(cfg, backend.variant(), time_limit_s)
+    out = Path(cfg.run.out_dir)
+    with Run(out, overwrite=overwrite, show_progress=show_progress) as run:
+        job = world_job(cfg)
+        ch = run.measure_changes(job.sim, job.frames, job.background, job.solver, job.budget, name=RESULT)
+        _say_if_reused(run, out, say)
+        columns = dict(job.columns)
+        if cfg.camera is not None:
+            rows, cols = _ground_truth(job.sim, cfg.camera, job.frames, job.background, out)
+            columns["change_centroid_row_px"], columns["change_centroid_col_px"] = rows, cols
+        ch.frame_columns = columns
+        plot_changes(ch, out / "dP.png")
+        # Run wrote OUT/measurements.npz/.csv; the job writes them again with its frame columns (time,
+        # movers, centroid), keeping Run's meta (its identity key) as it is.
+        ch.save_csv(out / f"{RESULT}.csv")
+        ch.save_npz(out / f"{RESULT}.npz")
+    return ch
+
+
+def rotation_deg(angles_deg) -> np.ndarray:
+    """3 x 3 rotation: about x, then y, then z, by ``angles_deg`` [deg]."""
+    ax, ay, az = np.radians(np.asarray(angles_deg, dtype=float))
+    rx = np.array([[1, 0, 0], [0, np.cos(ax), -np.sin(ax)], [0, np.sin(ax), np.cos(ax)]])
+    ry = np.array([[np.cos(ay), 0, np.sin(ay)], [0, 1, 0], [-np.sin(ay), 0, np.cos(ay)]])
+    rz = np.array([[np.cos(az), -np.sin(az), 0], [np.sin(az), np.cos(az), 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+def build_elements(cfg: WorldConfig) -> dict:
+    """The world's elements: the XML scene (turned z-up if authored y-up) and the config's objects and lights."""
+    elements: dict = {}
+    if cfg.scene_file is not None:
+        scene = load_scene_file(cfg.scene_file)
+        if cfg.up == "y":
+            turn_scene(scene, Y_UP_TO_Z_UP)
+        elements["scene"] = scene
+    for obj in cfg.objects:
+        vertices, faces = read_mesh(obj.mesh)
+        placed = (vertices * obj.scale) @ rotation_deg(obj.rotation_deg).T + np.asarray(obj.position_m)
+        elements[obj.id] = sd.mesh_object(obj.id, placed, faces, obj.albedo)
+    for light in cfg.lights:
+        elements[light.id] = _light_dict(light)
+    return elements
+
+
+def _light_dict(light) -> dict:
+    from mincam_sim.model.geometry import Pose
+
+    if light.kind == "sky":
+        return sd.sky(light.radiance_w_m2_sr)
+    if light.kind == "point":
+        return sd.point_light(light.position_m, light.intensity_w_sr)
+    forward = np.asarray(light.forward, dtype=float)
+    up = (1.0, 0.0, 0.0) if abs(forward[0]) < 0.9 * np.linalg.norm(forward) else (0.0, 1.0, 0.0)
+    matrix = Pose(tuple(light.position_m), tuple(forward), up).matrix()
+    if light.kind == "area":
+        return sd.area_light(light.size_m[0], light.size_m[1], matrix, light.radiance_w_m2_sr)
+    return sd.spot_light(matrix, light.intensity_w_sr, light.cutoff_deg)
+
+
+def mover_updates(sim: Simulation, cfg: WorldConfig) -> tuple[list[dict], dict, dict[str, np.ndarray]]:
+    """(frames, background, centres): each frame's parameter updates (world coordinates), the background's,
+    and each mover's centre per frame [m] (its as-built bounding-box centre moved with it)."""
+    params = sim.params
+    n = cfg.n_frames
+    frames: list[dict] = [{} for _ in range(n)]
+    background: dict = {}
+    centres: dict[str, np.ndarray] = {}
+    for mover in cfg.movers:
+        vkey, tkey = f"{mover.id}.vertex_positions", f"{mover.id}.to_world"
+        if vkey in params:
+            v0 = params[vkey].reshape(-1, 3)
+            centre = 0.5 * (v0.min(axis=0) + v0.max(axis=0))
+            for i in range(n):
+                rot = np.eye(3) if mover.rotations_deg is None else rotation_deg(mover.rotations_deg[i])
+                frames[i][vkey] = ((v0 - centre) @ rot.T + centre + mover.offsets_m[i]).ravel()
+            if cfg.background == "without_movers":  # every vertex at one point: no area, nothing to hit
+                background[vkey] = np.repeat(centre[None], len(v0), axis=0).ravel()
+        elif tkey in params:
+            m0 = params[tkey]
+            centre = m0[:3, 3].copy()
+            for i in range(n):
+                rot = np.eye(3) if mover.rotations_deg is None else rotation_deg(mover.rotations_deg[i])
+                m = m0.copy()
+                m[:3, :3] = rot @ m0[:3, :3]
+                m[:3, 3] = centre + mover.offsets_m[i]
+                frames[i][tkey] = m
+            if cfg.background == "without_movers":  # shrunk to a micrometre speck where it stands
+                m = m0.copy()
+                m[:3, :3] *= 1e-6 / max(float(np.abs(m0[:3, :3]).max()), 1e-300)
+                background[tkey] = m
+        else:
+            known = sorted({k.split(".", 1)[0] for k in params})
+            raise ConfigError(f"[[world.mover]] id {mover.id!r} is not a shape of the scene; shapes: "
+                              f"{', '.join(known)}")
+        centres[mover.id] = centre + mover.offsets_m
+    if cfg.background == "first_frame":
+        background = dict(frames[0])
+    return frames, background, centres
+
+
+def _camera_dict(camera: CameraSpec) -> dict:
+    from mincam_sim.model.geometry import look_at
+
+    pose = look_at(camera.position_m, camera.look_at_m, camera.up)
+    return sd.pinhole_camera(pose.matrix(), camera.fov_deg, camera.width_px, camera.height_px, spp=camera.spp)
+
+
+def _ground_truth(sim: Simulation, camera: CameraSpec, frames, background, out: Path):
+    """Images of the background and every frame, and the centroid (row, col) [px] of each frame's change:
+    background subtraction, |change| > threshold x the background's maximum (the experiments' rule)."""
+    sim.update(background)
+    bg = sim.camera_image(camera.spp, seed=0)
+    images, rows, cols = [], [], []
+    for frame in frames:
+        sim.update(background)
+        sim.update(frame)
+        image = sim.camera_image(camera.spp, seed=0)
+        images.append(image)
+        hit = np.abs(image - bg) > camera.threshold * float(bg.max())
+        r, c = np.nonzero(hit)
+        rows.append(r.mean() if r.size else np.nan)
+        cols.append(c.mean() if c.size else np.nan)
+    sim.update(background)
+    atomic_save_npz(out / "camera.npz", background=bg, frames=np.array(images))
+    return np.array(rows), np.array(cols)
+
+
+def plot_changes(ch: Changes, path: Path) -> Path:
+    """dP per mixel against frame, with 1-sigma error bars."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 3.6), constrained_layout=True)
+    x = ch.frame_columns.get("time_s", np.arange(ch.n_frames))
+    for k, name in enumerate(ch.mixel_names):
+        ax.errorbar(x, ch.dp.irradiance_w_m2[:, k], yerr=ch.dp.stderr_w_m2[:, k], marker="o", ms=3, capsize=2,
+                    label=name)
+    ax.axhline(0.0, color="0.6", lw=0.8)
+    ax.set_xlabel("time [s]" if "time_s" in ch.frame_columns else "frame")
+    ax.set_ylabel("ΔP [W/m²] (± 1σ)")
+    ax.set_title(f"change per mixel ({ch.info.solver}, {ch.info.rays_per_mixel_per_frame} rays/mixel/frame)")
+    ax.legend(fontsize=8, ncol=min(4, len(ch.mixel_names)))
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120, format="png")
+    plt.close(fig)
+    return path
+
+
+# --------------------------------------------------------------------------------------- size and time guard
+# Samples traced per second per solver, measured with llvm_ad_mono on a shared 2-core CPU (a 128 x 72 screen,
+# 2 mixels; worlds: the room of scenes/world, max_depth 3): the estimate is an upper bound of the time on faster
+# machines (a CUDA GPU is far faster).
+SAMPLES_PER_S: dict[type[Solver], float] = {ResponseMap: 2.0e7, Aperture: 1.0e7, Reference: 1.0e6,
+                                             PlainChange: 4.0e6, StratifiedChange: 4.0e6}
+SCALAR_SLOWDOWN = 10.0  # scalar_rgb traces one ray at a time
+DOT_PRODUCTS_PER_S = 5.0e8  # response_map: frame x map products (numpy)
+DEFAULT_TIME_LIMIT_S = 4 * 3600.0
+
+
+def estimate_seconds(cfg: RenderConfig | WorldConfig, variant: str | None = None) -> tuple[float, str]:
+    """A rough upper estimate of a render's time [s] and what it counts (from :data:`SAMPLES_PER_S`), for display
+    and world configs alike; nothing is built.
+
+    With ``target_rel_stderr > 0`` the sample counts grow until the target is met; the estimate is then that of
+    the first pass only (the text says so).
+    """
+    solver, budget = cfg.run.solver, cfg.run.budget
+    n_mixels = len(cfg.mincam)
+    if isinstance(cfg, WorldConfig):
+        n_frames, traced = cfg.n_frames, budget.rays()
+        depth = cfg.run.max_depth / 3.0  # segments per path, relative to the measured max_depth 3
+        samples = float(n_frames) * traced * n_mixels * depth
+        what = f"{n_frames} frames x {traced} rays x {n_mixels} mixels"
+        seconds = samples / SAMPLES_PER_S[type(solver)]
+        if cfg.camera is not None:
+            pixels = float(n_frames + 1) * cfg.camera.width_px * cfg.camera.height_px * cfg.camera.spp
+            seconds += pixels / SAMPLES_PER_S[Aperture]
+            what += f" + camera {n_frames + 1} images"
+    elif isinstance(solver, ResponseMap):
+        n_frames, (traced, _) = len(cfg.frames), traced_samples(cfg.run)
+        rows, cols = cfg.screen.shape
+        samples = float(rows * cols) * traced * n_mixels
+        what = f"{rows * cols} texels x {traced} samples x {n_mixels} mixels"
+        seconds = samples / SAMPLES_PER_S[ResponseMap] + n_frames * rows * cols * n_mixels / DOT_PRODUCTS_PER_S
+    else:
+        n_frames, (traced, _) = len(cfg.frames), traced_samples(cfg.run)
+        samples = float(n_frames) * traced * n_mixels
+        what = f"{n_frames} frames x {traced} samples x {n_mixels} mixels"
+        seconds = samples / SAMPLES_PER_S[type(solver)]
+    if variant == "scalar_rgb":
+        seconds *= SCALAR_SLOWDOWN
+    if budget.target_rel_stderr > 0:
+        what += " (first pass; target_rel_stderr adds passes)"
+    return seconds, what
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    if seconds < 3 * 86400:
+        return f"{seconds / 3600:.1f} h"
+    return f"{seconds / 86400:.3g} days"
+
+
+def check_budget(cfg: RenderConfig | WorldConfig, variant: str | None,
+                 limit_s: float = DEFAULT_TIME_LIMIT_S) -> float:
+    """Refuse a render whose estimated time (:func:`estimate_seconds`) exceeds ``limit_s``; return the estimate.
+
+    Raises
+    ------
+    ConfigError
+        Naming the estimate, what it counts, and the two fixes (fewer samples or frames, or a higher limit).
+    """
+    seconds, what = estimate_seconds(cfg, variant)
+    if seconds > limit_s:
+        key = "samples_per_texel" if isinstance(cfg.run.solver, ResponseMap) else "spp"
+        frames = "the movers' frames" if isinstance(cfg, WorldConfig) else "the frames"
+        raise ConfigError(f"this render would take about {_duration(seconds)} ({what}), over the limit of "
+                          f"{_duration(limit_s)}: lower [run] {key} (or {frames}), or raise the limit with "
+                          f"--time-limit-s {max(limit_s, 1.5 * seconds):.0f}")
+    return seconds
+
+
+# ----------------------------------------------------------------------------------------------- --check
+def _budget_text(cfg: RenderConfig | WorldConfig) -> str:
+    b = cfg.run.budget
+    if b.target_rel_stderr > 0:
+        text = f"target relative stderr {b.target_rel_stderr:g}"
+    elif isinstance(cfg.run.solver, ResponseMap):
+        text = f"{b.samples_per_texel} samples per texel"
+    else:
+        text = f"{b.rays()} samples per mixel per frame"
+    if not isinstance(cfg.run.solver, ResponseMap):
+        text += f", {b.replicates} replicates"
+    return f"{text}, seed {b.seed}"
+
+
+def config_summary(cfg: RenderConfig, variant: str | None) -> list[str]:
+    """What a validated config will render, one line per part (``mincam-sim render --check``)."""
+    run, screen = cfg.run, cfg.screen
+    lines = [f"config: {cfg.source or 'text'} is valid"]
+    def vec(v) -> str:
+        return "[" + ", ".join(f"{float(x):+.4f}" for x in v) + "]"
+
+    for mixel in cfg.mincam:
+        mask, pose = mixel.mask, mixel.pose
+        _, up, forward = pose.axes()  # orthonormal: up made perpendicular to forward
+        lines.append(f"mixel {mixel.name}: mask {mask.name} ({mask.shape[1]}x{mask.shape[0]} texels, "
+                     f"{1e3 * mask.width_m:g} x {1e3 * mask.height_m:g} mm) at d_f {1e3 * mixel.d_f_m:g} mm, "
+                     f"detector {1e3 * mixel.detector_size_m:g} mm, {mixel.optics} optics, position "
+                     f"{vec(pose.position_m)} m, forward {vec(forward)}, up {vec(up)}")
+    lines.append(f"screen: {screen.width_m:.4f} x {screen.height_m:.4f} m, {screen.resolution[0]} x "
+                 f"{screen.resolution[1]} texels, {-screen.pose.position_m[2]:g} m from the mincam")
+    f = cfg.frames
+    lo = min(float(x.min()) for x in f)
+    hi = max(float(x.max()) for x in f)
+    lines.append(f"frames: {len(f)} ({cfg.frames_kind}), {f.shape[2]} x {f.shape[1]} texels, radiance "
+                 f"{lo:g} .. {hi:g} W m^-2 sr^-1, {len(f) * f.nbytes_per_frame / 2**20:.1f} MiB if held at once "
+                 "(streamed in chunks)")
+    lines.append(f"solver: {solver_name(run.solver)}, {_budget_text(cfg)}, variant {variant or 'automatic'}")
+    _, rounding = traced_samples(run)
+    if rounding is not None:
+        lines.append(f"samples: {rounding}")
+    lines.append(_estimate_line(cfg, variant))
+    out = Path(run.out_dir)
+    state = "exists" if out.is_dir() else "will be created"
+    if (out / RESULT).exists() or (out / f"{RESULT}.npz").exists():
+        state += ", holds an earlier run (resumed if unchanged, refused if different unless --overwrite)"
+    lines.append(f"out dir: {out} ({state})")
+    return lines
+
+
+def _estimate_line(cfg: RenderConfig | WorldConfig, variant: str | None) -> str:
+    seconds, what = estimate_seconds(cfg, variant)
+    return (f"estimate: about {_duration(seconds)} ({what}; limit {_duration(DEFAULT_TIME_LIMIT_S)}, "
+            "--time-limit-s raises it)")
+
+
+def world_summary(cfg: WorldConfig, variant: str | None) -> list[str]:
+    """What a validated world config will render, one line per part (``mincam-sim render --check``)."""
+    lines = [f"config: {cfg.source or 'text'} is valid (world scene)"]
+    for mixel in cfg.mincam:
+        p = ", ".join(f"{v:+.4f}" for v in mixel.pose.position_m)
+        f = ", ".join(f"{v:+.3f}" for v in mixel.pose.forward)
+        u = ", ".join(f"{v:+.3f}" for v in mixel.pose.up)
+        lines.append(f"mixel {mixel.name}: mask {mixel.mask.name} at d_f {1e3 * mixel.d_f_m:g} mm, position [{p}] m, "
+                     f"forward [{f}], up [{u}]")
+    if cfg.scene_file is not None:
+        lines.append(f"scene: {cfg.scene_file} ({cfg.up}-up)")
+    for obj in cfg.objects:
+        lines.append(f"object {obj.id}: {obj.mesh.name}, albedo {obj.albedo:g}, at {list(obj.position_m)} m")
+    for light in cfg.lights:
+        lines.append(f"light {light.id}: {light.kind}")
+    for mover in cfg.movers:
+        span = np.ptp(mover.offsets_m, axis=0)
+        lines.append(f"mover {mover.id}: {len(mover.offsets_m)} frames, travel {np.round(span, 4).tolist()} m")
+    lines.append(f"solver: {solver_name(cfg.run.solver)}, {_budget_text(cfg)}, max_depth {cfg.run.max_depth}, "
+                 f"background {cfg.background}, variant {variant or 'automatic'}")
+    lines.append(_estimate_line(cfg, variant))
+    lines.append(f"out dir: {cfg.run.out_dir}")
+    return lines
