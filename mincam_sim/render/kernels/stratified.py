@@ -275,6 +275,8 @@ def buffers_key(objects) -> tuple:
         params = mi.traverse(obj)
         for key in params.keys():
             value = params[key]
+            if dr.is_tensor_v(value) and dr.is_jit_v(value):
+                value = value.array  # a texture: the address of its flat array (a restored copy lands elsewhere)
             if dr.is_jit_v(value) and dr.depth_v(value) == 1 and dr.width(value) > 1:
                 dr.eval(value)
                 parts.append((key, int(np.from_dlpack(value).__array_interface__["data"][0]), dr.width(value)))

@@ -169,9 +169,8 @@ SCENES = {s.name: s for s in (_display_tilted(), _display_shadowing(), _world_pl
 
 
 @functools.cache
-def _sim(scene: str, solver: str = "") -> ms.Simulation:
-    """The scene's simulation, one per solver (a known defect, not this contract's: a stratified run's frozen
-    launch replays a stale texture buffer after another solver rewrote the plane's texture in the same scene)."""
+def _sim(scene: str) -> ms.Simulation:
+    """The scene's simulation, shared by every solver that solves it (each leaves the scene as it found it)."""
     return SCENES[scene].build()
 
 
@@ -217,7 +216,7 @@ def _frames(entry: Entry, scene: Scene) -> list:
 
 def _measure(entry: Entry, scene: str, sink=None):
     """The solver's result in the scene (a change solver's fallbacks and retries are the scene's business)."""
-    sim, s = _sim(scene, entry.solver.name), SCENES[scene]
+    sim, s = _sim(scene), SCENES[scene]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         if entry.solver.changes:
@@ -264,7 +263,7 @@ def test_agrees_with_the_oracle(entry, scene):
 
 @pytest.mark.parametrize("entry, scene", PAIRS)
 def test_same_seed_same_numbers_and_the_scene_left_as_found(entry, scene):
-    sim = _sim(scene, entry.solver.name)
+    sim = _sim(scene)
     before = {k: np.array(sim.params[k]) for k in sim.params} if sim.kind == "world" else None
     again = _measure(entry, scene)
     for a, b in zip(_arrays(_cached(entry, scene)), _arrays(again), strict=True):
@@ -285,11 +284,11 @@ def test_results_are_typed(entry, scene):
         assert info.replicates == entry.budget.replicates and info.spp_per_mixel_per_frame == entry.budget.spp
         assert isinstance(info.rays_per_mixel_per_frame, int) and info.rays_per_mixel_per_frame > 0
         assert isinstance(info.retried_frames, tuple) and isinstance(info.fallbacks, tuple)
-        shape = (n, len(_sim(scene, entry.solver.name).mincam))
+        shape = (n, len(_sim(scene).mincam))
         assert result.dp.irradiance_w_m2.shape == result.p.irradiance_w_m2.shape == shape
     else:
         assert isinstance(result, ms.Measurements)
-        assert result.irradiance_w_m2.shape == (n, len(_sim(scene, entry.solver.name).mincam))
+        assert result.irradiance_w_m2.shape == (n, len(_sim(scene).mincam))
         assert result.meta["solver"] == entry.solver.name
         if isinstance(entry.solver, ms.ResponseMap):
             assert isinstance(result.maps, ResponseMaps)
@@ -308,7 +307,7 @@ def test_a_killed_run_resumes_through_run_with_the_same_numbers(entry, scene, tm
 
         return original(first_only(), table)
 
-    s, sim = SCENES[scene], _sim(scene, entry.solver.name)
+    s, sim = SCENES[scene], _sim(scene)
     call = "measure_changes" if entry.solver.changes else "measure"
     args = (None,) if entry.solver.changes else ()
     monkeypatch.setattr(simulation_module, "collect", killed_after_the_first_row)
@@ -331,7 +330,7 @@ def test_a_killed_run_resumes_through_run_with_the_same_numbers(entry, scene, tm
 def test_a_wrong_scene_kind_is_refused(entry):
     solver = entry.solver
     for scene in SCENES.values():
-        sim = _sim(scene.name, solver.name)
+        sim = _sim(scene.name)
         if scene.kind not in solver.scenes:
             with pytest.raises(InputError, match=f"does not solve {scene.kind} scenes"):
                 _measure(entry, scene.name)
