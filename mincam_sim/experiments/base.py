@@ -19,7 +19,7 @@ from mincam_sim.experiments.setup import Setup
 from mincam_sim.experiments.study_targets import StudyExperiment, figures_not_saved, numeric_details
 
 #: Set-up fields that are no study parameter: the study's own seed and quick mode, and non-numeric fields.
-_SETUP_NOT_STUDIED = frozenset({"seed", "quick", "screen_resolution", "dp_estimator"})
+_SETUP_NOT_STUDIED = frozenset({"seed", "quick", "screen_resolution", "dp_solver"})
 
 
 def _scalar_fields(obj) -> dict:

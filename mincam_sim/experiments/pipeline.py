@@ -98,7 +98,7 @@ class LocateOptions:
 def locate_in_world(sim: Simulation, camera: GroundTruthCamera, frames: Sequence[dict], background: dict,
                     setup: Setup, rng: np.random.Generator, options: LocateOptions,
                     truth_sim: Simulation | None = None) -> Located:
-    """Render dP of every frame (``setup.dp_estimator``: the stratified solver with the plain budget
+    """Render dP of every frame (``setup.dp_solver``: the stratified solver with the plain budget
     ``setup.tabletop_spp`` / ``STRATIFIED_SHARE`` rays per pass, or the plain correlated one with it), read it
     out, detect, predict positions with ``options.predict(change_dn, min_total_dn)``, propagate the noise, and
     compare with the ground-truth camera of ``truth_sim`` (a second simulation of the same scene, so that dP and
@@ -130,7 +130,7 @@ def locate_in_world(sim: Simulation, camera: GroundTruthCamera, frames: Sequence
     ground_truth, objects, extrapolated, groups = o.ground_truth, o.objects, o.extrapolated, o.groups
     _check_ground_truth(ground_truth, objects, frames)
     spp = setup.tabletop_spp
-    rays = spp // STRATIFIED_SHARE if setup.dp_estimator == "stratified" else spp
+    rays = spp // STRATIFIED_SHARE if setup.dp_solver == "stratified_change" else spp
     seen = _observe(sim, frames, background, setup, rng, o.predict, rays, o.show_progress)
     truths = _ground_truths(sim if truth_sim is None else truth_sim, camera, frames, background, setup, o)
     truth = truths.by_name[ground_truth]
@@ -191,7 +191,7 @@ class _Observed:
 def _observe(sim: Simulation, frames, background, setup: Setup, rng: np.random.Generator, predict,
              rays: int, show_progress: bool) -> _Observed:
     """Render dP of every frame, read it out with the sensor, detect, predict and propagate the noise."""
-    solver = StratifiedChange() if setup.dp_estimator == "stratified" else PlainChange()
+    solver = StratifiedChange() if setup.dp_solver == "stratified_change" else PlainChange()
     changes = sim.measure_changes(frames, background, solver, Budget(spp=rays, seed=setup.seed),
                                   show_progress=show_progress)
     dp = changes.dp
@@ -321,7 +321,7 @@ def _summary_extras(seen: _Observed, truths: _Truths, truth: np.ndarray, ok: np.
         "noise_sigma_median_pct": float(100 * np.median(sigma_norm[ok]) / setup.field_m) if ok.any() else None,
         "dP_worst_rel_stderr": float(np.nanmax(dp_rel[ok])) if ok.any() else None,
         "spp_per_mixel_per_frame": rays,
-        "dP_estimator": seen.info.solver,
+        "dP_solver": seen.info.solver,
         "rays_per_mixel_per_frame": seen.info.rays_per_mixel_per_frame,
         "launches": seen.info.launches,
         "exposure_s": seen.readout.sensor.exposure_s,

@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 
 from mincam_sim import paper
+from mincam_sim.errors import InputError
 from mincam_sim.masks import DEFAULT_MASK_SIZE_M, DEFAULT_RESOLUTION
 from mincam_sim.model.geometry import Pose
 from mincam_sim.model.optics import DEFAULT_D_F_M, DEFAULT_DETECTOR_SIZE_M, PAPER_SPACING_M
@@ -52,8 +53,8 @@ class Setup:
     spp : int
         Plain-estimator samples per mixel per frame on the tabletop (halved in quick mode); the stratified
         estimator spends ``spp / 128`` rays per pass for the same noise (:mod:`.pipeline`).
-    dp_estimator : {"stratified", "plain"}
-        How frame changes dP are rendered (both unbiased; "plain" is the reference).
+    dp_solver : {"stratified_change", "plain_change"}
+        The change solver that renders frame changes dP (both unbiased; "plain_change" is the reference).
     camera_px : int
         Pixels per side of the ground-truth camera's images (>= 8).
     seed : int
@@ -74,7 +75,7 @@ class Setup:
     screen_resolution: tuple[int, int] = DEFAULT_SCREEN_RESOLUTION
     table_light_radiance_w_m2_sr: float = 20.0
     spp: int = 1 << 23  # plain-estimator samples per mixel per frame on the tabletop (quick mode: half)
-    dp_estimator: str = "stratified"  # "stratified" (rays where the change is) or "plain" (the reference)
+    dp_solver: str = "stratified_change"  # rays where the change is, or "plain_change" (the reference)
     camera_px: int = 160
     seed: int = 0
     quick: bool = False
@@ -83,17 +84,18 @@ class Setup:
         for key in ("depth_m", "d_f_m", "detector_size_m", "mask_size_m", "field_m"):
             v = getattr(self, key)
             if not (np.isfinite(v) and v > 0):
-                raise ValueError(f"Setup.{key} must be > 0 (metres), got {v!r}")
+                raise InputError(f"Setup.{key} must be > 0 (metres), got {v!r}")
         if not 1 <= self.bit_depth <= 32:
-            raise ValueError(f"Setup.bit_depth must be 1 to 32 bits, got {self.bit_depth!r}")
+            raise InputError(f"Setup.bit_depth must be 1 to 32 bits, got {self.bit_depth!r}")
         if self.spp < 1 or self.camera_px < 8:
-            raise ValueError("Setup.spp must be >= 1 and Setup.camera_px >= 8")
+            raise InputError("Setup.spp must be >= 1 and Setup.camera_px >= 8")
         if not 0 < self.exposure_fill <= 1:
-            raise ValueError(f"Setup.exposure_fill must be in (0, 1], got {self.exposure_fill!r}")
-        if self.dp_estimator not in ("stratified", "plain"):
-            raise ValueError(f"Setup.dp_estimator must be 'stratified' or 'plain', got {self.dp_estimator!r}")
+            raise InputError(f"Setup.exposure_fill must be in (0, 1], got {self.exposure_fill!r}")
+        if self.dp_solver not in ("stratified_change", "plain_change"):
+            raise InputError(f"Setup.dp_solver must be 'stratified_change' or 'plain_change', got "
+                             f"{self.dp_solver!r}")
         if not (np.isfinite(self.spacing_m) and self.spacing_m >= 0):
-            raise ValueError(f"Setup.spacing_m must be >= 0 metres, got {self.spacing_m!r}")
+            raise InputError(f"Setup.spacing_m must be >= 0 metres, got {self.spacing_m!r}")
 
     def as_dict(self) -> dict:
         return asdict(self)

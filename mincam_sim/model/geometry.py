@@ -13,13 +13,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mincam_sim.errors import InputError
+
 Vec3 = tuple[float, float, float]
 
 
 def _as_vec3(value, name: str) -> np.ndarray:
     arr = np.asarray(value, dtype=float)
     if arr.shape != (3,) or not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be three finite numbers [m], got {value!r}")
+        raise InputError(f"{name} must be three finite numbers [m], got {value!r}")
     return arr
 
 
@@ -46,9 +48,9 @@ class Pose:
         fwd = _as_vec3(self.forward, "forward")
         up = _as_vec3(self.up, "up")
         if np.linalg.norm(fwd) == 0:
-            raise ValueError("forward must be a non-zero direction")
+            raise InputError("forward must be a non-zero direction")
         if np.linalg.norm(np.cross(fwd, up)) < 1e-9 * np.linalg.norm(fwd) * max(np.linalg.norm(up), 1e-300):
-            raise ValueError(f"up {tuple(up)} must not be parallel to forward {tuple(fwd)}")
+            raise InputError(f"up {tuple(up)} must not be parallel to forward {tuple(fwd)}")
         object.__setattr__(self, "position_m", tuple(float(v) for v in pos))
         object.__setattr__(self, "forward", tuple(float(v) for v in fwd))
         object.__setattr__(self, "up", tuple(float(v) for v in up))
@@ -92,7 +94,7 @@ def look_at(position_m: Vec3, target_m: Vec3, up: Vec3 = (0.0, 1.0, 0.0)) -> Pos
     """Pose at ``position_m`` looking at ``target_m`` [m]."""
     fwd = np.subtract(target_m, position_m)
     if np.linalg.norm(fwd) == 0:
-        raise ValueError("look_at: target coincides with position")
+        raise InputError("look_at: target coincides with position")
     return Pose(tuple(position_m), tuple(fwd), tuple(up))
 
 

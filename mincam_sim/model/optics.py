@@ -16,7 +16,7 @@ from numbers import Real
 import numpy as np
 
 from mincam_sim import paper
-from mincam_sim.errors import ConfigError
+from mincam_sim.errors import ConfigError, InputError
 from mincam_sim.masks import DEFAULT_MASK_SIZE_M, Mask, constant, ramp
 from mincam_sim.model.geometry import Pose
 
@@ -82,22 +82,22 @@ class Mixel:
             raise ConfigError(f"mixel {self.name!r}: wavelengths_m must be numbers in metres (550e-9 for 550 nm), "
                               f"got {self.wavelengths_m!r}")
         if not (np.isfinite(self.d_f_m) and self.d_f_m > 0):
-            raise ValueError(
+            raise InputError(
                 f"mixel {self.name!r}: d_f_m (mask-to-detector distance) must be > 0 metres, got {self.d_f_m!r}"
             )
         if not (np.isfinite(self.detector_size_m) and self.detector_size_m > 0):
-            raise ValueError(
+            raise InputError(
                 f"mixel {self.name!r}: detector_size_m must be a positive size in metres, got {self.detector_size_m!r}"
             )
         if self.optics not in ("geometric", "wave"):
-            raise ValueError(f"mixel {self.name!r}: optics must be 'geometric' or 'wave', got {self.optics!r}")
+            raise InputError(f"mixel {self.name!r}: optics must be 'geometric' or 'wave', got {self.optics!r}")
         lam = tuple(float(v) for v in np.atleast_1d(np.asarray(self.wavelengths_m, dtype=float)))
         if not lam or not all(np.isfinite(v) and 0 < v < 1e-4 for v in lam):
-            raise ValueError(f"mixel {self.name!r}: wavelengths_m must be positive wavelengths in metres "
+            raise InputError(f"mixel {self.name!r}: wavelengths_m must be positive wavelengths in metres "
                              f"(550e-9 for 550 nm), got {self.wavelengths_m!r}")
         object.__setattr__(self, "wavelengths_m", lam)
         if self.detector_size_m > min(self.mask.width_m, self.mask.height_m):
-            raise ValueError(
+            raise InputError(
                 f"mixel {self.name!r}: detector ({self.detector_size_m} m) is larger than its mask aperture "
                 f"({self.mask.width_m} x {self.mask.height_m} m); the housing tube has the mask's cross-section"
             )
@@ -157,16 +157,16 @@ class Mincam:
                               f"({type(mixels[bad[0]]).__name__}), not a Mixel; build each with "
                               "mincam_sim.model.optics.Mixel(mask, ...)")
         if not mixels:
-            raise ValueError("a mincam needs at least one mixel")
+            raise InputError("a mincam needs at least one mixel")
         names = [m.name for m in mixels]
         if len(set(names)) != len(names):
-            raise ValueError(f"mixel names must be unique, got {names}")
+            raise InputError(f"mixel names must be unique, got {names}")
         object.__setattr__(self, "mixels", mixels)
         if not self.allow_overlap:
             for i, a in enumerate(mixels):
                 for b in mixels[i + 1 :]:
                     if bodies_overlap(a, b):
-                        raise ValueError(
+                        raise InputError(
                             f"the bodies of mixels {a.name!r} and {b.name!r} intersect (each is a "
                             f"{a.mask.width_m * 1e3:g} x {a.mask.height_m * 1e3:g} x {a.d_f_m * 1e3:g} mm box from "
                             "its detector to its mask): move them apart, or pass allow_overlap=True to render an "
@@ -226,11 +226,11 @@ def seen_whole_by_every_mixel(mincam: Mincam, centres_m: np.ndarray, half_size_m
     for m in mincam:
         left, up, forward = m.pose.axes()
         if not np.allclose(forward, (0.0, 0.0, -1.0), atol=1e-9):
-            raise ValueError(f"mixel {m.name!r} must face the plane (forward (0, 0, -1)), got {m.pose.forward}")
+            raise InputError(f"mixel {m.name!r} must face the plane (forward (0, 0, -1)), got {m.pose.forward}")
         p = np.asarray(m.pose.position_m, dtype=np.float64)
         distance = p[2] - plane_z_m
         if distance <= 0:
-            raise ValueError(f"mixel {m.name!r} at z = {p[2]} m is not above the plane z = {plane_z_m} m")
+            raise InputError(f"mixel {m.name!r} at z = {p[2]} m is not above the plane z = {plane_z_m} m")
         tan = (np.array([m.mask.width_m, m.mask.height_m]) - m.detector_size_m) / (2 * m.d_f_m)
         axes = np.stack([left[:2], up[:2]])  # the mask's width runs along local x (left), its height along y
         offset = np.abs((centres - p[:2]) @ axes.T)  # (n, 2) from the mixel's axis, along each mask axis
@@ -277,7 +277,7 @@ def layout(
     mincam of the paper's model); ``False`` refuses it.
     """
     if len(masks) != len(offsets_m):
-        raise ValueError(f"{len(masks)} masks but {len(offsets_m)} offsets: give one offset per mask")
+        raise InputError(f"{len(masks)} masks but {len(offsets_m)} offsets: give one offset per mask")
     center = center or Pose()
     left, up, _ = center.axes()
     names = list(names) if names is not None else [f"m{i}_{m.name}" for i, m in enumerate(masks)]
@@ -336,4 +336,4 @@ def single(mask: Mask | None = None, pose: Pose | None = None, **kw) -> Mincam:
 def _check_spacing(spacing_m: float) -> None:
     _real("spacing_m", spacing_m)
     if not (np.isfinite(spacing_m) and spacing_m >= 0):
-        raise ValueError(f"spacing_m must be >= 0 metres, got {spacing_m!r}")
+        raise InputError(f"spacing_m must be >= 0 metres, got {spacing_m!r}")

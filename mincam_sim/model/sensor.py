@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from mincam_sim import paper
+from mincam_sim.errors import InputError
 
 PLANCK_J_S = 6.62607015e-34  # [J s] exact (SI 2019)
 SPEED_OF_LIGHT_M_S = 299_792_458.0  # [m/s] exact
@@ -46,12 +47,12 @@ MeasureMethod = Literal["aggregate", "per_pixel"]
 
 def _check_positive_finite(name: str, value: float, hint: str) -> None:
     if not np.isfinite(value) or value <= 0:
-        raise ValueError(f"SensorModel.{name} must be a finite number > 0, got {value!r}; {hint}")
+        raise InputError(f"SensorModel.{name} must be a finite number > 0, got {value!r}; {hint}")
 
 
 def _check_non_negative_finite(name: str, value: float, hint: str) -> None:
     if not np.isfinite(value) or value < 0:
-        raise ValueError(f"SensorModel.{name} must be a finite number >= 0, got {value!r}; {hint}")
+        raise InputError(f"SensorModel.{name} must be a finite number >= 0, got {value!r}; {hint}")
 
 
 @dataclass(frozen=True)
@@ -103,7 +104,7 @@ class SensorModel:
     def __post_init__(self) -> None:
         _check_positive_finite("exposure_s", self.exposure_s, "use an exposure time in seconds, e.g. 10e-3")
         if not np.isfinite(self.quantum_efficiency) or not 0 < self.quantum_efficiency <= 1:
-            raise ValueError(
+            raise InputError(
                 f"SensorModel.quantum_efficiency must be in (0, 1], got {self.quantum_efficiency!r}; "
                 "give a fraction (0.6), not a percentage"
             )
@@ -116,15 +117,15 @@ class SensorModel:
                 "gain_e_per_dn", self.gain_e_per_dn, "give electrons per DN, or None to map the full well"
             )
         if isinstance(self.bit_depth, bool) or not isinstance(self.bit_depth, int | np.integer):
-            raise ValueError(f"SensorModel.bit_depth must be an integer, got {self.bit_depth!r}")
+            raise InputError(f"SensorModel.bit_depth must be an integer, got {self.bit_depth!r}")
         if not 1 <= self.bit_depth <= 32:
-            raise ValueError(
+            raise InputError(
                 f"SensorModel.bit_depth must be in 1..32, got {self.bit_depth} (the paper: {paper.ADC_BITS})"
             )
         if isinstance(self.pixels_averaged, bool) or not isinstance(self.pixels_averaged, int | np.integer):
-            raise ValueError(f"SensorModel.pixels_averaged must be an integer, got {self.pixels_averaged!r}")
+            raise InputError(f"SensorModel.pixels_averaged must be an integer, got {self.pixels_averaged!r}")
         if self.pixels_averaged < 1:
-            raise ValueError(
+            raise InputError(
                 f"SensorModel.pixels_averaged must be >= 1, got {self.pixels_averaged}; 1 is a single pixel"
             )
         _check_positive_finite("detector_area_m2", self.detector_area_m2, "give the area in m^2, e.g. 1e-8")
@@ -246,7 +247,7 @@ class SensorModel:
                 "pass np.random.default_rng(seed) (no global random state is used)"
             )
         if method not in ("aggregate", "per_pixel"):
-            raise ValueError(f"method must be 'aggregate' or 'per_pixel', got {method!r}")
+            raise InputError(f"method must be 'aggregate' or 'per_pixel', got {method!r}")
         mean_electrons = np.asarray(self.electrons(irradiance_w_m2), dtype=np.float64)
         flat = mean_electrons.reshape(-1)  # a scalar irradiance used to fail (numpy scalars from rng.poisson)
         measure = self._measure_per_pixel if method == "per_pixel" else self._measure_aggregate
@@ -299,12 +300,12 @@ class SensorModel:
         fill fraction below 1 to leave headroom for shot noise before saturation.
         """
         if not np.isfinite(irradiance_peak_w_m2) or irradiance_peak_w_m2 <= 0:
-            raise ValueError(
+            raise InputError(
                 f"irradiance_peak_w_m2 must be a finite number > 0, got {irradiance_peak_w_m2!r}; "
                 "pass the brightest irradiance the mixel should record"
             )
         if not np.isfinite(fill) or not 0 < fill <= 1:
-            raise ValueError(f"fill must be in (0, 1], got {fill!r}; e.g. 0.8 fills 80 % of the full well")
+            raise InputError(f"fill must be in (0, 1], got {fill!r}; e.g. 0.8 fills 80 % of the full well")
         electrons_per_second = (
             irradiance_peak_w_m2 * self.pixel_area_m2 / self.photon_energy_j * self.quantum_efficiency
             + self.dark_current_e_per_s
@@ -320,12 +321,12 @@ def _validated_irradiance(irradiance_w_m2: ArrayLike) -> np.ndarray:
     irradiance = np.asarray(irradiance_w_m2, dtype=np.float64)
     if not np.all(np.isfinite(irradiance)):
         bad = int(np.count_nonzero(~np.isfinite(irradiance)))
-        raise ValueError(
+        raise InputError(
             f"irradiance_w_m2 has {bad} non-finite value(s) (NaN or inf); "
             "replace them (e.g. np.nan_to_num) before simulating the readout"
         )
     if np.any(irradiance < 0):
-        raise ValueError(
+        raise InputError(
             f"irradiance_w_m2 must be >= 0 (minimum given: {irradiance.min():.6g}); irradiance is a power "
             "per area and cannot be negative: check signs or subtract backgrounds after measuring, not before"
         )

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mincam_sim import paper
+from mincam_sim.errors import InputError
 from mincam_sim.model.geometry import Pose, clip_polygon_halfspace
 
 INCH_M = 0.0254  # [m]
@@ -55,12 +56,12 @@ class Screen:
         for key in ("width_m", "height_m"):
             v = getattr(self, key)
             if not (np.isfinite(v) and v > 0):
-                raise ValueError(f"screen {key} must be a positive size in metres, got {v!r}")
+                raise InputError(f"screen {key} must be a positive size in metres, got {v!r}")
         res = tuple(self.resolution)
         if len(res) != 2 or any(int(r) != r or r < 1 for r in res):
-            raise ValueError(f"screen resolution must be two positive integers (columns, rows), got {res!r}")
+            raise InputError(f"screen resolution must be two positive integers (columns, rows), got {res!r}")
         if res[0] * res[1] > 4096 * 4096:
-            raise ValueError(f"screen resolution {res} is too large (max 4096 x 4096 texels)")
+            raise InputError(f"screen resolution {res} is too large (max 4096 x 4096 texels)")
         object.__setattr__(self, "resolution", (int(res[0]), int(res[1])))
 
     @property
@@ -105,11 +106,11 @@ class Screen:
         """Validate a frame (shape, finite, >= 0) and return it as float64."""
         f = np.asarray(frame, dtype=np.float64)
         if f.shape != self.shape:
-            raise ValueError(f"{name} has shape {f.shape} but this screen's frames are {self.shape} (rows, cols)")
+            raise InputError(f"{name} has shape {f.shape} but this screen's frames are {self.shape} (rows, cols)")
         if not np.all(np.isfinite(f)):
-            raise ValueError(f"{name} contains NaN or infinite radiance; frames must be finite and >= 0")
+            raise InputError(f"{name} contains NaN or infinite radiance; frames must be finite and >= 0")
         if f.min() < 0:
-            raise ValueError(f"{name} has negative radiance ({f.min():.3g}); displays emit >= 0 W/m^2/sr")
+            raise InputError(f"{name} has negative radiance ({f.min():.3g}); displays emit >= 0 W/m^2/sr")
         return f
 
 
@@ -133,7 +134,7 @@ def white_square(
     the pixel grid are exact.
     """
     if not (np.isfinite(size_m) and size_m > 0):
-        raise ValueError(f"square size_m must be > 0 metres, got {size_m!r}")
+        raise InputError(f"square size_m must be > 0 metres, got {size_m!r}")
     cx, cy = center_m
     return radiance * coverage(screen, cx - size_m / 2, cx + size_m / 2, cy - size_m / 2, cy + size_m / 2)
 
@@ -263,7 +264,7 @@ def line_sweep(
 ) -> Sweep:
     """``n`` square positions evenly spaced from ``start_m`` to ``end_m`` (a 1D sweep along a boundary)."""
     if n < 1:
-        raise ValueError(f"a sweep needs n >= 1 positions, got {n}")
+        raise InputError(f"a sweep needs n >= 1 positions, got {n}")
     t = np.linspace(0.0, 1.0, n)[:, None]
     pos = (1 - t) * np.asarray(start_m, float) + t * np.asarray(end_m, float)
     return Sweep(pos, size_m, radiance)
@@ -279,7 +280,7 @@ def grid_sweep(
 ) -> Sweep:
     """Square positions on an ``nx`` x ``ny`` grid (row-major, y from top to bottom) for 2D calibration."""
     if nx < 1 or ny < 1:
-        raise ValueError(f"a grid sweep needs nx, ny >= 1, got {nx}, {ny}")
+        raise InputError(f"a grid sweep needs nx, ny >= 1, got {nx}, {ny}")
     xs = np.linspace(*x_range_m, nx)
     ys = np.linspace(*y_range_m, ny)[::-1]
     gx, gy = np.meshgrid(xs, ys)
@@ -346,7 +347,7 @@ def check_visible(screen: Screen, mixels) -> None:
     for mixel in mixels:
         offset = np.asarray(mixel.pose.position_m) - np.asarray(screen.pose.position_m)
         if float(offset @ normal) <= 0:
-            raise ValueError(
+            raise InputError(
                 f"mixel {mixel.name!r} at {mixel.pose.position_m} m is behind the screen or in its plane; "
                 "displays emit only from their front: move the mixel in front of the screen (along the screen's "
                 f"forward {screen.pose.forward}) or turn the screen round"
@@ -354,7 +355,7 @@ def check_visible(screen: Screen, mixels) -> None:
         tol_m = 1e-9 * min(mixel.mask.width_m, mixel.mask.height_m, mixel.d_f_m)
         inside = screen_in_body_polygon_local_m(screen, mixel, tol_m)
         if _polygon_area_m2(inside) > 0:
-            raise ValueError(
+            raise InputError(
                 f"the screen passes through mixel {mixel.name!r}'s body (the {mixel.mask.width_m * 1e3:g} x "
                 f"{mixel.mask.height_m * 1e3:g} x {mixel.d_f_m * 1e3:g} mm housing from its detector to its mask, "
                 f"at {mixel.pose.position_m} m): move the screen (or the mixel) so that the screen lies beyond "
@@ -363,7 +364,7 @@ def check_visible(screen: Screen, mixels) -> None:
         visible = visible_screen_polygon_local_m(screen, mixel)
         if _polygon_area_m2(visible) <= 1e-14 * screen_area_m2:
             tx, ty = mixel.half_fov_tan()
-            raise ValueError(
+            raise InputError(
                 f"the screen lies entirely outside mixel {mixel.name!r}'s field of view "
                 f"(+/-{np.degrees(np.arctan(tx)):.1f} x +/-{np.degrees(np.arctan(ty)):.1f} deg about its forward "
                 f"{mixel.pose.forward}, beyond its mask at {mixel.d_f_m * 1e3:g} mm): point the mixel at the "

@@ -12,12 +12,12 @@ from mincam_sim.experiments import Setup, reproduce
 SMALL = {"quick": True, "spp": 1 << 15}
 
 
-@pytest.mark.parametrize("estimator", ["plain", "stratified"])
-def test_tracking_runs_with_either_dp_estimator(tmp_path, estimator):
-    results = reproduce(["tracking"], Setup(dp_estimator=estimator, **SMALL), tmp_path)
+@pytest.mark.parametrize("solver", ["plain_change", "stratified_change"])
+def test_tracking_runs_with_either_dp_solver(tmp_path, solver):
+    results = reproduce(["tracking"], Setup(dp_solver=solver, **SMALL), tmp_path)
     summary = results["tracking"]
     text = repr(summary)
-    assert "rays_per_mixel_per_frame" in text and estimator in text
+    assert "rays_per_mixel_per_frame" in text and solver in text
 
 
 # a value other than the default for every Setup field (what the paper leaves open, within its valid range)
@@ -27,7 +27,7 @@ OTHER = {"depth_m": 0.45, "spacing_m": 0.03, "d_f_m": 0.0022, "detector_size_m":
 
 
 def test_every_setup_field_is_covered():
-    fields = {f.name for f in dataclasses.fields(Setup)} - {"quick", "spp", "dp_estimator"}
+    fields = {f.name for f in dataclasses.fields(Setup)} - {"quick", "spp", "dp_solver"}
     assert fields <= set(OTHER), f"Setup fields without a case here: {sorted(fields - set(OTHER))}"
 
 
