@@ -321,7 +321,7 @@ def test_no_module_builds_versions_into_an_identity_by_hand():
     """``library_versions()`` is read by the builder (and the response-map cache key) only."""
     users = sorted(p.relative_to(ROOT).as_posix() for p in (ROOT / "mincam_sim").rglob("*.py")
                    if "library_versions()" in p.read_text())
-    assert users == ["mincam_sim/storage/identity.py", "mincam_sim/render/kernels/map_tracing.py"]
+    assert users == ["mincam_sim/render/kernels/map_tracing.py", "mincam_sim/storage/identity.py"]
 
 
 # Keys of the one identity of a run (kind "run", built by Run; library versions pinned), recorded when Run became
