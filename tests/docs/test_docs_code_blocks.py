@@ -40,7 +40,7 @@ MARKER = re.compile(r"<!--\s*docs-test:\s*(?P<what>.*?)\s*-->", re.S)
 REQUIREMENT = re.compile(r"(?P<kind>module|command)\s+(?P<name>[\w.-]+)(?:\s*\((?P<how>[^)]*)\))?")
 
 #: Pages whose blocks take more than 30 s on 2 cores (seconds measured there): slow tests.
-SLOW = {"studies.md": "five studies, one of 33 points x 2 replicates: ~2 min"}
+SLOW = {"studies.md": "five studies (one of 33 points x 2 replicates): 9.5 min on 2 cores shared at load ~11"}
 
 
 @dataclass(frozen=True)
