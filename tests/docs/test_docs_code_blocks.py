@@ -220,3 +220,33 @@ def test_the_mechanism_refuses_unlabelled_blocks_and_reasonless_skips(tmp_path):
         run("```bash\nexit 3\n```\n", "d")
     with pytest.raises(pytest.fail.Exception, match="page.md:1 \\(python\\) raised NameError"):
         run("```python\nx = y\n```\n", "e")
+
+
+def _resolves(dotted: str) -> bool:
+    """``mincam_sim.a.b.C`` names a module, or an attribute of the longest module prefix that imports."""
+    parts = dotted.split(".")
+    for k in range(len(parts), 0, -1):
+        try:
+            obj = importlib.import_module(".".join(parts[:k]))
+        except ImportError:
+            continue
+        try:
+            for part in parts[k:]:
+                obj = getattr(obj, part)
+        except AttributeError:
+            return False
+        return True
+    return False
+
+
+def test_every_module_path_named_in_the_docs_exists():
+    """A package that moves leaves no stale ``mincam_sim.x`` behind in the README, the pages or the examples (the
+    docstrings' cross references are checked by the nitpicky docs build)."""
+    named: dict[str, str] = {}
+    for path in [*PAGES, *sorted((ROOT / "docs" / "examples").glob("*.py"))]:
+        for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+            for m in re.finditer(r"(?<![\w/.])mincam_sim(?:\.[A-Za-z_]\w*)+", line):
+                named.setdefault(m.group(0), f"{path.relative_to(ROOT)}:{number}")
+    assert len(named) > 50
+    stale = {name: where for name, where in named.items() if not _resolves(name)}
+    assert not stale, f"names that do not exist: {stale}"
