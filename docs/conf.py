@@ -92,3 +92,52 @@ html_title = f"mincam_sim {release}"
 html_static_path: list[str] = []
 html_show_sourcelink = False
 pygments_style = "sphinx"
+
+
+# ---------------------------------------------------------------------------------------------- viewcode back links
+# viewcode links each object in a module's highlighted source back to ``<module>.<name>`` on the page that
+# documents it, with ONE <module> per source file: the name under which the first object of that file was
+# documented. An object of the same file documented under another name (a package that re-exports it, or the file
+# itself) then gets a link to an anchor that does not exist. The first handler gives such an object that anchor too;
+# the second reads every back link of the built source pages and warns (an error under -W) about any that is broken.
+def _add_viewcode_anchors(app, doctree) -> None:
+    from sphinx import addnodes
+    from sphinx.ext.viewcode import _get_full_modname
+
+    entries = getattr(app.env, "_viewcode_modules", {})
+    taken = {i for node in doctree.findall() if hasattr(node, "get") for i in (node.get("ids") or [])}
+    for sig in doctree.findall(addnodes.desc_signature):
+        modname, fullname = sig.get("module"), sig.get("fullname")
+        entry = entries.get(_get_full_modname(modname, fullname) or "") if modname and fullname else None
+        if not entry or entry[3] == modname or fullname not in entry[2]:
+            continue
+        anchor = f"{entry[3]}.{fullname}"
+        if anchor not in taken:
+            sig["ids"].append(anchor)
+            taken.add(anchor)
+
+
+def _check_viewcode_back_links(app, exception) -> None:
+    import re
+
+    from sphinx.util import logging
+
+    if exception is not None or app.builder.format != "html":
+        return
+    out = Path(app.outdir)
+    ids: dict[Path, set[str]] = {}
+    for page in sorted((out / "_modules").rglob("*.html")):
+        for href in re.findall(r'class="viewcode-back" href="([^"]+)"', page.read_text(encoding="utf-8")):
+            target, _, anchor = href.partition("#")
+            path = (page.parent / target).resolve()
+            if path not in ids:
+                text = path.read_text(encoding="utf-8") if path.is_file() else ""
+                ids[path] = set(re.findall(r'id="([^"]+)"', text))
+            if anchor not in ids[path]:
+                logging.getLogger(__name__).warning(f"broken link in the highlighted source "
+                                                    f"{page.relative_to(out)}: {href}")
+
+
+def setup(app) -> None:
+    app.connect("doctree-read", _add_viewcode_anchors, priority=600)  # after viewcode's own (500)
+    app.connect("build-finished", _check_viewcode_back_links)

@@ -21,7 +21,7 @@ from typer.core import TyperGroup
 
 from mincam_sim import paper
 from mincam_sim.configuration.config import EXAMPLE_TOML, load_config, parse_mask
-from mincam_sim.errors import BackendUnavailableError, ConfigError, MincamError
+from mincam_sim.errors import BackendUnavailableError, ConfigError, InputError, MincamError
 from mincam_sim.masks import PrintedFilm, export_print_png, generate_library, save_exr
 from mincam_sim.storage.store import lock_out_dir
 
@@ -443,10 +443,12 @@ def masks_generate(
 def masks_export(
     spec: Annotated[str, typer.Argument(help="'ramp:x', 'constant:0.5', 'file:path.png' ...")],
     out: Annotated[Path, typer.Option("--out", help="PNG to send to the printer (name ending in .png)")],
-    size_m: Annotated[float, typer.Option(help="physical mask side [m]")] = paper.MASK_SIZE_M,
+    size_m: Annotated[float | None, typer.Option(help="physical mask side [m]; default: the size an OpenEXR mask "
+                                                      "file records, else 0.002")] = None,
     dpi: Annotated[int, typer.Option(help="printer resolution [dots per inch], 50 to 4800")] = 600,
-    levels: Annotated[int, typer.Option(help="grey levels the printer reproduces per dot, 2 to 65536 (above 256 "
-                                             "the PNG has 16 bits)")] = 256,
+    levels: Annotated[int | None, typer.Option(help="grey levels the printer reproduces per dot, 2 to 65536 (above "
+                                                    "256 the PNG has 16 bits); default 256; not with --halftone")
+                      ] = None,
     halftone: Annotated[bool, typer.Option(help="print with an ordered (Bayer) halftone")] = False,
     film_t_min: Annotated[float, typer.Option(help="transmission of fully inked film")] = 0.02,
     film_t_max: Annotated[float, typer.Option(help="transmission of clear film")] = 0.9,
@@ -456,61 +458,145 @@ def masks_export(
     sheet: Annotated[Path | None, typer.Option(help="print sheet (.png at --dpi or .pdf) with crop and "
                                                     "registration marks, the detector side and the film mapping; "
                                                     "default: <out>_sheet.png, notes in <sheet>.txt")] = None,
+    no_sheet: Annotated[bool, typer.Option("--no-sheet", help="write the mask's PNG alone, without a print sheet")
+                        ] = False,
     preview: Annotated[Path | None, typer.Option(help="also write what the film will transmit (OpenEXR)")] = None,
 ) -> None:
     """Export a mask as a print-ready PNG at DPI and physical size, and a print sheet with its notes; optionally
     preview the printed film."""
     from mincam_sim.masks.sheet import write_print_sheet
 
-    if not (np.isfinite(size_m) and size_m > 0):
+    if size_m is not None and not (np.isfinite(size_m) and size_m > 0):
         raise ConfigError(f"--size-m must be a positive mask side in metres, got {size_m}")
     if not 50 <= dpi <= 4800:
         raise ConfigError(f"--dpi must be a printer resolution of 50 to 4800 dots per inch, got {dpi}")
-    if not 2 <= levels <= 65536:
+    if levels is not None and not 2 <= levels <= 65536:
         raise ConfigError(f"--levels must be 2 to 65536 grey levels (256 for an 8-bit printer; a PNG holds at most "
                           f"16 bits), got {levels}")
     if out.suffix.lower() != ".png":
         raise ConfigError(f"--out {out}: the print file is a PNG; give a name ending in .png")
+    if no_sheet and sheet is not None:
+        raise ConfigError(f"--sheet {sheet} and --no-sheet: give one of them")
     sheet = out.with_name(f"{out.stem}_sheet.png") if sheet is None else sheet
     if sheet.suffix.lower() not in (".png", ".pdf"):
         raise ConfigError(f"--sheet {sheet}: give a name ending in .png (at --dpi) or .pdf")
     if sheet.resolve() == out.resolve():
         raise ConfigError(f"--sheet {sheet} is the --out file; give the sheet another name")
     check_out_file(out, "--out file")
-    check_out_file(sheet, "--sheet file")
+    if not no_sheet:
+        check_out_file(sheet, "--sheet file")
     if preview is not None:
         check_out_file(preview, "--preview file")
         if preview.suffix.lower() != ".exr":
             raise ConfigError(f"--preview {preview}: the preview is OpenEXR; give a name ending in .exr")
-    mask = parse_mask(spec, size_m, 512, "mask", encoding="srgb" if srgb else "linear")
-    _check_print_grid(mask, size_m, dpi)
+    _warn_unused_print_options(spec, srgb, levels, halftone)
+    mask = _mask_to_print(spec, size_m, srgb)
+    _check_print_grid(mask, dpi)
     try:
-        film = PrintedFilm(t_min=film_t_min, t_max=film_t_max, dpi=dpi, levels=levels,
+        film = PrintedFilm(t_min=film_t_min, t_max=film_t_max, dpi=dpi, levels=256 if levels is None else levels,
                            halftone="ordered" if halftone else None)
     except ValueError as err:
         raise ConfigError(str(err).replace("t_min", "--film-t-min").replace("t_max", "--film-t-max")) from None
+    title = f"mask {spec}"
+    if not no_sheet:
+        _check_sheet(mask, dpi, film, title)
     path = export_print_png(mask, out, dpi=dpi, film=film)
-    sheet_path, notes = write_print_sheet([mask], [(0.0, 0.0)], dpi, film, sheet, title=f"mask {spec}")
+    if not no_sheet:
+        sheet_path, notes = write_print_sheet([mask], [(0.0, 0.0)], dpi, film, sheet, title=title)
     if preview is not None:
         printed = film.print(mask)
         save_exr(printed, preview)
         typer.echo(f"{preview}: printed film transmits {printed.transmission.min():.3f}.."
                    f"{printed.transmission.max():.3f} on a {printed.shape[1]}x{printed.shape[0]} dot grid")
     typer.echo(str(path))
-    typer.echo(f"{sheet_path} (notes: {notes})")
+    if not no_sheet:
+        typer.echo(f"{sheet_path} (notes: {notes})")
 
 
-def _check_print_grid(mask, size_m: float, dpi: int) -> None:
-    """Refuse a mask that prints as more dots than a print file holds, naming --size-m and --dpi."""
+def _check_sheet(mask, dpi: int, film: PrintedFilm, title: str) -> None:
+    """Refuse, before anything is written, a print sheet that cannot be made at ``--dpi``, naming the largest dpi
+    that makes it (the sheet's notes are text of a fixed size in points: their dots grow as dpi squared)."""
+    from mincam_sim.masks.printing import METRES_PER_INCH, MIN_PRINT_DOTS
+    from mincam_sim.masks.sheet import check_print_sheet
+
+    def fits(at_dpi: int) -> bool:
+        try:
+            check_print_sheet([mask], [(0.0, 0.0)], at_dpi, film, title=title)
+        except InputError:
+            return False
+        return True
+
+    if fits(dpi):
+        return
+    # the smallest dpi that still gives the mask its dots; the search keeps fits(low) and not fits(high)
+    low = max(50, int(np.ceil(MIN_PRINT_DOTS * METRES_PER_INCH / min(mask.width_m, mask.height_m))))
+    high = dpi
+    if low >= high or not fits(low):
+        raise ConfigError(f"--size-m {mask.width_m:g}: no print sheet can be made at any --dpi; give --no-sheet "
+                          "to write the mask alone")
+    while high - low > 1:
+        mid = (low + high) // 2
+        low, high = (mid, high) if fits(mid) else (low, mid)
+    raise ConfigError(f"--size-m {mask.width_m:g} at --dpi {dpi}: the print sheet (the mask, its marks and notes) "
+                      f"would hold more dots than a print file does; give --dpi <= {low}, or --no-sheet to write "
+                      "the mask alone")
+
+
+def _warn_unused_print_options(spec: str, srgb: bool, levels: int | None, halftone: bool) -> None:
+    """One warning line for each ``masks export`` option that does not apply to this mask or film."""
+    if srgb and not spec.startswith("file:"):
+        _say(f"warning: --srgb does not apply to {spec!r}: it decodes the values of a file: mask's PNG; a generated "
+             "mask is transmission already (--srgb ignored)")
+    if halftone and levels is not None:
+        _say(f"warning: --levels {levels} does not apply with --halftone: an ordered halftone prints each dot fully "
+             "inked or clear (65 effective levels over 8 x 8 dots); --levels ignored")
+
+
+def _mask_to_print(spec: str, size_m: float | None, srgb: bool):
+    """The mask of ``spec`` at ``--size-m`` [m]; without it, at the size an OpenEXR file records (else 2 mm).
+
+    A file that records another size than ``--size-m`` is printed at ``--size-m``, with one warning line."""
+    stored = _recorded_size_m(spec)
+    height_m = None
+    if size_m is None:
+        size_m, height_m = stored if stored is not None else (paper.MASK_SIZE_M, None)
+    elif stored is not None and not np.isclose(stored[0], size_m, rtol=1e-9, atol=0.0):
+        _say(f"warning: {spec[5:]} records a {1e3 * stored[0]:.4g} x {1e3 * stored[1]:.4g} mm mask; printing it "
+             f"{1e3 * size_m:.4g} mm wide as --size-m asks (leave --size-m out to print it at its own size)")
+    return parse_mask(spec, size_m, 512, "mask", encoding="srgb" if srgb else "linear", height_m=height_m)
+
+
+def _recorded_size_m(spec: str) -> tuple[float, float] | None:
+    """(width, height) [m] that the OpenEXR mask file of a ``file:`` spec records; None for anything else."""
+    from mincam_sim.masks import load
+
+    if not spec.startswith("file:"):
+        return None
+    try:
+        recorded = load(spec[5:])  # only an OpenEXR file written with its size loads without a width
+    except Exception:  # noqa: BLE001 - not such a file: parse_mask reads it and names any problem
+        return None
+    return recorded.width_m, recorded.height_m
+
+
+def _check_print_grid(mask, dpi: int) -> None:
+    """Refuse a mask that prints as more dots than a print file holds, or as too few to show it (naming --size-m
+    and --dpi)."""
     from mincam_sim.masks.mask import MAX_TEXELS
+    from mincam_sim.masks.printing import check_print_dots
 
     per_m = dpi / 0.0254
     rows, cols = max(1, round(mask.height_m * per_m)), max(1, round(mask.width_m * per_m))
+    size = f"--size-m {mask.width_m:g}"
     if rows * cols > MAX_TEXELS:
         largest = np.sqrt(MAX_TEXELS * mask.width_m / mask.height_m) / per_m
-        raise ConfigError(f"--size-m {size_m:g} at --dpi {dpi} prints {cols} x {rows} dots, more than a print file "
+        raise ConfigError(f"{size} at --dpi {dpi} prints {cols} x {rows} dots, more than a print file "
                           f"holds ({MAX_TEXELS} dots): lower --dpi, or --size-m to at most {largest:.4g} m at "
                           f"{dpi} dpi")
+    try:
+        check_print_dots(mask.width_m, mask.height_m, dpi)
+    except InputError as err:
+        raise ConfigError(f"{size} at --dpi {dpi}: {err}".replace("give dpi", "give --dpi")) from None
 
 
 def _render_demo(out_dir: Path) -> None:

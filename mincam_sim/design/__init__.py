@@ -16,6 +16,7 @@ renderer itself).
   contrast), the baseline (ramps of ``cross_layout``, Eq. 7, cubic calibration) beside the design.
 * :mod:`.gradcheck`: AD against central finite differences.
 * :mod:`.run`: one run and its outputs (``mincam-sim design TASK``).
+
 Files:
 
 * ``tracking.py``: the task ``tracking``: four mixels 3.3 cm apart (paper Sec. 4.2) and its training distribution.

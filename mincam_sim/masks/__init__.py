@@ -13,7 +13,7 @@ Files:
   renderer.
 * ``sheet.py``: print sheets: every mask of a mincam on one page at its place and spacing, at the printer's dots,
   with crop and registration marks, the side that faces the detectors marked, and the film mapping and dpi printed
-  on the sheet and in a text file beside it (:func:`write_print_sheet`).
+  on the sheet and in a text file beside it (:func:`~mincam_sim.masks.sheet.write_print_sheet`).
 """
 
 from mincam_sim.masks.curves import circular_ramp, curved_ramp

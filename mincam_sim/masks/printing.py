@@ -3,14 +3,21 @@ ordered halftone, film transmission range) and print-ready PNG export at the mas
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
+from mincam_sim.errors import InputError
 from mincam_sim.masks.mask import MAX_TEXELS, Mask, resample
 from mincam_sim.storage import imageio
 from mincam_sim.storage.atomic import atomic_path
+
+#: Fewest printer dots a side a print file may give a mask: fewer cannot show a ramp or a sinusoid (and an 8 x 8
+#: ordered halftone cell needs 8).
+MIN_PRINT_DOTS = 8
+METRES_PER_INCH = 0.0254
 
 _BAYER8 = np.array(
     [
@@ -67,17 +74,17 @@ class PrintedFilm:
 
     def __post_init__(self) -> None:
         if not (0.0 <= self.t_min < self.t_max <= 1.0):
-            raise ValueError(
+            raise InputError(
                 f"PrintedFilm: need 0 <= t_min < t_max <= 1, got t_min={self.t_min}, t_max={self.t_max}"
             )
         if not (np.isfinite(self.dpi) and self.dpi > 0):
-            raise ValueError(f"PrintedFilm: dpi must be a positive number of dots per inch, got {self.dpi!r}")
+            raise InputError(f"PrintedFilm: dpi must be a positive number of dots per inch, got {self.dpi!r}")
         if self.levels is not None and (int(self.levels) != self.levels or self.levels < 2):
-            raise ValueError(f"PrintedFilm: levels must be an integer >= 2 or None, got {self.levels!r}")
+            raise InputError(f"PrintedFilm: levels must be an integer >= 2 or None, got {self.levels!r}")
         if self.halftone not in (None, "ordered"):
-            raise ValueError(f"PrintedFilm: halftone must be None or 'ordered', got {self.halftone!r}")
+            raise InputError(f"PrintedFilm: halftone must be None or 'ordered', got {self.halftone!r}")
         if not (np.isfinite(self.gamma) and self.gamma > 0):
-            raise ValueError(f"PrintedFilm: gamma must be positive, got {self.gamma!r}")
+            raise InputError(f"PrintedFilm: gamma must be positive, got {self.gamma!r}")
 
     @property
     def dots_per_m(self) -> float:
@@ -122,14 +129,66 @@ class PrintedFilm:
 
 def _dot_grid(width_m: float, height_m: float, dpi: float) -> tuple[int, int]:
     if not (np.isfinite(dpi) and dpi > 0):
-        raise ValueError(f"dpi must be a positive number of dots per inch, got {dpi!r}")
-    per_m = dpi / 0.0254
+        raise InputError(f"dpi must be a positive number of dots per inch, got {dpi!r}")
+    per_m = dpi / METRES_PER_INCH
     h, w = max(1, round(height_m * per_m)), max(1, round(width_m * per_m))
     if h * w > MAX_TEXELS:
-        raise ValueError(
+        raise InputError(
             f"print grid {h}x{w} dots is too large (max {MAX_TEXELS}); lower the dpi or the mask size"
         )
     return h, w
+
+
+class PrintWarning(UserWarning):
+    """A print file was written that cannot show its mask as meant (too few printer dots a side)."""
+
+
+def few_print_dots(width_m: float, height_m: float, dpi: float, name: str = "mask") -> str | None:
+    """Why a ``width_m`` x ``height_m`` [m] mask at ``dpi`` [dots per inch] prints as too few dots to show it, or
+    None when it gets at least :data:`MIN_PRINT_DOTS` dots a side.
+
+    The message names the size, the dpi, the dots it gives and the smallest dpi (or, where no dpi up to 4800 does,
+    the smallest mask) that gives ``MIN_PRINT_DOTS`` dots a side.
+    """
+    rows, cols = _dot_grid(width_m, height_m, dpi)
+    if min(rows, cols) >= MIN_PRINT_DOTS:
+        return None
+    need_dpi = int(np.ceil(MIN_PRINT_DOTS * METRES_PER_INCH / min(width_m, height_m)))
+    need_side_mm = 1e3 * MIN_PRINT_DOTS * METRES_PER_INCH / dpi
+    larger = f"make the mask at least {need_side_mm:.3g} mm a side at {dpi:g} dpi"
+    fix = f"give dpi >= {need_dpi}, or {larger}" if need_dpi <= 4800 else f"no dpi up to 4800 does: {larger}"
+    return (f"{name} of {1e3 * width_m:.4g} x {1e3 * height_m:.4g} mm prints as {cols} x {rows} dots at {dpi:g} dpi, "
+            f"too few to show it (at least {MIN_PRINT_DOTS} dots a side): {fix}")
+
+
+def check_print_dots(width_m: float, height_m: float, dpi: float, name: str = "mask") -> None:
+    """Refuse a mask that a print file would hold as fewer than :data:`MIN_PRINT_DOTS` dots a side.
+
+    Parameters
+    ----------
+    width_m, height_m : float
+        The mask's size [m].
+    dpi : float
+        Printer resolution [dots per inch].
+    name : str
+        Named in the message.
+
+    Raises
+    ------
+    InputError
+        With :func:`few_print_dots`'s message: the size, the dpi, the dots it gives and the smallest dpi (or
+        mask) that gives ``MIN_PRINT_DOTS`` dots a side.
+    """
+    problem = few_print_dots(width_m, height_m, dpi, name)
+    if problem is not None:
+        raise InputError(problem)
+
+
+def warn_few_print_dots(width_m: float, height_m: float, dpi: float, name: str = "mask") -> None:
+    """One :class:`PrintWarning` when the mask prints as fewer than :data:`MIN_PRINT_DOTS` dots a side."""
+    problem = few_print_dots(width_m, height_m, dpi, name)
+    if problem is not None:
+        warnings.warn(problem, PrintWarning, stacklevel=3)
 
 
 def export_print_png(
@@ -166,9 +225,16 @@ def export_print_png(
 
     Raises
     ------
-    ValueError
-        A file name that does not end in ``.png`` (the bytes are PNG whatever the name), or levels the bit
-        depth cannot hold.
+    InputError
+        A file name that does not end in ``.png`` (the bytes are PNG whatever the name), or levels the bit depth
+        cannot hold.
+
+    Warns
+    -----
+    PrintWarning
+        A mask that prints as fewer than :data:`~mincam_sim.masks.printing.MIN_PRINT_DOTS` dots a side
+        (:func:`~mincam_sim.masks.printing.few_print_dots`); the file is written all the same
+        (:func:`~mincam_sim.masks.printing.check_print_dots` refuses it instead).
 
     Notes
     -----
@@ -178,11 +244,12 @@ def export_print_png(
     """
     path = Path(path)
     if path.suffix.lower() != ".png":
-        raise ValueError(f"print file {str(path)!r}: masks are written as PNG; give a name ending in .png "
+        raise InputError(f"print file {str(path)!r}: masks are written as PNG; give a name ending in .png "
                          f"(not {path.suffix or 'no suffix'!r})")
     bit_depth = png_bit_depth(film, bit_depth)
     if dpi is None:
         dpi = film.dpi if film is not None else 600.0
+    warn_few_print_dots(mask.width_m, mask.height_m, dpi, f"mask {mask.name!r}")
     if film is not None:
         if dpi != film.dpi:
             film = replace(film, dpi=float(dpi))
@@ -199,18 +266,18 @@ def png_bit_depth(film: PrintedFilm | None, bit_depth: int | None = None) -> int
 
     Raises
     ------
-    ValueError
+    InputError
         More than 65536 levels (no PNG holds them), or ``bit_depth = 8`` for more than 256 levels.
     """
     levels = None if film is None or film.halftone is not None else film.levels
     if levels is not None and levels > 65536:
-        raise ValueError(f"levels = {levels}: a PNG holds at most 65536 grey levels (16 bits); give levels <= 65536 "
+        raise InputError(f"levels = {levels}: a PNG holds at most 65536 grey levels (16 bits); give levels <= 65536 "
                          "(256 for an 8-bit printer)")
     need = 16 if levels is not None and levels > 256 else 8
     if bit_depth is None:
         return need
     if bit_depth not in (8, 16):
-        raise ValueError(f"bit_depth must be 8 or 16, got {bit_depth!r}")
+        raise InputError(f"bit_depth must be 8 or 16, got {bit_depth!r}")
     if bit_depth < need:
-        raise ValueError(f"levels = {levels} need a 16-bit PNG; an 8-bit file holds 256 grey levels")
+        raise InputError(f"levels = {levels} need a 16-bit PNG; an 8-bit file holds 256 grey levels")
     return bit_depth

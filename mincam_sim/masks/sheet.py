@@ -19,8 +19,9 @@ from typing import Any
 
 import numpy as np
 
+from mincam_sim.errors import InputError
 from mincam_sim.masks.mask import MAX_TEXELS, Mask, resample
-from mincam_sim.masks.printing import PrintedFilm, _dot_grid, png_bit_depth
+from mincam_sim.masks.printing import PrintedFilm, _dot_grid, few_print_dots, png_bit_depth, warn_few_print_dots
 from mincam_sim.storage import imageio
 from mincam_sim.storage.atomic import atomic_path, atomic_write_text
 
@@ -93,56 +94,90 @@ def write_print_sheet(masks: Sequence[Mask], positions_m: Sequence[Sequence[floa
 
     Raises
     ------
-    ValueError
-        No masks, a position per mask missing, masks that overlap on the sheet, a sheet too large for ``dpi``,
-        or a file name that is neither ``.png`` nor ``.pdf``.
+    InputError
+        No masks, a position per mask missing, masks that overlap on the sheet, a sheet too large at ``dpi``, or a
+        file name that is neither ``.png`` nor ``.pdf``.
+
+    Warns
+    -----
+    PrintWarning
+        A mask that prints as fewer than :data:`~mincam_sim.masks.printing.MIN_PRINT_DOTS` dots a side; the
+        sheet is written all the same (:func:`check_print_sheet` refuses it instead).
     """
-    path, kind, masks, pos, labels = _checked_inputs(path, masks, positions_m, dpi, names)
-    film, bit_depth = _film_at(film, dpi)
-    _check_overlaps(masks, pos, labels)
-    notes = _sheet_notes(title, film, dpi, labels, pos, masks)
-    layout = _layout(notes, masks, pos, dpi)
+    path, kind = _checked_path(path)
+    film, masks, pos, labels, notes, layout = _checked_sheet(masks, positions_m, dpi, film, names, title)
+    for m, label in zip(masks, labels, strict=True):
+        warn_few_print_dots(m.width_m, m.height_m, dpi, f"mask {label!r}")
+    bit_depth = png_bit_depth(film)
     sheet, placements = _draw_sheet(layout, notes, labels, pos, masks, film, dpi)
     _write_sheet(sheet, kind, path, bit_depth, dpi)
     notes_path = atomic_write_text(path.with_suffix(".txt"), _notes_text(notes, placements, layout, dpi))
     return path, notes_path
 
 
-def _checked_inputs(path: str | Path, masks: Sequence[Mask], positions_m: Sequence[Sequence[float]], dpi: float,
-                    names: Sequence[str] | None) -> tuple[Path, str, list[Mask], np.ndarray, list[str]]:
-    """The sheet's path, its kind (``".png"`` / ``".pdf"``), the masks, their centres [m] and labels, checked.
+def check_print_sheet(masks: Sequence[Mask], positions_m: Sequence[Sequence[float]], dpi: float,
+                      film: PrintedFilm | None = None, names: Sequence[str] | None = None, title: str = "") -> None:
+    """Refuse, before anything is written, what :func:`write_print_sheet` would refuse for these masks.
+
+    Parameters are those of :func:`write_print_sheet` (without the file).
 
     Raises
     ------
-    ValueError
-        A name neither ``.png`` nor ``.pdf``, no masks, a position per mask missing, a dpi out of range, or a
-        label per mask missing.
+    InputError
+        No masks, a position or label per mask missing, a dpi out of 50..4800, masks that overlap on the sheet, a
+        mask of fewer than :data:`~mincam_sim.masks.printing.MIN_PRINT_DOTS` dots a side, or a sheet of more than
+        ``MAX_TEXELS`` dots.
     """
+    _, masks, _, labels, _, _ = _checked_sheet(masks, positions_m, dpi, film, names, title)
+    for m, label in zip(masks, labels, strict=True):
+        problem = few_print_dots(m.width_m, m.height_m, dpi, f"mask {label!r}")
+        if problem is not None:
+            raise InputError(problem)
+
+
+def _checked_path(path: str | Path) -> tuple[Path, str]:
+    """The sheet's path and its kind (``".png"`` / ``".pdf"``); anything else is refused (InputError)."""
     path = Path(path)
     kind = path.suffix.lower()
     if kind not in (".png", ".pdf"):
-        raise ValueError(f"print sheet {str(path)!r}: give a name ending in .png (at the printer's dpi) or .pdf")
+        raise InputError(f"print sheet {str(path)!r}: give a name ending in .png (at the printer's dpi) or .pdf")
+    return path, kind
+
+
+def _checked_sheet(masks: Sequence[Mask], positions_m: Sequence[Sequence[float]], dpi: float,
+                   film: PrintedFilm | None, names: Sequence[str] | None, title: str
+                   ) -> tuple[PrintedFilm | None, list[Mask], np.ndarray, list[str], list[str], _Layout]:
+    """The film at ``dpi``, the masks, their centres [m], labels, the notes and the sheet's layout, all checked."""
+    masks, pos, labels = _checked_inputs(masks, positions_m, dpi, names)
+    film = film if film is None or film.dpi == dpi else replace(film, dpi=float(dpi))
+    png_bit_depth(film)
+    _check_overlaps(masks, pos, labels)
+    notes = _sheet_notes(title, film, dpi, labels, pos, masks)
+    return film, masks, pos, labels, notes, _layout(notes, masks, pos, dpi)
+
+
+def _checked_inputs(masks: Sequence[Mask], positions_m: Sequence[Sequence[float]], dpi: float,
+                    names: Sequence[str] | None) -> tuple[list[Mask], np.ndarray, list[str]]:
+    """The masks, their centres [m] and labels, checked.
+
+    Raises
+    ------
+    InputError
+        No masks, a position per mask missing, a dpi out of range, or a label per mask missing.
+    """
     masks = list(masks)
     if not masks:
-        raise ValueError("a print sheet needs at least one mask")
+        raise InputError("a print sheet needs at least one mask")
     pos = np.asarray(positions_m, dtype=np.float64)
     if pos.shape != (len(masks), 2) or not np.isfinite(pos).all():
-        raise ValueError(f"positions_m must be one finite (x, y) in metres per mask ({len(masks)}), got shape "
+        raise InputError(f"positions_m must be one finite (x, y) in metres per mask ({len(masks)}), got shape "
                          f"{pos.shape}")
     if not (np.isfinite(dpi) and 50 <= dpi <= 4800):
-        raise ValueError(f"dpi must be a printer resolution of 50 to 4800 dots per inch, got {dpi!r}")
+        raise InputError(f"dpi must be a printer resolution of 50 to 4800 dots per inch, got {dpi!r}")
     labels = [m.name for m in masks] if names is None else [str(n) for n in names]
     if len(labels) != len(masks):
-        raise ValueError(f"{len(labels)} names for {len(masks)} masks")
-    return path, kind, masks, pos, labels
-
-
-def _film_at(film: PrintedFilm | None, dpi: float) -> tuple[PrintedFilm | None, int]:
-    """The film printed at the sheet's ``dpi`` [dots per inch] (None stays None) and the PNG bit depth it needs."""
-    bit_depth = png_bit_depth(film)
-    if film is not None and film.dpi != dpi:
-        film = replace(film, dpi=float(dpi))
-    return film, bit_depth
+        raise InputError(f"{len(labels)} names for {len(masks)} masks")
+    return masks, pos, labels
 
 
 def _mask_boxes(masks: Sequence[Mask], pos: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -152,12 +187,12 @@ def _mask_boxes(masks: Sequence[Mask], pos: np.ndarray) -> tuple[np.ndarray, np.
 
 
 def _check_overlaps(masks: Sequence[Mask], pos: np.ndarray, labels: Sequence[str]) -> None:
-    """Refuse (ValueError) two masks whose areas overlap on the sheet (touching edges are allowed)."""
+    """Refuse (InputError) two masks whose areas overlap on the sheet (touching edges are allowed)."""
     half, lo, hi = _mask_boxes(masks, pos)
     for i in range(len(masks)):
         for j in range(i + 1, len(masks)):
             if np.all(lo[i] < hi[j] - 1e-12) and np.all(lo[j] < hi[i] - 1e-12):
-                raise ValueError(f"masks {labels[i]!r} and {labels[j]!r} overlap on the sheet (centres "
+                raise InputError(f"masks {labels[i]!r} and {labels[j]!r} overlap on the sheet (centres "
                                  f"{pos[i].tolist()} and {pos[j].tolist()} m, sizes {2e3 * half[i]} and "
                                  f"{2e3 * half[j]} mm): space the mixels at least a mask width apart")
 
@@ -194,7 +229,7 @@ def _layout(notes: Sequence[str], masks: Sequence[Mask], pos: np.ndarray, dpi: f
 
     Raises
     ------
-    ValueError
+    InputError
         A sheet of more than ``MAX_TEXELS`` dots at ``dpi``.
     """
     from PIL import ImageFont
@@ -212,7 +247,7 @@ def _layout(notes: Sequence[str], masks: Sequence[Mask], pos: np.ndarray, dpi: f
     width = max(inner_w, text_w + 2 * margin)
     height = inner_h + line_h * (len(notes) + 1) + margin
     if width * height > MAX_TEXELS:
-        raise ValueError(f"print sheet of {width} x {height} dots at {dpi:g} dpi is too large (max {MAX_TEXELS}); "
+        raise InputError(f"print sheet of {width} x {height} dots at {dpi:g} dpi is too large (max {MAX_TEXELS}); "
                          "lower the dpi or print the masks on separate sheets")
     return _Layout(width, height, inner_h, margin, line_h, font)
 
@@ -321,4 +356,4 @@ def _write_pdf(sheet: np.ndarray, dpi: float, path: Path) -> None:
         fig.savefig(tmp, format="pdf", dpi=dpi)
 
 
-__all__ = ["SheetPlacement", "write_print_sheet"]
+__all__ = ["SheetPlacement", "check_print_sheet", "write_print_sheet"]

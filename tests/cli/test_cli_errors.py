@@ -70,6 +70,12 @@ def _npy(array, **kw) -> Callable[[Path], None]:
     return write
 
 
+def _exr_mask(path: Path, width_m: float) -> None:
+    from mincam_sim.masks import ramp, save_exr
+
+    save_exr(ramp("x", 32, width_m=width_m), path)
+
+
 def _npz_named_npy(path: Path) -> None:
     with open(path, "wb") as fh:
         np.savez(fh, frames=np.zeros((1, 18, 32)))
@@ -308,7 +314,31 @@ CASES: list[Case] = [
     Case("masks_generate_on_a_full_disk", ["masks", "generate", "--resolution", "64", "--out", "lib"],
          fsize_limit=2000, keywords=("lib/",)),
     Case("masks_export_on_a_full_disk", ["masks", "export", "ramp:x", "--out", "m.png", "--dpi", "4800",
-                                         "--size-m", "0.02"], fsize_limit=20000, keywords=("m.png", "m_sheet")),
+                                         "--size-m", "0.02", "--no-sheet"], fsize_limit=20000,
+         keywords=("m.png", "m_sheet")),
+    # masks and prints
+    Case("masks_export_too_few_dots", ["masks", "export", "ramp:x", "--out", "m.png", "--size-m", "0.0001",
+                                       "--dpi", "50"], keywords=("--dpi >= 2032",)),
+    Case("masks_export_too_few_dots_at_any_dpi", ["masks", "export", "ramp:x", "--out", "m.png", "--size-m", "1e-5"],
+         keywords=("no dpi up to 4800",)),
+    Case("masks_export_sheet_too_large", ["masks", "export", "ramp:x", "--out", "m.png", "--size-m", "0.085",
+                                          "--dpi", "2400"], keywords=("--dpi <= 1538",)),
+    Case("masks_export_4800_dpi_sheet", ["masks", "export", "ramp:x", "--out", "m.png", "--dpi", "4800"],
+         keywords=("--no-sheet",)),
+    Case("masks_export_4800_dpi_no_sheet", ["masks", "export", "ramp:x", "--out", "m.png", "--dpi", "4800",
+                                            "--no-sheet"], expect="ok", outputs=("m.png",)),
+    Case("masks_export_sheet_and_no_sheet", ["masks", "export", "ramp:x", "--out", "m.png", "--sheet", "s.png",
+                                             "--no-sheet"], keywords=("--no-sheet",)),
+    Case("masks_export_srgb_generated_mask", ["masks", "export", "ramp:x", "--out", "m.png", "--srgb"], expect="ok",
+         notes=("warning: --srgb does not apply",), outputs=("m.png", "m_sheet.png")),
+    Case("masks_export_levels_with_halftone", ["masks", "export", "ramp:x", "--out", "m.png", "--halftone",
+                                               "--levels", "4"], expect="ok",
+         notes=("warning: --levels 4 does not apply with --halftone",), outputs=("m.png",)),
+    Case("masks_export_exr_other_size", ["masks", "export", "file:m.exr", "--out", "m.png", "--size-m", "0.002"],
+         {"m.exr": lambda p: _exr_mask(p, 0.004)}, expect="ok", notes=("records a 4 x 4 mm mask",),
+         outputs=("m.png",)),
+    Case("masks_export_srgb_exr", ["masks", "export", "file:m.exr", "--out", "m.png", "--srgb"],
+         {"m.exr": lambda p: _exr_mask(p, 0.002)}, keywords=("sRGB",)),
 ]
 
 MESH = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"
