@@ -40,14 +40,15 @@ MODELS = {
     "bare": ms.DotProduct(),
     "+ parallax": ms.DotProduct(parallax=True),
     "+ parallax + vignetting": ms.DotProduct(parallax=True, vignetting=True),
-    "+ detector blur (all)": ms.DotProduct(parallax=True, vignetting=True, detector_blur=True),
-}
+}  # + detector_blur=True: the same numbers to 0.001 point for these ramps (a linear mask blurred stays linear)
 
 
 def sweep(setup: Setup, depth_m: float, solver=None):
-    """(positions, 2) irradiance [W/m^2] and the true positions [m]; ``solver`` None: the physics."""
-    return boundary_sweep_irradiance(setup, depth_m, POSITIONS, SAMPLES_PER_TEXEL, TEXELS, solver=solver,
-                                     seen_whole=True)
+    """(positions, 2) irradiance [W/m^2] and the true positions [m]; ``solver`` None: the physics. The band and
+    the square are 3 cm at 0.5 m, scaled with depth (the same angles at every depth; only the spacing is not)."""
+    size_m = 0.03 * depth_m / 0.5
+    return boundary_sweep_irradiance(setup, depth_m, POSITIONS, SAMPLES_PER_TEXEL, TEXELS, band_m=size_m,
+                                     square_m=size_m, solver=solver, seen_whole=True)
 
 
 rows, curves = [], {}
@@ -79,9 +80,11 @@ print(f"({time.perf_counter() - start:.0f} s)")
 # The calibration curves of both models
 # -------------------------------------
 # The ratio of Eq. 4 against the square's true position, as each model predicts it at 0.5 m, pair 3.3 cm
-# apart. The bare model's curve is steeper: from the mincam's centre both mixels see the same field, while in
-# the physics each sees it shifted by the spacing, which shortens the range the ratio spans (Eq. 4's slope is
-# ``1 / (L − 2 s)``, not ``1 / L``). Parallax moves the curve onto the physics; vignetting bends its ends.
+# apart. The physics' curve is steeper: from the mincam's centre both mixels see the same field, while in the
+# physics each sees it shifted by its offset, so the ratio changes faster with position (Eq. 4's slope is
+# ``1 / (L − 2 s)`` for mixels ``± s`` from the centre, not ``1 / L``), and a calibration fitted on the bare
+# model reads the physics' positions too far from the centre. Parallax moves the curve onto the physics;
+# vignetting bends its ends.
 fig, (ax, ax_err) = plt.subplots(1, 2, figsize=(10, 3.6), constrained_layout=True)
 for label, (observed, true_m) in curves.items():
     style = {"color": "k", "lw": 2.5} if label == "physics" else {"lw": 1.2}

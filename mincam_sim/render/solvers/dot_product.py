@@ -37,7 +37,6 @@ from mincam_sim.budget import Budget
 from mincam_sim.errors import InputError
 from mincam_sim.masks.freeform import transmission_at
 from mincam_sim.measurements import Measurements
-from mincam_sim.model.geometry import clip_polygon_halfspace
 from mincam_sim.model.optics import Mincam, Mixel
 from mincam_sim.progress import progress
 from mincam_sim.render.kernels.map_tracing import FRAME_CHUNK_BYTES, ResponseMaps
@@ -244,43 +243,57 @@ def _clipped(texels: np.ndarray, xe: np.ndarray, ye: np.ndarray, to_mask, frame,
              integrand, nodes: int) -> np.ndarray:
     """Integrals over the images of texels cut by the mask plane or the aperture's edge: each texel clipped to the
     part beyond the mask plane (on the screen), projected, clipped to the aperture, split into a fan of triangles
-    integrated by a collapsed ``nodes x nodes`` Gauss-Legendre rule."""
+    integrated by a collapsed ``nodes x nodes`` Gauss-Legendre rule (all texels at once)."""
     right, up, centre, pinhole, rot, d_f = frame
     hw, hh = half
     axis = rot[:, 2]
-    plane_normal = np.array([right @ axis, up @ axis])
-    plane_offset = float((centre - pinhole) @ axis - d_f)
-    aperture = [(np.array([1.0, 0.0]), hw), (np.array([-1.0, 0.0]), hw), (np.array([0.0, 1.0]), hh),
-                (np.array([0.0, -1.0]), hh)]
+    i, j = texels[:, 0], texels[:, 1]
+    polys = np.stack([np.stack([xe[j], ye[i]], -1), np.stack([xe[j + 1], ye[i]], -1),
+                      np.stack([xe[j + 1], ye[i + 1]], -1), np.stack([xe[j], ye[i + 1]], -1)], axis=1)
+    count = np.full(len(texels), 4)
+    polys, count = _clip_halfplanes(polys, count, np.array([right @ axis, up @ axis]),
+                                    float((centre - pinhole) @ axis - d_f))
+    x_m, y_m, _ = to_mask(polys[..., 0], polys[..., 1])
+    img = np.stack([np.where(np.isfinite(x_m), x_m, 0.0), np.where(np.isfinite(y_m), y_m, 0.0)], axis=-1)
+    for normal, offset in ((np.array([1.0, 0.0]), hw), (np.array([-1.0, 0.0]), hw), (np.array([0.0, 1.0]), hh),
+                           (np.array([0.0, -1.0]), hh)):
+        img, count = _clip_halfplanes(img, count, normal, offset)
+    if img.shape[1] < 3:
+        return np.zeros(len(texels))
     u, wu = _gl01(nodes)
     su, sv = (g.ravel() for g in np.meshgrid(u, u, indexing="ij"))
-    sw = (np.outer(wu, wu).ravel()) * su  # collapsed square -> triangle: Jacobian s
-    pts_x, pts_y, pts_w, owner = [], [], [], []
-    for n, (i, j) in enumerate(texels):
-        poly = np.array([[xe[j], ye[i]], [xe[j + 1], ye[i]], [xe[j + 1], ye[i + 1]], [xe[j], ye[i + 1]]])
-        poly = clip_polygon_halfspace(poly, plane_normal, plane_offset)
-        if len(poly) < 3:
-            continue
-        x_m, y_m, _ = to_mask(poly[:, 0], poly[:, 1])
-        img = np.column_stack([x_m, y_m])
-        for normal, offset in aperture:
-            img = clip_polygon_halfspace(img, normal, offset)
-            if len(img) < 3:
-                break
-        if len(img) < 3:
-            continue
-        p0, p1, p2 = img[0], img[1:-1], img[2:]
-        area2 = np.abs((p1[:, 0] - p0[0]) * (p2[:, 1] - p0[1]) - (p1[:, 1] - p0[1]) * (p2[:, 0] - p0[0]))
-        tx = p0[0] + su[None] * (p1[:, 0:1] - p0[0]) + (su * sv)[None] * (p2[:, 0:1] - p1[:, 0:1])
-        ty = p0[1] + su[None] * (p1[:, 1:2] - p0[1]) + (su * sv)[None] * (p2[:, 1:2] - p1[:, 1:2])
-        pts_x.append(tx.ravel())
-        pts_y.append(ty.ravel())
-        pts_w.append((area2[:, None] * sw[None]).ravel())
-        owner.append(np.full(tx.size, n))
-    if not pts_x:
-        return np.zeros(len(texels))
-    values = integrand(np.concatenate(pts_x), np.concatenate(pts_y)) * np.concatenate(pts_w)
-    return np.bincount(np.concatenate(owner), weights=values, minlength=len(texels))
+    sw = np.outer(wu, wu).ravel() * su  # collapsed square -> triangle: Jacobian s
+    p0 = img[:, :1]  # fan (0, k, k + 1), k = 1 .. count - 2
+    p1, p2 = img[:, 1:-1], img[:, 2:]
+    live = np.arange(1, img.shape[1] - 1)[None, :] <= count[:, None] - 2
+    area2 = np.abs((p1[..., 0] - p0[..., 0]) * (p2[..., 1] - p0[..., 1])
+                   - (p1[..., 1] - p0[..., 1]) * (p2[..., 0] - p0[..., 0])) * live
+    tx = p0[..., 0, None] + su * (p1[..., 0, None] - p0[..., 0, None]) + su * sv * (p2[..., 0, None] - p1[..., 0, None])
+    ty = p0[..., 1, None] + su * (p1[..., 1, None] - p0[..., 1, None]) + su * sv * (p2[..., 1, None] - p1[..., 1, None])
+    values = integrand(tx, ty) * area2[..., None] * sw
+    return values.sum(axis=(1, 2))
+
+
+def _clip_halfplanes(polys: np.ndarray, count: np.ndarray, normal: np.ndarray, offset: float):
+    """Sutherland-Hodgman for many convex polygons at once: the part of each polygon (``polys`` (n, v, 2), the first
+    ``count`` vertices valid) where ``normal . p + offset >= 0``; returns the clipped polygons, padded, and counts."""
+    n, v = polys.shape[:2]
+    idx = np.arange(v)[None, :]
+    valid = idx < count[:, None]
+    nxt = np.where(idx + 1 < count[:, None], idx + 1, 0)
+    q = np.take_along_axis(polys, nxt[..., None], axis=1)
+    side_p, side_q = polys @ normal + offset, q @ normal + offset
+    keep = valid & (side_p >= 0)
+    cross = valid & ((side_p >= 0) != (side_q >= 0))
+    t = np.where(cross, side_p / np.where(cross, side_p - side_q, 1.0), 0.0)
+    hit = polys + t[..., None] * (q - polys)
+    cand = np.stack([polys, hit], axis=2).reshape(n, 2 * v, 2)  # per edge: its start, then its crossing
+    flags = np.stack([keep, cross], axis=2).reshape(n, 2 * v)
+    order = np.argsort(~flags, axis=1, kind="stable")
+    new_count = flags.sum(axis=1)
+    width = max(int(new_count.max(initial=0)), 1)
+    clipped = np.take_along_axis(cand, order[:, :width, None], axis=1)
+    return np.where((np.arange(width)[None, :] < new_count[:, None])[..., None], clipped, 0.0), new_count
 
 
 __all__ = ["DotProduct", "DotProductPlan", "aperture_view_factor_pi"]
