@@ -12,8 +12,8 @@ each mixel's axis) and ``detector_blur`` (the detector's size).
 The task: the paper's 1D intrusion pair (band ramps ``y`` and ``1 − y``, 3.3 cm apart) is calibrated with a
 cubic on a white 3 cm square swept along the boundary, **on the model**, then used **on the physics**
 (``ResponseMap``, the Monte Carlo response maps) at the same depth: 0.3, 0.5 and 1.0 m. The sweep and the scoring
-are the spacing study's own code (:func:`mincam_sim.experiments.spacing.boundary_sweep_irradiance`,
-:func:`~mincam_sim.experiments.spacing.boundary_errors`), keeping the squares both mixels see whole, as the
+are the spacing study's own code (``mincam_sim.experiments.spacing.boundary_sweep_irradiance`` and
+``boundary_errors``), keeping the squares both mixels see whole, as the
 screen calibration does; errors are % of the calibrated range at each depth (50 cm at 0.5 m, scaled with depth).
 """
 
