@@ -4,8 +4,8 @@ Units are SI throughout: metres, radians, W/m^2 (irradiance), W m^-2 sr^-1 (radi
 Only ``mincam_sim.render`` imports mitsuba / drjit; everything else is pure numpy.
 
 The front door: ``Simulation(mincam, screen=... | world=...)`` with a solver (``ResponseMap``, ``Aperture``,
-``Reference``, ``StratifiedChange``, ``PlainChange``, ``PlaneReplay``) and a ``Budget``; ``Run(out_dir)`` keeps
-results.
+``Reference``, ``StratifiedChange``, ``PlainChange``, ``PlaneReplay``; ``DotProduct``, the idealised model) and a
+``Budget``; ``Run(out_dir)`` keeps results.
 These names load the renderer on first use (``import mincam_sim`` itself stays pure numpy).
 """
 
@@ -26,6 +26,7 @@ _LAZY = {
     "PlainChange": "mincam_sim.render.solvers",
     "StratifiedChange": "mincam_sim.render.solvers",
     "PlaneReplay": "mincam_sim.render.solvers",
+    "DotProduct": "mincam_sim.render.solvers",
     "Run": "mincam_sim.runs.run",
     # building a world: updates by name (world coordinates), scene pieces, the experiments' tabletop and toys
     "vertex_update": "mincam_sim.render.scene.updates",
@@ -53,6 +54,7 @@ def __getattr__(name: str):
 
 __all__ = [
     "Aperture",
+    "DotProduct",
     "Tabletop",
     "Trajectory",
     "area_light",

@@ -394,6 +394,39 @@ def render(
     typer.echo(f"# written to {cfg.run.out_dir} (figures: {', '.join(p.name for p in figures)})")
 
 
+@app.command("export-maps")
+def export_maps_command(
+    config: Annotated[Path, typer.Argument(help="TOML display configuration (see `mincam-sim config-example`)")],
+    out_dir: Annotated[Path, typer.Option("--out", help="directory for maps/*.npy, forward_matrix.npy, maps.json")],
+    psf_grid: Annotated[tuple[int, int] | None, typer.Option(help="also write psfs.npy: responses to point sources "
+                                                                  "on an NX x NY grid over the screen")] = None,
+    ideal: Annotated[bool, typer.Option("--ideal", help="the idealised dot-product model (DotProduct, exact) "
+                                                        "instead of the physics (response maps)")] = False,
+) -> None:
+    """Write each mixel's response map (W/m^2 per W m^-2 sr^-1 of each screen texel) as NumPy arrays with a JSON
+    sidecar (units, screen, geometry), at the config's [run] samples_per_texel, for other tools."""
+    from mincam_sim.configuration.toml_files import read_document
+    from mincam_sim.render.simulation import Simulation
+    from mincam_sim.render.solvers import DotProduct
+
+    raw, _, _ = read_document(config, None)
+    if "world" in raw:
+        raise ConfigError(f"{config} has a [world] section; response maps are maps over a display's texels: give a "
+                          "display config ([screen] and [frames])")
+    if psf_grid is not None and min(psf_grid) < 1:
+        raise ConfigError(f"--psf-grid needs two positive integers NX NY, got {psf_grid[0]} {psf_grid[1]}")
+    cfg = load_config(config)
+    check_out_dir(out_dir)
+    if not ideal:
+        cfg.run.variant = check_variant(cfg.run.variant)
+        _announce_variant()
+    sim = Simulation(cfg.mincam, screen=cfg.screen)
+    sidecar = sim.export_maps(out_dir, cfg.run.budget, solver=DotProduct() if ideal else None, psf_grid=psf_grid,
+                              show_progress=_show_progress())
+    typer.echo(f"# {len(cfg.mincam)} response maps ({'dot_product' if ideal else 'response_map'}) of "
+               f"{cfg.screen.shape[0]} x {cfg.screen.shape[1]} texels written to {out_dir} (sidecar {sidecar.name})")
+
+
 @app.command("config-example")
 def config_example(
     world: Annotated[bool, typer.Option("--world", help="the world-scene config (your own scene from a file)")] = False,

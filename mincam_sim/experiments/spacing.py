@@ -35,12 +35,13 @@ from mincam_sim.experiments.layouts import intrusion_mincam, mincam_on_screen
 from mincam_sim.experiments.screen_calibration import fit_calibration_1d, screen_sweep_1d
 from mincam_sim.experiments.setup import Setup
 from mincam_sim.model.geometry import Pose
+from mincam_sim.model.optics import seen_whole_by_every_mixel
 from mincam_sim.model.readout import read_out
 from mincam_sim.paper import CALIBRATION_SQUARE_M, SPACING_M
 from mincam_sim.plotting.plots import plot_spacing
 from mincam_sim.progress import progress
 from mincam_sim.render.simulation import Simulation
-from mincam_sim.scene.display import Screen
+from mincam_sim.scene.display import Screen, Sweep
 
 
 @dataclass(frozen=True)
@@ -81,17 +82,27 @@ class SpacingParams:
 
 def boundary_sweep_irradiance(setup: Setup, depth_m: float, positions: int, samples_per_texel: int,
                               screen_texels: int, boundary_x_m: float = 0.0, band_m: float = 0.03,
-                              square_m: float = CALIBRATION_SQUARE_M) -> tuple[np.ndarray, np.ndarray]:
+                              square_m: float = CALIBRATION_SQUARE_M, solver=None,
+                              seen_whole: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Irradiance [W/m^2] (positions, 2) of the intrusion pair of ``setup`` (calibrated for its ``depth_m``) as a
     white square sweeps the boundary on a square screen at ``depth_m`` (geometry scaled with depth), and the
-    square's true positions along the boundary [m]."""
+    square's true positions along the boundary [m]. ``solver``: None for the physics (response maps at
+    ``samples_per_texel``), or another display solver (e.g. the idealised ``DotProduct``) measuring the same
+    sweep. ``seen_whole``: keep only the squares that every detector point of both mixels sees whole (as the
+    screen calibration does; :func:`~mincam_sim.model.optics.seen_whole_by_every_mixel`)."""
     scale = depth_m / setup.depth_m
     cam = mincam_on_screen(intrusion_mincam(setup, boundary_x_m, band_m), setup)
     scaled = setup.with_(field_m=setup.field_m * scale)
     sweep = screen_sweep_1d(scaled, boundary_x_m * scale, positions, square_m * scale)
+    if seen_whole:
+        keep = seen_whole_by_every_mixel(cam, sweep.positions_m, 0.5 * sweep.size_m, -depth_m)
+        sweep = Sweep(sweep.positions_m[keep], sweep.size_m, sweep.radiance)
     side = 1.3 * scaled.field_m  # a square display covering the swept boundary at this depth
     screen = Screen(side, side, (screen_texels, screen_texels), Pose((0.0, 0.0, -depth_m), (0.0, 0.0, 1.0)))
     budget = Budget(samples_per_texel=samples_per_texel, seed=setup.seed)
+    if solver is not None:
+        measured = Simulation(cam, screen=screen).measure(sweep.frame_source(screen), solver, budget)
+        return measured.irradiance_w_m2, sweep.positions_m[:, 1]
     maps = Simulation(cam, screen=screen).response_maps(budget)
     return maps.measure(sweep.frame_stack(screen)).irradiance_w_m2, sweep.positions_m[:, 1]
 

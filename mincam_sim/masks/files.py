@@ -1,4 +1,5 @@
-"""Mask files: PNG / OpenEXR in (grayscale or RGB -> luma, alpha refused), OpenEXR out with metadata."""
+"""Mask files: PNG / OpenEXR / NumPy ``.npy`` in (grayscale or RGB -> luma, alpha refused), OpenEXR out with
+metadata."""
 
 from __future__ import annotations
 
@@ -6,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mincam_sim.masks.freeform import is_npy, load_npy
 from mincam_sim.masks.mask import Mask
 from mincam_sim.storage import imageio
 from mincam_sim.storage.atomic import atomic_path
@@ -42,7 +44,8 @@ def _to_transmission(arr: np.ndarray, channels: list[str], src: str) -> np.ndarr
 
 def load(path: str | Path, width_m: float | None = None, height_m: float | None = None, invert: bool = False,
          name: str | None = None, encoding: str = "linear") -> Mask:
-    """Load a mask from a PNG (8/16-bit) or OpenEXR file.
+    """Load a mask from a PNG (8/16-bit), OpenEXR or NumPy ``.npy`` file (a 2D float array in [0, 1]: a freeform
+    mask; ``width_m`` required).
 
     Parameters
     ----------
@@ -84,12 +87,28 @@ def load(path: str | Path, width_m: float | None = None, height_m: float | None 
     passes 21.6 %). RGB images are reduced to luminance with the Rec. 709 weights 0.2126 R + 0.7152 G + 0.0722 B
     applied to the (decoded) values. An alpha channel is accepted only if fully opaque.
     """
+    if is_npy(path):
+        return _npy_mask(Path(path), width_m, height_m, invert, name, encoding)
     p, fmt = _source(path, encoding)
     t, info, stored = _read_exr(p) if fmt == "exr" else _read_png(p, encoding)
     width_m, height_m = _physical_size(p, t.shape, width_m, height_m, stored, info)
     t = 1.0 - t if invert else t
     label = name if name is not None else str(stored.get("name") or p.stem)
     return Mask(t, width_m, height_m, label, _file_meta(p, fmt, invert, encoding, stored, info))
+
+
+def _npy_mask(p: Path, width_m: float | None, height_m: float | None, invert: bool, name: str | None,
+              encoding: str) -> Mask:
+    """A freeform mask from a ``.npy`` array (linear transmission in [0, 1]; its size must be given)."""
+    if width_m is None:
+        raise ValueError(f"mask file {str(p)!r} (a NumPy array) has no physical size: give width_m in metres")
+    if encoding != "linear":
+        raise ValueError(f"mask file {str(p)!r} is a NumPy array of linear transmissions; the sRGB encoding applies "
+                         "to PNG files only (use mask_encoding = \"linear\")")
+    mask = load_npy(p, width_m, height_m, name)
+    if invert:
+        mask = Mask(1.0 - mask.transmission, mask.width_m, mask.height_m, mask.name, {**mask.meta, "invert": True})
+    return mask
 
 
 def _source(path: str | Path, encoding: str) -> tuple[Path, str]:

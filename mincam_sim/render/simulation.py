@@ -367,6 +367,34 @@ class Simulation:
         maps, _ = ResponseMap().maps(self, self._budget(budget), show_progress=show_progress)
         return maps
 
+    def export_maps(self, out_dir: str | PathLike, budget: Budget | None = None, *, solver: Solver | None = None,
+                    psf_grid: tuple[int, int] | None = None, show_progress: bool = False) -> Path:
+        """Write each mixel's response map as NumPy arrays with a JSON sidecar (display scenes), for other tools.
+
+        ``maps/<mixel>.npy`` (rows, cols) [sr: W/m^2 per W m^-2 sr^-1 of each texel] and its standard error,
+        ``forward_matrix.npy`` (n_mixels, rows * cols), with ``psf_grid = (nx, ny)`` ``psfs.npy``: responses to
+        point sources on that grid, and ``maps.json`` (units, conventions, screen, geometry, how they were made).
+        ``solver``: :class:`~.solvers.ResponseMap` (default, the physics at the budget's samples per texel) or
+        :class:`~.solvers.DotProduct` (the idealised model). Returns the sidecar's path.
+        """
+        from mincam_sim.render.kernels.map_export import export_maps
+        from mincam_sim.render.solvers import DotProduct
+
+        if self.kind != "display":
+            raise InputError("response maps are maps over a screen's texels: display scenes only")
+        if psf_grid is not None:
+            grid = tuple(psf_grid) if isinstance(psf_grid, (tuple, list)) else ()
+            if len(grid) != 2 or any(isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1
+                                     for n in grid):
+                raise InputError(f"psf_grid must be two positive integers (nx, ny), got {psf_grid!r}")
+        if isinstance(solver, DotProduct):
+            maps = solver.maps(self.mincam, self.screen, show_progress)
+        elif solver is None or isinstance(solver, ResponseMap):
+            maps = self.response_maps(budget, show_progress=show_progress)
+        else:
+            raise InputError(f"export_maps takes the ResponseMap or DotProduct solver, got {type(solver).__name__}")
+        return export_maps(maps, self.mincam, self.screen, out_dir, psf_grid)
+
 
 class WorldParameters(Mapping):
     """The scene's parameters as the user's elements define them, in world coordinates (read-only).

@@ -9,6 +9,7 @@ way in.
 * ``mixel_sensor.py``: one Mitsuba sensor that starts every ray on a mixel's mask aperture.
 * ``mask_eval.py``: mask transmission inside Dr.Jit kernels (analytic profiles, raster textures).
 * ``map_tracing.py``: response maps traced per display texel, with their variance, and their content cache.
+* ``map_export.py``: response maps and point-source responses out as NumPy arrays with a JSON sidecar.
 * ``stratified.py``: stratified estimates: most rays where a frame can change things, a few everywhere else.
 * ``guided_path.py``: path tracing with the inter-reflection bounce guided toward what a frame moves.
 * ``change_region.py``: bounds on a mixel's aperture plane where a frame can change its measurement.

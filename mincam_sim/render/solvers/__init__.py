@@ -20,6 +20,8 @@ file                   role
                        pilots, the retry of heavy-tailed frames, the typed :class:`~mincam_sim.changes.RunInfo`
 ``plane_replay.py``    :class:`PlaneReplay` (worlds): the aperture's rays traced once, a frame that moves a
                        textured plane within its plane replayed per ray (:class:`SlidingPlane`)
+``dot_product.py``     :class:`DotProduct` (displays): the idealised model (mask stretched over the field, dotted
+                       with the frame), physics added one effect at a time; exact quadrature, pure numpy
 =====================  ===========================================================================================
 """
 
@@ -27,12 +29,13 @@ from mincam_sim.render.kernels.map_tracing import ResponseMaps
 from mincam_sim.render.solvers.aperture import Aperture
 from mincam_sim.render.solvers.base import Plan, Solver
 from mincam_sim.render.solvers.change import FallbackWarning, HeavyTailWarning, PlainChange, StratifiedChange
+from mincam_sim.render.solvers.dot_product import DotProduct
 from mincam_sim.render.solvers.plane_replay import PlaneReplay, SlidingPlane
 from mincam_sim.render.solvers.reference import Reference
 from mincam_sim.render.solvers.response_map import ResponseMap
 
-SOLVERS = (Reference, Aperture, ResponseMap, PlainChange, StratifiedChange, PlaneReplay)
+SOLVERS = (Reference, Aperture, ResponseMap, PlainChange, StratifiedChange, PlaneReplay, DotProduct)
 """Every public solver class (the contract test crosses them with its scenes)."""
 
-__all__ = ["SOLVERS", "Aperture", "FallbackWarning", "HeavyTailWarning", "Plan", "PlainChange", "PlaneReplay",
-           "Reference", "ResponseMap", "ResponseMaps", "SlidingPlane", "Solver", "StratifiedChange"]
+__all__ = ["SOLVERS", "Aperture", "DotProduct", "FallbackWarning", "HeavyTailWarning", "Plan", "PlainChange",
+           "PlaneReplay", "Reference", "ResponseMap", "ResponseMaps", "SlidingPlane", "Solver", "StratifiedChange"]

@@ -15,6 +15,11 @@ Each (solver, scene) pair must
 
 and every solver refuses a scene kind it does not solve (and the wrong measurement) with an ``InputError``.
 
+An exact solver (:class:`~mincam_sim.render.solvers.DotProduct`, standard error 0) carries its own oracle in its
+entry: the idealised model computed independently (on the screen, through the projection's Jacobian, where the
+solver integrates on the mask plane), or, with every physical effect switched on, the scene's physics without the
+other mixels' bodies; it must agree to a relative tolerance.
+
 Adding a solver: one module in ``mincam_sim/render/solvers/`` and one :data:`ENTRIES` row here.
 """
 
@@ -34,7 +39,7 @@ from mincam_sim import masks
 from mincam_sim.errors import InputError
 from mincam_sim.model.geometry import look_at
 from mincam_sim.model.optics import Mincam, Mixel
-from mincam_sim.oracles.closed_forms import open_aperture_irradiance
+from mincam_sim.oracles.closed_forms import open_aperture_irradiance, point_to_parallel_rect
 from mincam_sim.oracles.quadrature import mixel_irradiance_gl, open_aperture_view_factor_irradiance
 from mincam_sim.render import backend
 from mincam_sim.render import simulation as simulation_module
@@ -168,6 +173,66 @@ def _world_far_tilted() -> Scene:
 SCENES = {s.name: s for s in (_display_tilted(), _display_shadowing(), _world_plane(), _world_far_tilted())}
 
 
+# ------------------------------------------------------------------------------ oracles of the idealised model
+def _ideal_square(mixel: Mixel, screen: ms.Screen, pinhole_m: np.ndarray, region_m, radiance: float,
+                  n: int = 48) -> float:
+    """The bare dot-product model of one mixel for a uniform rectangle of the screen, integrated on the *screen*:
+    ``(pi F / A_mask) int T(x_m(s)) dA_m/dA_s dA_s`` with the central projection's Jacobian
+    ``dA_m / dA_s = d_f^2 cos(t_s) / (r^2 cos^3(t))`` (t about the mixel's axis, t_s at the screen), Gauss-Legendre
+    over the rectangle (which must lie inside the aperture's view); pi F from the closed form."""
+    rot = mixel.pose.matrix()[:3, :3]
+    x0, x1, y0, y1 = region_m
+    gx, wx = np.polynomial.legendre.leggauss(n)
+    xs, ys = 0.5 * (x1 - x0) * (gx + 1) + x0, 0.5 * (y1 - y0) * (gx + 1) + y0
+    w = np.outer(wx, wx) * (x1 - x0) * (y1 - y0) / 4
+    sx, sy = np.meshgrid(xs, ys, indexing="ij")
+    delta = screen.to_world(sx, sy) - pinhole_m
+    r = np.linalg.norm(delta, axis=-1)
+    local = delta @ rot
+    cos_t, cos_s = local[..., 2] / r, -(delta @ screen.pose.axes()[2]) / r
+    x_m, y_m = -local[..., 0] * mixel.d_f_m / local[..., 2], local[..., 1] * mixel.d_f_m / local[..., 2]
+    assert (np.abs(x_m) < mixel.mask.width_m / 2).all() and (np.abs(y_m) < mixel.mask.height_m / 2).all()
+    t = mixel.mask.profile.evaluate(x_m, y_m)
+    jac = mixel.d_f_m**2 * cos_s / (r * r * cos_t**3)
+    pi_f = np.pi * point_to_parallel_rect(-mixel.mask.width_m / 2, mixel.mask.width_m / 2, -mixel.mask.height_m / 2,
+                                          mixel.mask.height_m / 2, mixel.d_f_m)
+    return float(radiance * pi_f / mixel.mask.area_m2 * np.sum(w * t * jac))
+
+
+def _ideal_facing(mixel: Mixel, screen: ms.Screen, pinhole_m: np.ndarray, radiance: float) -> float:
+    """The bare model of an open mixel facing a parallel uniform screen: the screen's image on the mask plane is the
+    screen scaled by ``d_f / depth`` about the pinhole; ``pi F L`` times the share of the aperture it covers."""
+    depth = float(pinhole_m[2] - screen.pose.position_m[2])
+    k = mixel.d_f_m / depth
+    cx, cy = -(screen.pose.position_m[0] - pinhole_m[0]) * k, (screen.pose.position_m[1] - pinhole_m[1]) * k
+    hw, hh = mixel.mask.width_m / 2, mixel.mask.height_m / 2
+    sw, sh = screen.width_m * k / 2, screen.height_m * k / 2
+    covered = max(0.0, min(hw, cx + sw) - max(-hw, cx - sw)) * max(0.0, min(hh, cy + sh) - max(-hh, cy - sh))
+    pi_f = np.pi * point_to_parallel_rect(-hw, hw, -hh, hh, mixel.d_f_m)
+    return float(radiance * pi_f * covered / mixel.mask.area_m2)
+
+
+def _bare_model(scene: str) -> np.ndarray:
+    """The bare DotProduct model of each display scene, computed independently of the solver."""
+    sim, s = _sim(scene, "oracle"), SCENES[scene]
+    centre = sim.mincam.centre_m
+    if scene == "display":
+        one = _ideal_square(sim.mincam[0], sim.screen, centre, (0.04, 0.07, 0.02, 0.05), 2.0)
+        return np.array([[one], [0.5 * one]])
+    one = np.array([_ideal_facing(m, sim.screen, centre, 1.0) for m in sim.mincam])
+    radiance = np.array([f.max() for f in s.frames])
+    return radiance[:, None] * one[None, :]
+
+
+def _physics_without_bodies(scene: str) -> np.ndarray:
+    """Every effect on: the scene's physics, the other mixels' bodies left out (the model has none)."""
+    sim, s = _sim(scene, "oracle"), SCENES[scene]
+    if scene == "display":
+        return s.expected
+    alone = np.array([open_aperture_view_factor_irradiance(m, sim.screen, 1.0) for m in sim.mincam])
+    return np.array([f.max() for f in s.frames])[:, None] * alone[None, :]
+
+
 @functools.cache
 def _sim(scene: str) -> ms.Simulation:
     """The scene's simulation, shared by every solver that solves it (each leaves the scene as it found it)."""
@@ -182,6 +247,9 @@ class Entry:
     solver: Solver
     budget: ms.Budget
     slow: bool = False
+    oracle: typing.Callable[[str], np.ndarray] | None = None  # exact solvers: their own expectation per scene
+    rtol: float = 0.0
+    label: str = ""
 
 
 ENTRIES = [
@@ -191,6 +259,9 @@ ENTRIES = [
     Entry(ms.PlainChange(), ms.Budget(spp=1 << 14, replicates=8, seed=3)),
     Entry(ms.StratifiedChange(), ms.Budget(spp=1 << 14, replicates=8, seed=3)),
     Entry(ms.PlaneReplay("table"), ms.Budget(spp=1 << 16, replicates=8, seed=3)),
+    Entry(ms.DotProduct(), ms.Budget(seed=3), oracle=_bare_model, rtol=1e-9, label="bare"),
+    Entry(ms.DotProduct(parallax=True, vignetting=True, detector_blur=True), ms.Budget(seed=3),
+          oracle=_physics_without_bodies, rtol=1e-6, label="physics"),
 ]
 
 
@@ -203,7 +274,11 @@ def _solves(entry: Entry, scene: Scene) -> bool:
     return scene.changes is not None if solver.changes else True
 
 
-PAIRS = [pytest.param(entry, scene.name, id=f"{entry.solver.name}-{scene.name}",
+def _id(entry: Entry) -> str:
+    return entry.solver.name + (f"_{entry.label}" if entry.label else "")
+
+
+PAIRS = [pytest.param(entry, scene.name, id=f"{_id(entry)}-{scene.name}",
                       marks=[pytest.mark.slow] if entry.slow else [])
          for entry in ENTRIES for scene in SCENES.values() if _solves(entry, scene)]
 
@@ -249,7 +324,11 @@ def test_every_public_solver_is_under_contract():
 @pytest.mark.parametrize("entry, scene", PAIRS)
 def test_agrees_with_the_oracle(entry, scene):
     result, s = _cached(entry, scene), SCENES[scene]
-    if entry.solver.changes:
+    if entry.oracle is not None:  # an exact solver: standard error 0, its own oracle
+        assert np.all(result.stderr_w_m2 == 0)
+        np.testing.assert_allclose(result.irradiance_w_m2, entry.oracle(scene), rtol=entry.rtol, atol=0,
+                                   err_msg=f"{_id(entry)} in {scene}")
+    elif entry.solver.changes:
         assert_close_mc(result.dp.irradiance_w_m2, s.expected_dp, result.dp.stderr_w_m2,
                         what=f"{entry.solver.name} dP in {scene}")
         p_expected = s.expected + s.expected_dp  # P(frame) = P(background) + dP
@@ -290,7 +369,7 @@ def test_results_are_typed(entry, scene):
         assert isinstance(result, ms.Measurements)
         assert result.irradiance_w_m2.shape == (n, len(_sim(scene).mincam))
         assert result.meta["solver"] == entry.solver.name
-        if isinstance(entry.solver, ms.ResponseMap):
+        if isinstance(entry.solver, (ms.ResponseMap, ms.DotProduct)):
             assert isinstance(result.maps, ResponseMaps)
         else:
             assert result.maps is None
@@ -315,7 +394,8 @@ def test_a_killed_run_resumes_through_run_with_the_same_numbers(entry, scene, tm
         warnings.simplefilter("ignore")
         getattr(run, call)(sim, _frames(entry, s), *args, entry.solver, entry.budget)
     done = np.load(tmp_path / "measurements" / "done.npy")
-    assert done[0] and (done.all() if isinstance(entry.solver, ms.ResponseMap) else not done[1])  # maps: a chunk
+    chunked = isinstance(entry.solver, (ms.ResponseMap, ms.DotProduct))  # maps: a chunk of frames per row
+    assert done[0] and (done.all() if chunked else not done[1])
     monkeypatch.setattr(simulation_module, "collect", original)
     with ms.Run(tmp_path) as run, warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -326,7 +406,7 @@ def test_a_killed_run_resumes_through_run_with_the_same_numbers(entry, scene, tm
         assert resumed.info == _cached(entry, scene).info
 
 
-@pytest.mark.parametrize("entry", ENTRIES, ids=[e.solver.name for e in ENTRIES])
+@pytest.mark.parametrize("entry", ENTRIES, ids=[_id(e) for e in ENTRIES])
 def test_a_wrong_scene_kind_is_refused(entry):
     solver = entry.solver
     for scene in SCENES.values():

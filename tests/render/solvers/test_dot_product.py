@@ -1,0 +1,184 @@
+"""The idealised dot-product model (``ms.DotProduct``): its normalisation against the closed form, the physics it
+becomes effect by effect (against the quadrature oracle), its refusals, and the maps it and the response-map
+solver export (NPY + JSON, from Python and from ``mincam-sim export-maps``)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+import mincam_sim as ms
+from mincam_sim import masks
+from mincam_sim.cli import app
+from mincam_sim.errors import InputError
+from mincam_sim.model.geometry import look_at
+from mincam_sim.oracles.closed_forms import open_aperture_irradiance, point_to_parallel_rect
+from mincam_sim.oracles.quadrature import mixel_irradiance_polygon
+from mincam_sim.render import backend
+from mincam_sim.scene.display import coverage
+
+SCREEN = ms.Screen(1.0, 1.0, (50, 50))  # 0.5 m away: fills the 53 degree field
+RADIANCE = 2.0
+
+
+def test_the_bare_model_of_an_open_mask_is_the_closed_form_at_the_centre_and_all_effects_the_physics():
+    cam = ms.single(masks.constant(1.0))
+    frame = np.full(SCREEN.shape, RADIANCE)
+    sim = ms.Simulation(cam, screen=SCREEN)
+    bare = sim.measure([frame], ms.DotProduct())
+    centre = np.pi * RADIANCE * point_to_parallel_rect(-1e-3, 1e-3, -1e-3, 1e-3, 2e-3)
+    np.testing.assert_allclose(bare.irradiance_w_m2[0, 0], centre, rtol=1e-12)
+    assert bare.stderr_w_m2[0, 0] == 0 and bare.meta["exact"] and bare.meta["solver"] == "dot_product"
+    assert "cos^4 vignetting" in bare.meta["ignored"] and bare.meta["reached_rel_stderr"] == 0
+    full = sim.measure([frame], ms.DotProduct(parallax=True, vignetting=True, detector_blur=True))
+    physics = open_aperture_irradiance(RADIANCE, 1e-4, 2e-3, 2e-3, 2e-3, (-0.5, 0.5, -0.5, 0.5), 0.5)
+    np.testing.assert_allclose(full.irradiance_w_m2[0, 0], physics, rtol=1e-9)
+    assert abs(physics / centre - 1) > 1e-4  # the detector's size is seen: the two checks are different numbers
+
+
+def _tilted(detector_size_m: float):
+    screen = ms.Screen(0.6, 0.4, (60, 40), ms.Pose((0.02, 0.0, -0.5), (0.3, 0.0, 1.0)))
+    mixel = ms.Mixel(masks.ramp("x"), detector_size_m=detector_size_m,
+                     pose=look_at((0.03, 0.01, 0.0), tuple(screen.to_world(0.05, 0.02))), name="ramp")
+    return mixel, screen
+
+
+def test_parallax_and_vignetting_approach_the_quadrature_oracle_as_the_detector_shrinks():
+    region = (-0.1, 0.15, -0.05, 0.1)  # texel edges: 1 cm texels
+    deviations = []
+    for size in (2e-4, 2e-5):
+        mixel, screen = _tilted(size)
+        frame = RADIANCE * coverage(screen, *region)
+        expected = mixel_irradiance_polygon(mixel, screen, region, RADIANCE, n_detector=6, n_triangle=12)
+        sim = ms.Simulation(ms.Mincam((mixel,)), screen=screen)
+        model = sim.measure([frame], ms.DotProduct(parallax=True, vignetting=True)).irradiance_w_m2[0, 0]
+        bare = sim.measure([frame], ms.DotProduct()).irradiance_w_m2[0, 0]
+        deviations.append(abs(model / expected - 1))
+        assert abs(bare / expected - 1) > 100 * deviations[-1]  # vignetting is what the bare model misses here
+    assert deviations[1] < 1e-4 and deviations[1] < deviations[0] / 10  # ~ (detector / field)^2
+
+
+def test_parallax_moves_each_mixels_field_by_its_offset():
+    """Two mixels 4 cm apart: from the centre both see the same field; with parallax each sees it shifted."""
+    cam = ms.pair_layout(spacing_m=0.04)
+    sim = ms.Simulation(cam, screen=SCREEN)
+    maps = {p: ms.DotProduct(parallax=p).maps(cam, SCREEN).weights_sr for p in (False, True)}
+    np.testing.assert_allclose(maps[False][0], maps[False][1][:, ::-1], rtol=1e-12)  # one field, mirrored masks
+    centroid = {p: (maps[p] * SCREEN.texel_centers_m()[0]).sum(axis=(1, 2)) / maps[p].sum(axis=(1, 2))
+                for p in maps}
+    shift = centroid[True] - centroid[False]
+    offsets = np.array([m.pose.position_m[0] for m in cam]) - cam.centre_m[0]
+    np.testing.assert_allclose(shift, offsets, atol=2e-3)  # 2 cm each way, within a tenth of a texel
+    assert sim.measure([np.ones(SCREEN.shape)], ms.DotProduct(parallax=True)).stderr_w_m2.max() == 0
+
+
+def test_bad_options_and_wave_optics_are_refused():
+    with pytest.raises(InputError, match="nodes must be an integer"):
+        ms.DotProduct(nodes=0)
+    with pytest.raises(InputError, match="parallax must be True or False"):
+        ms.DotProduct(parallax="yes")
+    wave = ms.Mincam((ms.Mixel(masks.constant(1.0), optics="wave"),))
+    with pytest.raises(InputError, match="optics = 'wave'"):
+        ms.Simulation(wave, screen=SCREEN).measure([np.ones(SCREEN.shape)], ms.DotProduct())
+
+
+# ------------------------------------------------------------------------------------------------ maps out
+def _frames(screen: ms.Screen) -> np.ndarray:
+    rng = np.random.default_rng(3)
+    return np.stack([rng.random(screen.shape), RADIANCE * coverage(screen, -0.1, 0.05, -0.2, 0.1)])
+
+
+def _from_export(out, frames: np.ndarray) -> np.ndarray:
+    sidecar = json.loads((out / "maps.json").read_text())
+    maps = [np.load(out / sidecar["files"][name]["map"]) for name in sidecar["mixel_names"]]
+    return np.array([[np.sum(w * f) for w in maps] for f in frames])
+
+
+def test_exported_ideal_maps_measure_what_the_solver_measures(tmp_path):
+    cam = ms.pair_layout(spacing_m=0.033)
+    sim = ms.Simulation(cam, screen=SCREEN)
+    frames = _frames(SCREEN)
+    sidecar = sim.export_maps(tmp_path, solver=ms.DotProduct(parallax=True), psf_grid=(5, 4))
+    m = sim.measure(frames, ms.DotProduct(parallax=True))
+    np.testing.assert_allclose(_from_export(tmp_path, frames), m.irradiance_w_m2, rtol=1e-12)
+    meta = json.loads(sidecar.read_text())
+    assert meta["screen"]["resolution"] == [50, 50] and meta["screen"]["position_m"] == [0.0, 0.0, -0.5]
+    assert meta["units"]["map"].startswith("sr") and meta["source"]["form"] == "dot_product"
+    assert [x["name"] for x in meta["geometry"]["mixels"]] == cam.names
+    a = np.load(tmp_path / "forward_matrix.npy")
+    np.testing.assert_allclose(a @ frames[0].ravel(), m.irradiance_w_m2[0], rtol=1e-12)
+    psfs = np.load(tmp_path / "psfs.npy")
+    assert psfs.shape == (4, 5, 2) and meta["psfs"]["shape"] == [4, 5, 2]
+    # a point source of intensity I at a grid point: the texel holding it at radiance I / texel area
+    x, y = meta["psfs"]["points_x_m"][1], meta["psfs"]["points_y_m"][2]
+    j, i = int((x / SCREEN.width_m + 0.5) * 50), int((0.5 - y / SCREEN.height_m) * 50)
+    point = np.zeros(SCREEN.shape)
+    point[i, j] = 1.0 / SCREEN.texel_area_m2
+    np.testing.assert_allclose(psfs[2, 1], sim.measure([point], ms.DotProduct(parallax=True)).irradiance_w_m2[0])
+
+
+@pytest.mark.skipif(not backend.is_jit(), reason="needs a JIT variant (LLVM or CUDA)")
+def test_exported_response_maps_measure_what_the_solver_measures_and_the_cli_writes_them(tmp_path):
+    screen = ms.Screen(1.0, 1.0, (24, 24))
+    cam = ms.pair_layout(spacing_m=0.033)
+    sim = ms.Simulation(cam, screen=screen)
+    budget = ms.Budget(samples_per_texel=16, replicates=4, seed=2)
+    frames = _frames(screen)
+    sim.export_maps(tmp_path / "py", budget)
+    m = sim.measure(frames, ms.ResponseMap(), budget)
+    np.testing.assert_allclose(_from_export(tmp_path / "py", frames), m.irradiance_w_m2, rtol=1e-12)
+    stderr = np.load(tmp_path / "py" / "maps" / f"{cam.names[0]}_stderr.npy")
+    assert stderr.shape == screen.shape and stderr.max() > 0
+
+    config = tmp_path / "c.toml"
+    config.write_text('[run]\nsolver = "response_map"\nsamples_per_texel = 16\n'
+                      '[screen]\nresolution = [32, 18]\n')
+    r = CliRunner().invoke(app, ["export-maps", str(config), "--out", str(tmp_path / "cli"), "--psf-grid", "3",
+                                 "3", "--ideal"])
+    assert r.exit_code == 0, r.output
+    meta = json.loads((tmp_path / "cli" / "maps.json").read_text())
+    assert meta["source"]["form"] == "dot_product" and np.load(tmp_path / "cli" / "psfs.npy").shape[:2] == (3, 3)
+    bad = CliRunner().invoke(app, ["export-maps", str(config), "--out", str(tmp_path / "bad"), "--psf-grid", "0",
+                                   "3"])
+    assert bad.exit_code == 2 and "error: --psf-grid" in bad.output
+
+
+def test_export_refuses_bad_input(tmp_path):
+    sim = ms.Simulation(ms.single(masks.constant(1.0)), screen=SCREEN)
+    with pytest.raises(InputError, match="psf_grid must be two positive integers"):
+        sim.export_maps(tmp_path, solver=ms.DotProduct(), psf_grid=(0, 3))
+    with pytest.raises(InputError, match="ResponseMap or DotProduct"):
+        sim.export_maps(tmp_path, solver=ms.Aperture())
+
+
+# ------------------------------------------------------------------------------ the finding, reproduced
+def _calibrated_on_model_tested_on_physics(spacing_m: float, model) -> dict:
+    """The intrusion pair at 0.5 m: a cubic fitted on ``model``'s sweep, applied to the physics' sweep (the spacing
+    study's code, squares both mixels see whole); error rates in % of the 50 cm field."""
+    from mincam_sim.estimation.estimators import intrusion_position
+    from mincam_sim.experiments.screen_calibration import fit_calibration_1d
+    from mincam_sim.experiments.setup import Setup
+    from mincam_sim.experiments.spacing import boundary_errors, boundary_sweep_irradiance
+
+    setup = Setup(spacing_m=spacing_m)
+    args = (setup, 0.5, 41, 256, 160)
+    physics, truth = boundary_sweep_irradiance(*args, seen_whole=True)
+    ideal, ideal_truth = boundary_sweep_irradiance(*args, solver=model, seen_whole=True)
+    cal = fit_calibration_1d(intrusion_position(*ideal.T), ideal_truth, {})
+    return boundary_errors(setup, cal, intrusion_position(*physics.T), truth, 0.5)[1]
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not backend.is_jit(), reason="needs a JIT variant (LLVM or CUDA)")
+def test_calibrating_on_the_ideal_model_misses_the_physics_by_the_field_of_view_offset():
+    """The issue's finding (docs/ideal_model.md): ~2 % of the field for the bare model with the pair 3.3 cm apart,
+    <= 0.1 % with co-located mixels, <= 0.3 % once parallax and vignetting are in the model."""
+    bare = _calibrated_on_model_tested_on_physics(0.033, ms.DotProduct())
+    assert 1.8 < bare["avg_error_pct"] < 2.6 and bare["max_error_pct"] < 4.0
+    co_located = _calibrated_on_model_tested_on_physics(0.0, ms.DotProduct())
+    assert co_located["avg_error_pct"] <= 0.1 and co_located["max_error_pct"] <= 0.2
+    closer = _calibrated_on_model_tested_on_physics(0.033, ms.DotProduct(parallax=True, vignetting=True))
+    assert closer["avg_error_pct"] <= 0.3 and closer["max_error_pct"] <= 0.3
