@@ -216,14 +216,11 @@ def _announce_variant() -> None:
 def variant_problem(variant: str) -> str | None:
     """Why ``variant`` cannot run on this machine, or None if it can. Renders nothing.
 
-    Uses ``mincam_sim.render.backend.variant_available(name)`` when the backend offers it; otherwise asks the
-    backend to load the variant (only the render layer imports Mitsuba / Dr.Jit) and reports its refusal.
+    Asks the backend to load the variant (only the render layer imports Mitsuba / Dr.Jit) and reports its
+    refusal.
     """
     from mincam_sim.render import backend
 
-    ask = getattr(backend, "variant_available", None)
-    if callable(ask):
-        return None if ask(variant) else f"Mitsuba variant {variant!r} is not available on this machine"
     backend.request_variant(variant)
     try:
         loaded = backend.variant()

@@ -13,7 +13,7 @@ import numpy as np
 from mincam_sim.design import tracking as tr
 from mincam_sim.errors import StaleResultError
 from mincam_sim.masks import export_print_png
-from mincam_sim.masks.sheet import write_print_sheet
+from mincam_sim.masks.sheet import check_print_sheet, write_print_sheet
 from mincam_sim.storage.atomic import atomic_path, atomic_save_npz, atomic_write_json
 from mincam_sim.storage.identity import build_identity
 from mincam_sim.storage.store import check_identity
@@ -38,6 +38,11 @@ BASELINE = "current ramps, Eq. 7"
 DESIGNED = "designed, learned decoder"
 RAMPS_LEARNED = "current ramps, learned decoder"
 MIRRORED = "mirrored ramps (old layout), Eq. 7"
+
+
+def _sheet_offsets_m(task: tr.TrackingTask) -> list[tuple[float, float]]:
+    """Where each mask sits on the print sheet [m]: the cross's offsets at the task's spacing."""
+    return [(dx / tr.SPACING_M * task.spacing_m, dy / tr.SPACING_M * task.spacing_m) for dx, dy in tr.OFFSETS_M]
 
 
 def make_task(quick: bool = False, seed: int = 0, **overrides) -> tr.TrackingTask:
@@ -110,6 +115,9 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
     out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     task = make_task(quick, seed, **overrides)
+    offsets_m = _sheet_offsets_m(task)
+    # the sheet is written last: what it would refuse (a dpi whose sheet is too large) is refused before any work
+    check_print_sheet(task.baseline_masks(), offsets_m, task.dpi, task.film())
     identity = design_identity(task_name, task, quick, seed)
     _refuse_another_design(out, identity, overwrite)
     grad = check_gradients(seed=seed)
@@ -132,7 +140,6 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
         "runtime_s": {"gradient_check": t_check, "design": t_design, "evaluation": t_eval,
                       "total": time.perf_counter() - start},
     }
-    offsets_m = [(dx / tr.SPACING_M * task.spacing_m, dy / tr.SPACING_M * task.spacing_m) for dx, dy in tr.OFFSETS_M]
     write_print_sheet(list(result.printer_masks), offsets_m, task.dpi, task.film(), out / "print_sheet.png",
                       names=labels, title=f"designed {task_name} masks (seed {seed}), seen from the detectors")
     atomic_write_json(out / "design.json", report, indent=1, default=float)

@@ -377,6 +377,8 @@ BOUNDARY = [
          {"d.toml": "[tracking]\ndpii = 300.0\n"}, keywords=("dpii",)),
     Case("design_config_not_toml", ["design", "tracking", "--config", "d.toml"], {"d.toml": "dpi = = 3\n"},
          keywords=("not valid TOML",)),
+    Case("design_dpi_whose_sheet_is_too_large", ["design", "tracking", "--quick", "--dpi", "4800", "--out", "d"],
+         keywords=("print sheet", "dpi")),
     Case("empty_config_says_it_is_the_default_job", ["render", "c.toml", "--check"], {"c.toml": ""}, expect="ok",
          notes=("default job",)),
 ]
