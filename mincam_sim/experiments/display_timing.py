@@ -39,7 +39,7 @@ class DisplayTiming:
         Rms jitter of the reading instants [s].
     start_s : float or None
         Instant of the first reading after the video starts [s]; ``None`` draws it uniformly within one
-        video frame (the clocks are not synchronised).
+        shown frame (the clocks are not synchronised).
     """
 
     refresh_rate_hz: float
@@ -72,8 +72,10 @@ def frame_onsets_s(n_frames: int, video_rate_hz: float, refresh_rate_hz: float) 
 def sample_times_s(timing: DisplayTiming, duration_s: float, video_rate_hz: float,
                    rng: np.random.Generator) -> np.ndarray:
     """Reading start instants [s] within ``[0, duration_s - exposure_s]`` (sorted; jittered; the first at
-    ``timing.start_s`` or drawn within one video frame)."""
-    start = rng.uniform(0.0, 1.0 / video_rate_hz) if timing.start_s is None else timing.start_s
+    ``timing.start_s`` or drawn within one shown frame: a video frame, or a refresh period where the video is faster
+    than the display)."""
+    phase_span_s = max(1.0 / video_rate_hz, 1.0 / timing.refresh_rate_hz)  # one shown frame
+    start = rng.uniform(0.0, phase_span_s) if timing.start_s is None else timing.start_s
     n = int(np.floor((duration_s - timing.exposure_s - start) * timing.sample_rate_hz - 3 * timing.jitter_s
                      * timing.sample_rate_hz)) + 1
     if n < 1:
