@@ -1,7 +1,10 @@
 """Paper Sec. 4.3: speed from one mixel with a sinusoid mask.
 
 * road video (the paper's experiment): a road texture crop slides across the 50" screen by k display pixels
-  per frame at 30 frames/s; speed in px/s; the stationary mixel's signal P(t) -> FFT peak -> v = omega_p/omega_d.
+  per frame at 30 frames/s, each frame read once at its instant (ideal); speed in px/s; the stationary mixel's
+  signal P(t) -> FFT peak -> v = omega_p/omega_d. Beside it, the paper's own video (one pixel per frame, so its
+  frame rate is the speed) on a display read by a camera on its own clock (``display_*``, :mod:`.display_timing`);
+  the road is measured once per crop position and every video is a lookup.
 * vehicle (its physical version): the mixel looks down from height d at a textured road plane that moves at
   v m/s under an overcast sky (the plane moves by a parameter update per frame).
 
@@ -223,6 +226,14 @@ PAPER_LIKE_CHOICE = (
     "paper does not describe and which is not adopted.")
 
 
+def _displayed_duration_s(params: SpeedParams, shift_px: int) -> float:
+    """Length [s] of the paper-like video of the speed ``video_frame_rate_hz x shift_px``: one pass over
+    ``display_road_px`` of road, or (0) the ideal video's ``video_frames / video_frame_rate_hz``."""
+    if params.display_road_px:
+        return params.display_road_px / (params.video_frame_rate_hz * shift_px)
+    return params.video_frames / params.video_frame_rate_hz
+
+
 def _video_words(params: SpeedParams) -> str:
     if not params.display_shift_px:
         return f"{params.video_frame_rate_hz:g} frames/s video (video_shifts_px per frame)"
@@ -309,7 +320,6 @@ class Speed(Experiment):
         timing = params.timing()
         draw_rngs = self.streams(setup, ("video", "display_timing"))["display_timing"].spawn(
             params.display_timing_draws)  # one stream per draw: draw 0 is the same whatever their number
-        duration_s = params.video_frames / rate
         # the road's irradiance at every crop position, measured once: every video (ideal or displayed) is a lookup
         position_irr = road_irradiance_by_shift(maps, road, cols, max(shifts) * params.video_frames)
         true_v, pred_v, plain_v, spectra = [], [], [], []
@@ -324,8 +334,7 @@ class Speed(Experiment):
             spectra.append((signal, rate * k))
             for d, draw_rng in enumerate(draw_rngs):
                 timed = displayed_signal(position_irr, rate * k, params.display_shift_px or k,
-                                         params.display_road_px / (rate * k) if params.display_road_px else duration_s,
-                                         timing, draw_rng, setup)
+                                         _displayed_duration_s(params, k), timing, draw_rng, setup)
                 timed_v[d, j] = _speed(timed, timing.sample_rate_hz, omega_d_px, v_min, params.difference_order,
                                        v_max)
                 error = abs(timed_v[d, j] / (rate * k) - 1)
@@ -348,8 +357,8 @@ class Speed(Experiment):
                            f"(held, frames dropped when faster), read asynchronously at {timing.sample_rate_hz:g}/s "
                            f"(random phase), {timing.exposure_s * 1e3:g} ms exposure, {timing.jitter_s * 1e3:g} ms "
                            "rms jitter"),
-                "video_shift_px_per_frame": params.display_shift_px or "video_shifts_px",
-                "road_px_per_speed": params.display_road_px or "speed x video_frames / video_frame_rate_hz",
+                "video_shift_px_per_frame": [params.display_shift_px or k for k in shifts],
+                "road_px_per_speed": [round(_displayed_duration_s(params, k) * rate * k) for k in shifts],
                 "choice": PAPER_LIKE_CHOICE,
                 "refresh_rate_hz": timing.refresh_rate_hz,
                 "sample_rate_hz": timing.sample_rate_hz,
@@ -580,10 +589,9 @@ def _timed_errors(position_irr: np.ndarray, setup: Setup, params: SpeedParams, e
         params.display_timing_draws)
     out = np.empty((params.display_timing_draws, len(STUDY_ESTIMATORS), len(shifts)))
     for j, k in enumerate(shifts):
-        duration_s = params.display_road_px / (rate * k) if params.display_road_px else params.video_frames / rate
         for d, draw_rng in enumerate(draw_rngs):
-            timed = displayed_signal(position_irr, rate * k, params.display_shift_px or k, duration_s, timing,
-                                     draw_rng, setup)
+            timed = displayed_signal(position_irr, rate * k, params.display_shift_px or k,
+                                     _displayed_duration_s(params, k), timing, draw_rng, setup)
             estimates = _study_estimates(timed, timing.sample_rate_hz, omega_d_px, v_min, v_max,
                                          params.difference_order)
             out[d, :, j] = np.abs(np.array(estimates) / (rate * k) - 1) * 100
