@@ -94,7 +94,7 @@ class SpeedParams:
         ``display_exposure_s`` per reading, its instants jittered by ``display_jitter_s`` rms
         (:mod:`.display_timing`). The paper gives none of these; the defaults (60 Hz, 30 readings/s, 20 ms,
         2 ms) are plain camera-like values, not fitted: with the paper's one-pixel-per-frame video they move the
-        errors less than the road texture does (``scenes/studies/speed_display_timing.toml``).
+        errors less than the road texture does (``scenes/studies/speed/display_timing.toml``).
     display_timing_draws : int
         Independent draws of the timing (phase, jitter, read-out noise) on the same rendered video; the headline
         of ``display_timing`` is draw 0, ``display_timing.draws`` summarises them all.
@@ -219,7 +219,7 @@ PAPER_LIKE_CHOICE = (
     "display refresh, camera rate, exposure, jitter, video length, speeds or mask period. With its one-pixel video "
     "the 74 % failure of a 30 frames/s video jumping k px per frame is gone, and refresh 60-144 Hz, 29.97-60 "
     "readings/s, 0-20 ms exposure and 0-2 ms jitter change the errors less than the road texture does (seed medians "
-    "0.9/0.5 to 5.2/1.7 %; scenes/studies/speed_display_timing.toml). So the paper's numbers do not constrain the "
+    "0.9/0.5 to 5.2/1.7 %; scenes/studies/speed/display_timing.toml). So the paper's numbers do not constrain the "
     "timing, which stays at plain camera-like values (60 Hz, 30/s, 20 ms, 2 ms), not fitted. Against the paper's "
     "7.55 / 2.85 %, the maximum lands within a factor of two and the average does not (seed 0); the one change found "
     "that lands on most draws is a coarser mask (0.3 mm period: 6.5 / 5.0 %, every speed biased low), which the "
@@ -598,11 +598,9 @@ def _timed_errors(position_irr: np.ndarray, setup: Setup, params: SpeedParams, e
     return out
 
 
-def run_display_timing_study(path: str | Path, out_dir: str | Path, quick: bool = False) -> list[dict]:
-    """Run the study file ``path`` (``scenes/studies/speed_display_timing.toml``): ``[study] seeds`` and one
-    ``[points.<label>]`` table of ``[speed]`` fields per set-up; write ``speed_display_timing.json`` and
-    ``speed_display_timing.png`` into ``out_dir`` and return the rows (:func:`display_timing_study`, each with
-    its ``label``)."""
+def read_display_timing_study(path: str | Path, quick: bool = False) -> tuple[tuple[int, ...], dict[str, dict]]:
+    """The seeds and the labelled points of a display-timing study file, every point checked as ``[speed]``
+    fields (:class:`~mincam_sim.errors.ConfigError` naming the point and the field) before anything renders."""
     document = read_toml_file(path, "study")
     seeds, points = document.get("study", {}).get("seeds"), document.get("points")
     if not (isinstance(seeds, list) and seeds and all(isinstance(s, int) for s in seeds)):
@@ -620,8 +618,21 @@ def run_display_timing_study(path: str | Path, out_dir: str | Path, quick: bool 
             dataclasses.replace(base, **table)
         except ValueError as err:
             raise ConfigError(f"study file {path}: [points.{label}]: {err}") from None
-    rows = display_timing_study(list(fields.values()), tuple(seeds), quick)
-    rows = [{"label": label, **row} for label, row in zip(points, rows, strict=True)]
+    return tuple(seeds), fields
+
+
+def run_display_timing_study(path: str | Path, out_dir: str | Path, quick: bool = False) -> list[dict]:
+    """Run the study file ``path`` (``scenes/studies/speed/display_timing.toml``): ``[study] seeds`` and one
+    ``[points.<label>]`` table of ``[speed]`` fields per set-up; write ``speed_display_timing.json`` and
+    ``speed_display_timing.png`` into ``out_dir`` and return the rows (:func:`display_timing_study`, each with
+    its ``label``).
+
+    Not the study runner's file (``mincam-sim study run`` runs the whole experiment, vehicles included, per
+    point): this loop renders the road once per seed and mask period and looks every timing draw up from it.
+    """
+    seeds, fields = read_display_timing_study(path, quick)
+    rows = display_timing_study(list(fields.values()), seeds, quick)
+    rows = [{"label": label, **row} for label, row in zip(fields, rows, strict=True)]
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     (out / "speed_display_timing.json").write_text(json.dumps(rows, indent=1))

@@ -4,6 +4,7 @@ video on a display, and the chosen default against the paper's 7.55 / 2.85 % (wi
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,6 +18,7 @@ from mincam_sim.experiments.speed import (
     _summary,
     display_timing_study,
     displayed_signal,
+    read_display_timing_study,
     road_irradiance_by_shift,
     run_display_timing_study,
 )
@@ -146,3 +148,9 @@ def test_a_bad_study_point_is_refused_before_anything_renders(tmp_path, table, m
     study.write_text(f'[study]\nseeds = [0]\n[points.a]\n{table}\n', encoding="utf-8")
     with pytest.raises(ConfigError, match=message):
         run_display_timing_study(study, tmp_path / "out", quick=True)
+
+
+def test_the_shipped_display_timing_study_file_is_valid():
+    root = Path(__file__).resolve().parents[2]
+    seeds, points = read_display_timing_study(root / "scenes" / "studies" / "speed" / "display_timing.toml")
+    assert len(seeds) >= 3 and any(p.get("display_shift_px") == 0 for p in points.values())
