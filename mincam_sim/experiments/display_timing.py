@@ -5,7 +5,8 @@ paper's: a video on a screen, a camera sampling on its own clock) differs in thr
 
 * **refresh and sample-and-hold**: video frame ``j`` is published at ``j / video_rate_hz`` and shown from the
   first display refresh at or after that instant until the next frame replaces it (held, not flashed); a video
-  rate that does not divide the refresh rate gives uneven hold times (judder);
+  rate that does not divide the refresh rate gives uneven hold times (judder), and a video faster than the
+  refresh drops frames (each refresh shows the latest frame published; the dropped ones are held for no time);
 * **exposure**: a reading integrates the displayed signal over ``exposure_s`` (the average over the exposure:
   frames that change within it blur together);
 * **asynchronous sampling**: readings start at ``start_s + k / sample_rate_hz + jitter`` on the mixel's own
