@@ -5,7 +5,8 @@ paper's: a video on a screen, a camera sampling on its own clock) differs in thr
 
 * **refresh and sample-and-hold**: video frame ``j`` is published at ``j / video_rate_hz`` and shown from the
   first display refresh at or after that instant until the next frame replaces it (held, not flashed); a video
-  rate that does not divide the refresh rate gives uneven hold times (judder);
+  rate that does not divide the refresh rate gives uneven hold times (judder), and a video faster than the
+  refresh drops frames (each refresh shows the latest frame published; the dropped ones are held for no time);
 * **exposure**: a reading integrates the displayed signal over ``exposure_s`` (the average over the exposure:
   frames that change within it blur together);
 * **asynchronous sampling**: readings start at ``start_s + k / sample_rate_hz + jitter`` on the mixel's own
@@ -39,7 +40,7 @@ class DisplayTiming:
         Rms jitter of the reading instants [s].
     start_s : float or None
         Instant of the first reading after the video starts [s]; ``None`` draws it uniformly within one
-        video frame (the clocks are not synchronised).
+        shown frame (the clocks are not synchronised).
     """
 
     refresh_rate_hz: float
@@ -72,8 +73,10 @@ def frame_onsets_s(n_frames: int, video_rate_hz: float, refresh_rate_hz: float) 
 def sample_times_s(timing: DisplayTiming, duration_s: float, video_rate_hz: float,
                    rng: np.random.Generator) -> np.ndarray:
     """Reading start instants [s] within ``[0, duration_s - exposure_s]`` (sorted; jittered; the first at
-    ``timing.start_s`` or drawn within one video frame)."""
-    start = rng.uniform(0.0, 1.0 / video_rate_hz) if timing.start_s is None else timing.start_s
+    ``timing.start_s`` or drawn within one shown frame: a video frame, or a refresh period where the video is faster
+    than the display)."""
+    phase_span_s = max(1.0 / video_rate_hz, 1.0 / timing.refresh_rate_hz)  # one shown frame
+    start = rng.uniform(0.0, phase_span_s) if timing.start_s is None else timing.start_s
     n = int(np.floor((duration_s - timing.exposure_s - start) * timing.sample_rate_hz - 3 * timing.jitter_s
                      * timing.sample_rate_hz)) + 1
     if n < 1:

@@ -1,7 +1,10 @@
 """Paper Sec. 4.3: speed from one mixel with a sinusoid mask.
 
 * road video (the paper's experiment): a road texture crop slides across the 50" screen by k display pixels
-  per frame at 30 frames/s; speed in px/s; the stationary mixel's signal P(t) -> FFT peak -> v = omega_p/omega_d.
+  per frame at 30 frames/s, each frame read once at its instant (ideal); speed in px/s; the stationary mixel's
+  signal P(t) -> FFT peak -> v = omega_p/omega_d. Beside it, the paper's own video (one pixel per frame, so its
+  frame rate is the speed) on a display read by a camera on its own clock (``display_*``, :mod:`.display_timing`);
+  the road is measured once per crop position and every video is a lookup.
 * vehicle (its physical version): the mixel looks down from height d at a textured road plane that moves at
   v m/s under an overcast sky (the plane moves by a parameter update per frame).
 
@@ -15,12 +18,15 @@ estimator therefore takes the FFT peak of the frame-to-frame difference P(t) - P
 
 from __future__ import annotations
 
+import dataclasses
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from mincam_sim.budget import Budget
+from mincam_sim.configuration.toml_files import read_toml_file
 from mincam_sim.errors import ConfigError
 from mincam_sim.estimation.estimators import (
     AliasingError,
@@ -87,10 +93,20 @@ class SpeedParams:
         by a mixel on its own clock (random phase) at ``display_sample_rate_hz``, integrating
         ``display_exposure_s`` per reading, its instants jittered by ``display_jitter_s`` rms
         (:mod:`.display_timing`). The paper gives none of these; the defaults (60 Hz, 30 readings/s, 20 ms,
-        2 ms) are this simulator's guess at a camera sampling a 30 frames/s video asynchronously.
+        2 ms) are plain camera-like values, not fitted: with the paper's one-pixel-per-frame video they move the
+        errors less than the road texture does (``scenes/studies/speed/display_timing.toml``).
     display_timing_draws : int
         Independent draws of the timing (phase, jitter, read-out noise) on the same rendered video; the headline
         of ``display_timing`` is draw 0, ``display_timing.draws`` summarises them all.
+    display_shift_px : int
+        Crop shift per frame of the paper-like video [display px]. The paper (Sec. 4.3.1) shifts the crop "by one
+        pixel ... for consecutive frames", so its frame rate is the speed in px/s (a video faster than the
+        display's refresh drops frames); 0 shows the ideal video (``video_shifts_px`` at ``video_frame_rate_hz``).
+    display_road_px : int
+        Road each speed's paper-like video travels [display px]: the paper's video is one pass of the crop over
+        its road texture, so every speed shows the same road and lasts ``display_road_px / v``; 0 gives every
+        speed the ideal video's duration ``video_frames / video_frame_rate_hz``. At most
+        ``max(video_shifts_px) x video_frames`` (the road the ideal video renders).
     """
 
     mask_period_m: float = 0.2e-3
@@ -112,6 +128,8 @@ class SpeedParams:
     display_exposure_s: float = 0.02
     display_jitter_s: float = 0.002
     display_timing_draws: int = 32
+    display_shift_px: int = 1
+    display_road_px: int = 0
 
     def timing(self) -> DisplayTiming:
         """The paper-like display timing (raises ``ValueError`` naming the field if it is inconsistent)."""
@@ -133,6 +151,16 @@ class SpeedParams:
             raise ValueError("video_shifts_px must be >= 1 px and vehicle_speeds_m_s > 0")
         if len(self.video_resolution) != 2:
             raise ValueError(f"video_resolution must be [columns, rows], got {list(self.video_resolution)}")
+        rendered_px = max(self.video_shifts_px) * self.video_frames
+        if self.display_shift_px < 0 or not 0 <= self.display_road_px <= rendered_px:
+            raise ValueError(f"display_shift_px must be >= 0 (got {self.display_shift_px!r}) and display_road_px in "
+                             f"[0, max(video_shifts_px) x video_frames = {rendered_px}] px (got "
+                             f"{self.display_road_px!r})")
+        fastest_px_s = self.video_frame_rate_hz * max(self.video_shifts_px)
+        if self.display_road_px and self.display_road_px / fastest_px_s * self.display_sample_rate_hz < 16:
+            raise ValueError(f"display_road_px = {self.display_road_px} gives fewer than 16 readings at "
+                             f"{fastest_px_s:g} px/s and display_sample_rate_hz = {self.display_sample_rate_hz:g}; "
+                             "raise either")
         if min(self.video_frames, self.vehicle_frames, self.turn_frames) < 16:
             raise ValueError("video_frames, vehicle_frames and turn_frames must be >= 16 (an FFT needs samples)")
 
@@ -147,7 +175,71 @@ def _speed(signal: np.ndarray, rate_hz: float, omega_d: float, v_min: float, ord
                                    max_frequency_hz=f_max))
 
 
+def road_irradiance_by_shift(maps, road: np.ndarray, cols: int, n_shifts: int, chunk: int = 256) -> np.ndarray:
+    """The mixel's irradiance [W/m^2] for the road crop shifted by 0 .. ``n_shifts - 1`` display px, (n_shifts,).
+
+    The response maps are linear in the displayed radiance, so every video of the road (any shift per frame, any
+    display timing) is a lookup into this one measurement; nothing is rendered again per speed or per timing.
+    ``maps.measure`` sums each frame in one order whatever the chunk, so a lookup equals measuring the crop alone.
+    """
+    out = np.empty(n_shifts)
+    for i in range(0, n_shifts, chunk):
+        crops = np.stack([road[:, s : s + cols] for s in range(i, min(i + chunk, n_shifts))])
+        out[i : i + len(crops)] = maps.measure(crops).irradiance_w_m2[:, 0]
+    return out
+
+
+def displayed_signal(position_irr: np.ndarray, speed_px_s: float, shift_px: int, duration_s: float,
+                     timing: DisplayTiming, rng: np.random.Generator, setup: Setup) -> np.ndarray:
+    """The mixel's read-out [DN] of the road video at ``speed_px_s`` shown on a display and read on its own clock.
+
+    The video shifts the crop by ``shift_px`` per frame at ``speed_px_s / shift_px`` frames/s (the paper: one
+    pixel per frame, so its frame rate is the speed); frames appear at the display's refreshes and are held (a
+    video faster than the refresh drops frames), and each reading averages what is shown during its exposure
+    (:mod:`.display_timing`). ``rng`` draws the clock's phase, its jitter and the sensor noise.
+    """
+    video_rate_hz = speed_px_s / shift_px
+    n_frames = int(round(duration_s * video_rate_hz))
+    if (n_frames - 1) * shift_px >= len(position_irr):
+        raise ValueError(f"a {duration_s:g} s video at {speed_px_s:g} px/s needs {(n_frames - 1) * shift_px + 1} road "
+                         f"positions, got {len(position_irr)}")
+    frame_irr = position_irr[: n_frames * shift_px : shift_px, None]
+    times = sample_times_s(timing, n_frames / video_rate_hz, video_rate_hz, rng)
+    shown = displayed_readings(frame_irr, video_rate_hz, timing.refresh_rate_hz, times, timing.exposure_s)
+    return read_out(shown, shown.min(0), setup.sensor(), rng, setup.exposure_fill).frames_dn[:, 0]
+
+
 TURN_WIDTH_M, TURN_SPEED_M_S, TURN_RADIUS_M = 1.6, 10.0, 5.0  # the turning vehicle: mixel separation, speed, radius
+
+
+#: Why the paper-like display set-up is what it is (``results.json``: ``display_timing.choice``).
+PAPER_LIKE_CHOICE = (
+    "The paper (Sec. 4.3.1) fixes the video: the crop shifts by one pixel per frame, so the video's frame rate is the "
+    "speed in px/s (display_shift_px = 1); a camera reads it asynchronously; the speed is the FFT peak. It gives no "
+    "display refresh, camera rate, exposure, jitter, video length, speeds or mask period. With its one-pixel video "
+    "the 74 % failure of a 30 frames/s video jumping k px per frame is gone, and refresh 60-144 Hz, 29.97-60 "
+    "readings/s, 0-20 ms exposure and 0-2 ms jitter change the errors less than the road texture does (seed medians "
+    "0.9/0.5 to 5.2/1.7 %; scenes/studies/speed/display_timing.toml). So the paper's numbers do not constrain the "
+    "timing, which stays at plain camera-like values (60 Hz, 30/s, 20 ms, 2 ms), not fitted. Against the paper's "
+    "7.55 / 2.85 %, the maximum lands within a factor of two and the average does not (seed 0); the one change found "
+    "that lands on most draws is a coarser mask (0.3 mm period: 6.5 / 5.0 %, every speed biased low), which the "
+    "paper does not describe and which is not adopted.")
+
+
+def _displayed_duration_s(params: SpeedParams, shift_px: int) -> float:
+    """Length [s] of the paper-like video of the speed ``video_frame_rate_hz x shift_px``: one pass over
+    ``display_road_px`` of road, or (0) the ideal video's ``video_frames / video_frame_rate_hz``."""
+    if params.display_road_px:
+        return params.display_road_px / (params.video_frame_rate_hz * shift_px)
+    return params.video_frames / params.video_frame_rate_hz
+
+
+def _video_words(params: SpeedParams) -> str:
+    if not params.display_shift_px:
+        return f"{params.video_frame_rate_hz:g} frames/s video (video_shifts_px per frame)"
+    if params.display_shift_px == 1:
+        return "a video shifting 1 px per frame (frame rate = speed in px/s)"
+    return f"a video shifting {params.display_shift_px} px per frame (frame rate = speed / {params.display_shift_px})"
 
 
 def video_omega_d_rad_per_px(setup: Setup, params: SpeedParams) -> float:
@@ -207,14 +299,19 @@ class Speed(Experiment):
         cols, rows = params.video_resolution
         return objects.road_texture((rows, cols + max(params.video_shifts_px) * params.video_frames + 1), rng)
 
+    @staticmethod
+    def video_maps(setup: Setup, params: SpeedParams):
+        """The sinusoid mixel's response maps over the screen showing the road video."""
+        screen = setup.with_(screen_resolution=tuple(params.video_resolution)).screen()
+        cam = Mincam((sinusoid_mixel(setup, params.mask_period_m, Pose()),))
+        return Simulation(cam, screen=screen).response_maps(
+            Budget(samples_per_texel=params.video_samples_per_texel, seed=setup.seed))
+
     def road_video(self, setup: Setup, params: SpeedParams, rng: np.random.Generator, out_dir: Path,
                    show_progress: bool) -> dict:
         """The paper's experiment: a road crop slides across the screen by k px per frame."""
-        screen = setup.with_(screen_resolution=tuple(params.video_resolution)).screen()
-        cam = Mincam((sinusoid_mixel(setup, params.mask_period_m, Pose()),))
-        maps = Simulation(cam, screen=screen).response_maps(
-            Budget(samples_per_texel=params.video_samples_per_texel, seed=setup.seed))
-        rows, cols = screen.shape
+        maps = self.video_maps(setup, params)
+        cols = params.video_resolution[0]
         road = self.scene(setup, params, rng)
         shifts = params.video_shifts_px
         rate = params.video_frame_rate_hz
@@ -223,23 +320,26 @@ class Speed(Experiment):
         timing = params.timing()
         draw_rngs = self.streams(setup, ("video", "display_timing"))["display_timing"].spawn(
             params.display_timing_draws)  # one stream per draw: draw 0 is the same whatever their number
+        # the road's irradiance at every crop position, measured once: every video (ideal or displayed) is a lookup
+        position_irr = road_irradiance_by_shift(maps, road, cols, max(shifts) * params.video_frames)
         true_v, pred_v, plain_v, spectra = [], [], [], []
         timed_v = np.empty((params.display_timing_draws, len(shifts)))
+        worst = None  # (relative error, read-out, true speed, draw) of the worst displayed speed over the draws
         for j, k in enumerate(progress(shifts, desc="road video speeds", disable=not show_progress)):
-            crops = np.stack([road[:, i * k : i * k + cols] for i in range(params.video_frames)])
-            m = maps.measure(crops)
-            signal = read_out(m.irradiance_w_m2, m.irradiance_w_m2.min(0), setup.sensor(), rng,
-                              setup.exposure_fill).frames_dn[:, 0]
+            irr = position_irr[: k * params.video_frames : k, None]  # frame i shows the crop shifted by i k px
+            signal = read_out(irr, irr.min(0), setup.sensor(), rng, setup.exposure_fill).frames_dn[:, 0]
             true_v.append(rate * k)
             pred_v.append(_speed(signal, rate, omega_d_px, v_min, params.difference_order, v_max))
             plain_v.append(_speed(signal, rate, omega_d_px, v_min, 0, v_max))
             spectra.append((signal, rate * k))
             for d, draw_rng in enumerate(draw_rngs):
-                times = sample_times_s(timing, params.video_frames / rate, rate, draw_rng)
-                shown = displayed_readings(m.irradiance_w_m2, rate, timing.refresh_rate_hz, times, timing.exposure_s)
-                timed = read_out(shown, shown.min(0), setup.sensor(), draw_rng, setup.exposure_fill).frames_dn[:, 0]
+                timed = displayed_signal(position_irr, rate * k, params.display_shift_px or k,
+                                         _displayed_duration_s(params, k), timing, draw_rng, setup)
                 timed_v[d, j] = _speed(timed, timing.sample_rate_hz, omega_d_px, v_min, params.difference_order,
                                        v_max)
+                error = abs(timed_v[d, j] / (rate * k) - 1)
+                if worst is None or error > worst[0]:
+                    worst = (error, timed, rate * k, d)
         true_v, pred_v = np.array(true_v), np.array(pred_v)
         draws = [speed_error_rates(v, true_v) for v in timed_v]
         draw_max = np.array([r["max_error_pct"] for r in draws])
@@ -247,13 +347,19 @@ class Speed(Experiment):
         self._plots(spectra, omega_d_px, true_v, pred_v, v_min, out_dir, "speed_road_video", "px/s", rate,
                     params.difference_order)
         plot_speed(true_v, timed_v[0], out_dir / "speed_road_video_display_prediction.png", unit="px/s")
+        self._worst_spectrum_plot(worst, timing.sample_rate_hz, omega_d_px, v_min, v_max, params.difference_order,
+                                  out_dir / "speed_road_video_display_worst_spectrum.png")
         return {
             "timing": "ideal: one instantaneous reading per video frame, at its instant",
             "display_timing": {
                 **draws[0],
-                "timing": (f"paper-like: {rate:g} frames/s held on a {timing.refresh_rate_hz:g} Hz display, read "
-                           f"asynchronously at {timing.sample_rate_hz:g}/s (random phase), "
-                           f"{timing.exposure_s * 1e3:g} ms exposure, {timing.jitter_s * 1e3:g} ms rms jitter"),
+                "timing": (f"paper-like: {_video_words(params)} on a {timing.refresh_rate_hz:g} Hz display "
+                           f"(held, frames dropped when faster), read asynchronously at {timing.sample_rate_hz:g}/s "
+                           f"(random phase), {timing.exposure_s * 1e3:g} ms exposure, {timing.jitter_s * 1e3:g} ms "
+                           "rms jitter"),
+                "video_shift_px_per_frame": [params.display_shift_px or k for k in shifts],
+                "road_px_per_speed": [round(_displayed_duration_s(params, k) * rate * k) for k in shifts],
+                "choice": PAPER_LIKE_CHOICE,
                 "refresh_rate_hz": timing.refresh_rate_hz,
                 "sample_rate_hz": timing.sample_rate_hz,
                 "exposure_s": timing.exposure_s,
@@ -370,6 +476,16 @@ class Speed(Experiment):
         }
 
     @staticmethod
+    def _worst_spectrum_plot(worst, rate, omega_d, v_min, v_max, order, path) -> None:
+        """The spectrum the estimator searched for the worst displayed speed over the timing draws."""
+        _, signal, speed, draw = worst
+        f_max = min(rate / 2, 1.5 * omega_d * v_max / (2 * np.pi))
+        spec = spectrum(np.diff(signal, n=order), rate, min_frequency_hz=0.5 * omega_d * v_min / (2 * np.pi),
+                        max_frequency_hz=f_max)
+        plot_spectrum(spec, omega_d * speed, path, title=f"worst displayed speed: {speed:g} px/s read as "
+                      f"{spec.peak_omega_rad_s / omega_d:.0f} px/s (draw {draw})")
+
+    @staticmethod
     def _plots(spectra, omega_d, true_v, pred_v, v_min, out_dir, stem, unit, rate, order) -> None:
         signal, speed = spectra[len(spectra) // 2]
         spec = spectrum(np.diff(signal, n=order), rate, min_frequency_hz=0.5 * omega_d * v_min / (2 * np.pi))
@@ -389,3 +505,167 @@ class Speed(Experiment):
         vehicle["nyquist_speed_m_s"] = vehicle_limit
         return ExperimentResult.from_rates(self.name, video, self.paper,
                                            {"vehicle": vehicle, "vehicle_trajectory": trajectory})
+
+
+#: The estimators the display-timing study compares: the experiment's (FFT peak of the difference, in the band of
+#: speeds of interest), the plain FFT peak of P(t) in that band, and the paper's plain peak over the whole spectrum.
+STUDY_ESTIMATORS = ("difference_in_band", "plain_in_band", "plain")
+
+
+def _study_estimates(signal: np.ndarray, rate_hz: float, omega_d: float, v_min: float, v_max: float,
+                     order: int) -> tuple[float, ...]:
+    return (_speed(signal, rate_hz, omega_d, v_min, order, v_max), _speed(signal, rate_hz, omega_d, v_min, 0, v_max),
+            float(speed_from_signal(signal, rate_hz, omega_d)))
+
+
+def _summary(errors_pct: np.ndarray) -> dict:
+    """Max and average over the speeds of (draws, speeds) errors [%]: their mean, std and median over the draws,
+    the share of draws within a factor of two of the paper and the share with a speed off by over 20 %."""
+    worst, mean = errors_pct.max(axis=-1), errors_pct.mean(axis=-1)
+    in_band = ((worst >= SPEED_MAX_ERROR_PCT / 2) & (worst <= SPEED_MAX_ERROR_PCT * 2)
+               & (mean >= SPEED_AVG_ERROR_PCT / 2) & (mean <= SPEED_AVG_ERROR_PCT * 2))
+    return {"max_error_pct_mean": float(worst.mean()), "max_error_pct_std": float(worst.std()),
+            "max_error_pct_median": float(np.median(worst)), "avg_error_pct_mean": float(mean.mean()),
+            "avg_error_pct_std": float(mean.std()), "avg_error_pct_median": float(np.median(mean)),
+            "max_error_pct_p16_p84": np.percentile(worst, [16, 84]).tolist(),
+            "avg_error_pct_p16_p84": np.percentile(mean, [16, 84]).tolist(),
+            "draws_within_factor_two_of_paper": float(in_band.mean()),
+            "draws_with_a_speed_off_by_over_20_pct": float((worst > 20).mean())}
+
+
+def display_timing_study(points: list[dict], seeds: tuple[int, ...], quick: bool = False) -> list[dict]:
+    """The road video's paper-like errors over display set-ups (plain loop; the road is rendered once per seed).
+
+    Parameters
+    ----------
+    points : list of dict
+        ``[speed]`` fields per point (``display_*``: refresh, read rate, exposure, jitter, shift, road length,
+        draws; ``mask_period_m``, the omega_d geometry); the others stay at their quick or full defaults. The
+        road texture depends on the seed alone (not on these fields).
+    seeds : tuple of int
+        Set-up seeds: each one renders its own road texture and response maps once.
+    quick : bool
+        Quick-mode parameters (fewer frames and speeds).
+
+    Returns
+    -------
+    list of dict
+        Per point: its fields and, per estimator of :data:`STUDY_ESTIMATORS`, :func:`_summary` over every seed's
+        timing draws (the same draws as ``reproduce speed`` with those fields and seed); ``per_seed``: the
+        experiment's estimator summarised per seed (per road texture).
+    """
+    experiment, base = Speed(), Speed().params(quick)
+    roads = {}  # (seed, mask period) -> the road's irradiance by shift, rendered once
+
+    def road(seed: int, params: SpeedParams) -> np.ndarray:
+        key = (seed, params.mask_period_m)
+        if key not in roads:
+            setup = Setup(quick=quick, seed=seed)
+            texture = experiment.scene(setup, params, experiment.rng(setup))
+            roads[key] = road_irradiance_by_shift(experiment.video_maps(setup, params), texture,
+                                                  params.video_resolution[0],
+                                                  max(params.video_shifts_px) * params.video_frames)
+        return roads[key]
+
+    every_params = [dataclasses.replace(base, **point) for point in points]  # all checked before any rendering
+    rows = []
+    for point, params in zip(points, every_params, strict=True):
+        errors = []  # per seed: (draws, estimators, speeds)
+        for seed in seeds:
+            errors.append(_timed_errors(road(seed, params), Setup(quick=quick, seed=seed), params, experiment))
+        stacked = np.concatenate(errors)
+        rows.append({**point, "seeds": list(seeds),
+                     **{name: _summary(stacked[:, i]) for i, name in enumerate(STUDY_ESTIMATORS)},
+                     "per_seed": [_summary(e[:, 0]) for e in errors]})
+    return rows
+
+
+def _timed_errors(position_irr: np.ndarray, setup: Setup, params: SpeedParams, experiment: Speed) -> np.ndarray:
+    """Speed errors [%] of every timing draw, estimator and speed: (draws, estimators, speeds)."""
+    rate, shifts, timing = params.video_frame_rate_hz, params.video_shifts_px, params.timing()
+    omega_d_px = video_omega_d_rad_per_px(setup, params)
+    v_min, v_max = rate * min(shifts), rate * max(shifts)
+    draw_rngs = experiment.streams(setup, ("video", "display_timing"))["display_timing"].spawn(
+        params.display_timing_draws)
+    out = np.empty((params.display_timing_draws, len(STUDY_ESTIMATORS), len(shifts)))
+    for j, k in enumerate(shifts):
+        for d, draw_rng in enumerate(draw_rngs):
+            timed = displayed_signal(position_irr, rate * k, params.display_shift_px or k,
+                                     _displayed_duration_s(params, k), timing, draw_rng, setup)
+            estimates = _study_estimates(timed, timing.sample_rate_hz, omega_d_px, v_min, v_max,
+                                         params.difference_order)
+            out[d, :, j] = np.abs(np.array(estimates) / (rate * k) - 1) * 100
+    return out
+
+
+def read_display_timing_study(path: str | Path, quick: bool = False) -> tuple[tuple[int, ...], dict[str, dict]]:
+    """The seeds and the labelled points of a display-timing study file, every point checked as ``[speed]``
+    fields (:class:`~mincam_sim.errors.ConfigError` naming the point and the field) before anything renders."""
+    document = read_toml_file(path, "study")
+    seeds, points = document.get("study", {}).get("seeds"), document.get("points")
+    if not (isinstance(seeds, list) and seeds and all(isinstance(s, int) for s in seeds)):
+        raise ConfigError(f"study file {path}: [study] seeds must be a list of integers, e.g. seeds = [0, 1, 2]")
+    if not isinstance(points, dict) or not points:
+        raise ConfigError(f"study file {path}: give one [points.<label>] table of [speed] fields per set-up")
+    names, base = {f.name for f in dataclasses.fields(SpeedParams)}, Speed().params(quick)
+    fields = {label: {k: tuple(v) if isinstance(v, list) else v for k, v in table.items()}
+              for label, table in points.items()}
+    for label, table in fields.items():
+        unknown = sorted(set(table) - names)
+        if unknown:
+            raise ConfigError(f"study file {path}: [points.{label}] has unknown [speed] fields {unknown}")
+        try:
+            dataclasses.replace(base, **table)
+        except ValueError as err:
+            raise ConfigError(f"study file {path}: [points.{label}]: {err}") from None
+    return tuple(seeds), fields
+
+
+def run_display_timing_study(path: str | Path, out_dir: str | Path, quick: bool = False) -> list[dict]:
+    """Run the study file ``path`` (``scenes/studies/speed/display_timing.toml``): ``[study] seeds`` and one
+    ``[points.<label>]`` table of ``[speed]`` fields per set-up; write ``speed_display_timing.json`` and
+    ``speed_display_timing.png`` into ``out_dir`` and return the rows (:func:`display_timing_study`, each with
+    its ``label``).
+
+    Not the study runner's file (``mincam-sim study run`` runs the whole experiment, vehicles included, per
+    point): this loop renders the road once per seed and mask period and looks every timing draw up from it.
+    """
+    seeds, fields = read_display_timing_study(path, quick)
+    rows = display_timing_study(list(fields.values()), seeds, quick)
+    rows = [{"label": label, **row} for label, row in zip(fields, rows, strict=True)]
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "speed_display_timing.json").write_text(json.dumps(rows, indent=1))
+    plot_display_timing_study(rows, out / "speed_display_timing.png")
+    return rows
+
+
+def plot_display_timing_study(rows: list[dict], path: Path) -> Path:
+    """Max and average speed error per set-up: the median over every seed's timing draws with its 16-84 %
+    range, each seed's median (one road texture each) as a dot, the paper's value and its factor-of-two band."""
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 0.45 * len(rows) + 1.6), sharey=True)
+    y = np.arange(len(rows))[::-1]
+    for ax, key, paper in ((axes[0], "max", SPEED_MAX_ERROR_PCT), (axes[1], "avg", SPEED_AVG_ERROR_PCT)):
+        ax.axvspan(paper / 2, paper * 2, color="tab:green", alpha=0.15, label="paper / 2 .. paper x 2")
+        ax.axvline(paper, color="tab:green", lw=1.5, label="paper (7.55 % max, 2.85 % avg)")
+        for yi, row in zip(y, rows, strict=True):
+            own = row["difference_in_band"]
+            low, high = own[f"{key}_error_pct_p16_p84"]
+            median = own[f"{key}_error_pct_median"]
+            ax.errorbar(median, yi, xerr=[[median - low], [high - median]], fmt="o", color="k", ms=5, capsize=3)
+            seeds = [s[f"{key}_error_pct_median"] for s in row["per_seed"]]
+            ax.plot(seeds, yi + 0.2 + 0 * np.asarray(seeds), ".", color="tab:blue", ms=5, alpha=0.7)
+        ax.set_xscale("log")
+        ax.set_xlabel(f"{key} speed error over the speeds [%]")
+        ax.grid(alpha=0.3, which="both", axis="x")
+    axes[0].set_yticks(y, [row["label"] for row in rows], fontsize=8)
+    axes[0].plot([], [], ".", color="tab:blue", label="median of one seed (road texture)")
+    axes[0].plot([], [], "o-", color="k", label="median of all draws, 16-84 %")
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.tight_layout(rect=(0, 0.06, 1, 1))
+    fig.legend(handles, labels, loc="lower center", ncol=4, fontsize=8, frameon=False)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
