@@ -234,12 +234,13 @@ class Simulation:
 
     def movable(self) -> list[str]:
         """Names of the user's shapes and lights that updates can move: shapes with a ``to_world`` or vertex
-        positions, point and spot lights (not the ground-truth camera, an environment or the mincam's bodies)."""
+        positions, point and spot lights (not the ground-truth camera, an environment, shapes a loaded scene gave
+        without an id, or the mincam's bodies)."""
         keys = set(self._params.keys())
         names = {key.split(".", 1)[0] for key in keys if key.endswith((".to_world", ".vertex_positions", ".position"))}
         directional = {e.id() for e in self.scene.emitters() if e.is_environment() or
                        int(e.flags()) & int(backend.mitsuba().EmitterFlags.Infinite)}
-        return sorted(names - directional - {CAMERA_KEY} - self._own)
+        return sorted(names - directional - {CAMERA_KEY} - self._own - self._loaded.static)
 
     def without(self, *names: str) -> dict:
         """Parameter updates that take the named shapes or lights out of the scene (a change's background):

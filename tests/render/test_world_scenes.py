@@ -211,6 +211,7 @@ def test_a_loaded_scene_is_a_world_and_shapes_without_an_id_are_static(tmp_path)
     scene = mi.load_file(str(_write(tmp_path, card_id=None, unit_m=1.0, sensor=False)), optimize=False)
     sim = ms.Simulation(CAM, world=scene)
     assert "card.to_world" not in sim.params and "scene_shape1.to_world" in sim.params
+    assert sim.movable() == ["lamp"] == ms.Simulation(CAM, world=scene).movable()  # static, also when reused
     assert sim.max_depth_source == "the integrator of the loaded scene 'scene'"
     p, s, _ = _measure(sim, seed=5)
     assert_close_mc(p, _oracle(0.0), s, what="a card without an id, static")

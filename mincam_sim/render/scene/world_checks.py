@@ -14,8 +14,9 @@ from mincam_sim.render import backend
 from mincam_sim.render.scene.world_input import WorldWarning
 
 INSIDE_FRACTION = 0.5  # a mixel whose view meets the back of one-sided faces in this share of directions is inside
-SCENE_TOO_LARGE = 1e4  # scene extent / rig size above this: a scene modelled in cm or mm, read as metres?
+SCENE_TOO_LARGE = 1e3  # scene extent / rig size above this: a scene modelled in cm or mm, read as metres?
 SCENE_TOO_SMALL = 1.0  # scene extent / rig size below this: the scene is smaller than the rig
+MIN_RIG_M = 0.01  # a mincam is taken as at least this size [m] (a single mixel's 2 mm mask sits in a device)
 
 
 def require_light(scene) -> None:
@@ -26,11 +27,12 @@ def require_light(scene) -> None:
 
 
 def rig_size_m(mincam: Mincam) -> float:
-    """The rig's size [m]: the spread of its mixels' positions, or its largest mask or detector."""
+    """The rig's size [m]: the spread of its mixels' positions, its largest mask or detector, or
+    :data:`MIN_RIG_M`, whichever is largest."""
     positions = np.array([m.pose.position_m for m in mincam])
     spread = float(np.linalg.norm(np.ptp(positions, axis=0)))
     parts = [max(m.mask.width_m, m.mask.height_m, m.detector_size_m) for m in mincam]
-    return max(spread, max(parts))
+    return max(spread, max(parts), MIN_RIG_M)
 
 
 def user_extent_m(scene, skip: set[str]) -> float | None:
@@ -45,16 +47,16 @@ def user_extent_m(scene, skip: set[str]) -> float | None:
 
 
 def warn_if_implausible_size(scene, mincam: Mincam, skip: set[str], unit_m: float) -> None:
-    """One :class:`WorldWarning` when the scene is more than :data:`SCENE_TOO_LARGE` times the rig's size (a file
-    modelled in cm or mm read as metres) or smaller than the rig."""
+    """One :class:`WorldWarning` when the scene is more than :data:`SCENE_TOO_LARGE` times the rig's size
+    (:func:`rig_size_m`; a file modelled in cm or mm read as metres) or smaller than the rig."""
     extent, rig = user_extent_m(scene, skip), rig_size_m(mincam)
     if extent is None or rig <= 0:
         return
     units = "metres" if unit_m == 1.0 else f"units of {unit_m:g} m"
     if extent > SCENE_TOO_LARGE * rig:
-        warnings.warn(f"the scene spans {extent:.4g} m, {extent / rig:.3g} times the mincam ({rig:.3g} m): read in "
-                      f"{units}; a file modelled in cm or mm needs unit_m = 0.01 or 0.001", WorldWarning,
-                      stacklevel=4)
+        warnings.warn(f"the scene spans {extent:.4g} m, {extent / rig:.3g} times the mincam ({rig:.3g} m), read in "
+                      f"{units}: a file modelled in cm or mm needs unit_m = 0.01 or 0.001 (a scene this large on "
+                      "purpose needs nothing)", WorldWarning, stacklevel=4)
     elif extent < SCENE_TOO_SMALL * rig:
         warnings.warn(f"the scene spans {extent:.4g} m, less than the mincam ({rig:.3g} m): read in {units}; check "
                       "unit_m (files are in metres unless unit_m says otherwise)", WorldWarning, stacklevel=4)

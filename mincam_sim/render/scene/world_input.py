@@ -7,6 +7,7 @@ of another mesh's size accepted, a negative radiance giving negative irradiance,
 
 from __future__ import annotations
 
+import re
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -32,6 +33,7 @@ class LoadedScenes:
     files: list = field(default_factory=list)  # SceneFile
     max_depth: tuple[int, str] | None = None
     ignored_sensors: list[str] = field(default_factory=list)
+    static: set[str] = field(default_factory=set)  # names given to shapes and lights without an id
 
     def note(self) -> None:
         """One :class:`WorldWarning` if a loaded scene brought sensors (the mincam is the world's sensor)."""
@@ -71,8 +73,10 @@ def expand_elements(elements) -> tuple[dict, LoadedScenes]:
         else:
             where = f"the integrator of the loaded scene {name!r}"
         if isinstance(value, mi.Scene):
-            for item_name, item in _scene_items(mi, value, name):
+            for item_name, item, named in _scene_items(mi, value, name):
                 add(item_name, item, f"from the loaded scene {name!r}")
+                if not named:
+                    loaded.static.add(item_name)
             depth = file_max_depth(value)
             if depth is not None and loaded.max_depth is None:
                 loaded.max_depth = (depth, where)
@@ -92,16 +96,18 @@ def expand_elements(elements) -> tuple[dict, LoadedScenes]:
     return out, loaded
 
 
-def _scene_items(mi, scene, element: str) -> list[tuple[str, object]]:
-    """(name, object) of a loaded scene's shapes and its emitters that are no shape's: by their id, those
-    without one (static geometry: nothing addresses them) as ``<element>_shape<i>`` / ``<element>_light<i>``."""
+def _scene_items(mi, scene, element: str) -> list[tuple[str, object, bool]]:
+    """(name, object, whether it has an id of its own) of a loaded scene's shapes and its emitters that are no
+    shape's: by their id, those without one (static geometry: nothing addresses them) as ``<element>_shape<i>``
+    / ``<element>_light<i>``."""
     shapes = list(scene.shapes())
     lights = [e for e in scene.emitters() if not int(e.flags()) & int(mi.EmitterFlags.Surface)]
     if not shapes and not lights:
         raise InputError("a loaded scene passed as an element holds no shapes and no emitters")
+    generated = re.compile(rf"{re.escape(element)}_(shape|light)\d+")  # named by an earlier load of this scene
     items = [(s.id() or f"{element}_shape{i}", s) for i, s in enumerate(shapes)]
     items += [(e.id() or f"{element}_light{i}", e) for i, e in enumerate(lights)]
-    return items
+    return [(name, item, bool(item.id()) and not generated.fullmatch(item.id())) for name, item in items]
 
 
 def check_radiant_params(params, keys: Sequence[str] | None = None) -> None:
