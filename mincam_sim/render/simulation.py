@@ -334,7 +334,8 @@ class Simulation:
     def identity(self) -> dict:
         """What determines this scene's numbers (JSON-able): the mincam and the screen (displays); the mincam,
         the scene's content as built and, for a world from a file, every file it names, recursively
-        (``<include>``d files, meshes and textures, also through ``$parameter`` defaults)."""
+        (``<include>``d files, meshes and textures, also through ``$parameter`` defaults or the ``parameters``
+        given), the parameters given and the unit (``unit_m``) when it is not the metre."""
         # the masks again by mixel, so that a refusal names the masks that changed rather than "the mincam"
         masks = {m.name: fingerprint(m.mask) for m in self.mincam}
         if self.kind == "display":
@@ -343,11 +344,12 @@ class Simulation:
         out = {"kind": "world", "mincam": fingerprint(self.mincam), "masks": masks, "scene": self._content_key}
         if self._loaded.files:
             top = self._loaded.files[0].path.resolve().parent
-            out["files"], out["parameters"] = {}, {}
+            out["files"] = {}
             for file in self._loaded.files:
                 digests = scene_file_digests(file.path, parameters=file.parameters)
                 out["files"].update({os.path.relpath(k, top): v for k, v in digests.items()})
-                out["parameters"].update(file.parameters)
+                if file.parameters:  # absent when none are set: the identity of a run without them is unchanged
+                    out.setdefault("parameters", {}).update(file.parameters)
                 if file.unit_m != 1.0:
                     out.setdefault("file_unit_m", {})[os.path.relpath(file.path.resolve(), top)] = file.unit_m
         if self.unit_m != 1.0:
