@@ -280,6 +280,36 @@ def _measure_after(sim: ms.Simulation, update: dict):
     return m.irradiance_w_m2[0, 0], m.stderr_w_m2[0, 0], m
 
 
+def _placed(x_m: float, y_m: float, z_m: float, size_m: float):
+    return sd._transform(np.array([[size_m, 0, 0, x_m], [0, size_m, 0, y_m], [0, 0, size_m, z_m], [0, 0, 0, 1.0]]))
+
+
+SHAPES = {"disk": {"type": "disk", "to_world": _placed(0.05, 0.0, 0.2, 0.04)},
+          "sphere": {"type": "sphere", "to_world": _placed(-0.05, 0.02, 0.15, 0.03)},
+          "cube": {"type": "cube", "to_world": _placed(0.0, -0.06, 0.1, 0.02)},
+          "spot": sd.spot_light(Pose((0.0, 0.1, 0.4), (0.0, 0.0, -1.0)).matrix(), 2.0, 25.0)}
+
+
+@pytest.mark.parametrize("kind", list(SHAPES))
+def test_taking_a_shape_or_light_out_equals_the_scene_without_it(kind):
+    """Disks, spheres and cubes shrink to a 1 um speck by their ``to_world`` (accepted: the transform is
+    invertible), a spot light's intensity goes to 0: P then equals P of the same scene built without it."""
+    grey = {"type": "diffuse", "reflectance": {"type": "spectrum", "value": 0.6}}
+    lamp = dict(sd.area_light(LAMP_M[0], LAMP_M[1], np.eye(4), RADIANCE), bsdf=grey)  # the spot lights it too
+    element = dict(SHAPES[kind], **({} if kind == "spot" else {"bsdf": grey}))
+    with_it = ms.Simulation(CAM, world={"lamp": lamp, kind: element})
+    without = ms.Simulation(CAM, world={"lamp": lamp})
+    assert with_it.movable() == sorted(["lamp", kind])
+    out = with_it.without(kind)
+    with_it.update(out)
+    a, sa, _ = _measure(with_it, spp=1 << 16, seed=8)
+    b, sb, _ = _measure(without, spp=1 << 16, seed=9)
+    assert_close_mc(a, b, np.hypot(sa, sb), what=f"{kind} taken out against the scene without it")
+    with_it.update({key: with_it.complete_background([out], {})[key] for key in out})  # back as built
+    c, sc, _ = _measure(with_it, spp=1 << 16, seed=8)
+    assert abs(c - a) > 5 * np.hypot(sa, sc), f"the {kind} changes the view as built"
+
+
 # ---------------------------------------------------------------------------------------- silent answers
 def test_a_world_without_light_is_refused_when_measured():
     """An empty world gave 0 +- 0 without a word (and crashed in Dr.Jit for changes)."""
