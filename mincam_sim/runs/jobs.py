@@ -21,6 +21,7 @@ camera ``camera.npz`` (every frame's image and the background's) plus the change
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -265,7 +266,21 @@ def _ground_truth(sim: Simulation, camera: CameraSpec, frames, background, out: 
         cols.append(c.mean() if c.size else np.nan)
     sim.update(background)
     atomic_save_npz(out / "camera.npz", background=bg, frames=np.array(images))
-    return np.array(rows), np.array(cols)
+    rows, cols = np.array(rows), np.array(cols)
+    _warn_undefined_centroids(images, bg, rows, camera.threshold)
+    return rows, cols
+
+
+def _warn_undefined_centroids(images: list, bg: np.ndarray, rows: np.ndarray, threshold: float) -> None:
+    """One warning when frames that change the image have no pixel above the threshold (their centroid NaN):
+    the background's brightest pixel, often a light in view, sets the threshold."""
+    changed = np.array([float(np.abs(image - bg).max()) > 0 for image in images], dtype=bool)
+    undefined = np.isnan(rows) & changed
+    if undefined.any():
+        warnings.warn(f"the camera's change centroid is undefined (NaN) in {int(undefined.sum())} of {len(rows)} "
+                      f"frames that change the image: no pixel changed by more than threshold {threshold:g} x the "
+                      f"background's brightest pixel ({float(bg.max()):.4g} W m^-2 sr^-1, a light in view?); lower "
+                      "[world.camera] threshold", UserWarning, stacklevel=3)
 
 
 def plot_changes(ch: Changes, path: Path) -> Path:

@@ -403,3 +403,19 @@ offsets_m = [[0.0, 0.0, 0.0], [0.0, 0.01, 0.0]]
     with pytest.raises(ConfigError, match="'sky' is not a shape or light of the scene that can move; movable: "
                                           "bulb, card, dim, lamp$"):
         run_world_config(load_world_config(tmp_path / "c.toml"), overwrite=True)
+
+
+def test_an_undefined_change_centroid_is_said():
+    """A lamp in the camera's view sets the threshold of the change; a dim change then has no pixel above it and
+    its centroid is NaN: one warning says why and what to lower (it was NaN without a word)."""
+    from mincam_sim.runs.jobs import _warn_undefined_centroids
+
+    bg = np.zeros((4, 6))
+    bg[0, 0] = 100.0  # the lamp
+    dim, unchanged = bg.copy(), bg.copy()
+    dim[2, 3] += 1.0  # below 0.05 x 100
+    with pytest.warns(UserWarning, match=r"undefined \(NaN\) in 1 of 2 frames .*\(100 W m\^-2 sr\^-1, a light in view"):
+        _warn_undefined_centroids([dim, unchanged], bg, np.array([np.nan, np.nan]), 0.05)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _warn_undefined_centroids([dim], bg, np.array([2.0]), 0.05)
