@@ -77,9 +77,10 @@ def _parameters(section: str, key: str, value: Any) -> dict[str, str]:
     for name, v in value.items():
         if isinstance(v, bool):
             v = "true" if v else "false"
-        elif isinstance(v, (int, float)):
+        elif isinstance(v, (int, float)) and np.isfinite(v):
             v = repr(v)
-        elif isinstance(v, list) and v and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+        elif isinstance(v, list) and v and all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                               and np.isfinite(x) for x in v):
             v = ", ".join(repr(x) for x in v)
         if not isinstance(v, str):
             raise ConfigError(f"[{section}.{key}] {name} = {describe(v)}: give the value as the XML writes it (a "

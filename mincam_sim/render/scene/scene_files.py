@@ -9,6 +9,7 @@ back (:func:`file_max_depth`); its sensors are the mincam's business. Meshes in 
 
 from __future__ import annotations
 
+import numbers
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -68,13 +69,12 @@ def check_parameters(parameters) -> dict[str, str]:
         if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z_]\w*", name):
             raise InputError(f"parameters: {name!r} is not a parameter name (letters, digits, '_'; the name of a "
                              "<default> without '$')")
-        if isinstance(value, bool):
+        if isinstance(value, (bool, np.bool_)):
             value = "true" if value else "false"
-        elif isinstance(value, (int, float)) and np.isfinite(value):
-            value = repr(value)
-        elif isinstance(value, (list, tuple)) and value and all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in value):
-            value = ", ".join(repr(v) for v in value)
+        elif _finite_number(value):
+            value = repr(value.item() if isinstance(value, np.generic) else value)
+        elif isinstance(value, (list, tuple, np.ndarray)) and len(value) and all(_finite_number(v) for v in value):
+            value = ", ".join(repr(v.item() if isinstance(v, np.generic) else v) for v in value)
         elif isinstance(value, Path):
             value = str(value)
         if not isinstance(value, str):
@@ -82,6 +82,11 @@ def check_parameters(parameters) -> dict[str, str]:
                              "such as '0, 0, 0', a finite number, a boolean or a list of numbers)")
         out[name] = value
     return out
+
+
+def _finite_number(value) -> bool:
+    return (isinstance(value, (numbers.Real, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+            and bool(np.isfinite(value)))
 
 
 def declared_parameters(path: Path) -> set[str]:
