@@ -61,6 +61,34 @@ def _world_variant(section: str, key: str, value: Any) -> str:
     return value
 
 
+def _depth(section: str, key: str, value: Any) -> int:
+    depth = Integer(minimum=0, maximum=16)(section, key, value)
+    if depth == 1:
+        raise ConfigError(f"[{section}] {key} = 1 sees nothing through a mask (a path needs 2 segments: mask -> "
+                          "light); give 2 or more, or 0 for the scene file's own")
+    return depth
+
+
+def _parameters(section: str, key: str, value: Any) -> dict[str, str]:
+    if not isinstance(value, dict):
+        raise ConfigError(f"[{section}] {key} must be a table name = value (the scene file's <default> names), got "
+                          f"{describe(value)}")
+    out = {}
+    for name, v in value.items():
+        if isinstance(v, bool):
+            v = "true" if v else "false"
+        elif isinstance(v, (int, float)) and np.isfinite(v):
+            v = repr(v)
+        elif isinstance(v, list) and v and all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                               and np.isfinite(x) for x in v):
+            v = ", ".join(repr(x) for x in v)
+        if not isinstance(v, str):
+            raise ConfigError(f"[{section}.{key}] {name} = {describe(v)}: give the value as the XML writes it (a "
+                              "string such as \"0, 0, 0\", a number, a boolean or a list of numbers)")
+        out[str(name)] = v
+    return out
+
+
 def _rows_check(width: int):
     def check(section: str, key: str, value: Any) -> np.ndarray:
         return _rows(section, key, value, width)
@@ -109,8 +137,8 @@ class WorldRunSection:
     replicates: int = setting(8, "independent estimates per value, for the standard error",
                               Integer(minimum=2, maximum=4096))
     seed: int = setting(0, "same seed, same numbers", Integer(minimum=0))
-    max_depth: int = setting(3, "path length from the mask: 2 = direct light, 3 = one inter-reflection",
-                             Integer(minimum=2, maximum=16))
+    max_depth: int = setting(0, "path length from the mask: 2 = direct light, 3 = one inter-reflection; 0 = the "
+                             "scene file's <integrator> max_depth, else 3", _depth)
     variant: str = setting("", '"" = automatic (cuda_ad_mono > llvm_ad_mono)', _world_variant)
     out_dir: str = setting("out/world", "measurements.npz / .csv and a plot of dP; relative to this file", Text())
 
@@ -138,6 +166,10 @@ class WorldSection:
                                    Number(positive=True))
     background: str = setting("without_movers", '"without_movers" (movers removed), "as_built", or "first_frame"',
                               Choice(BACKGROUNDS))
+    unit_m: float = setting(1.0, "the length of the scene file's unit in metres (0.01: modelled in cm; the mincam, "
+                            "movers and lights here stay in metres)", Number(positive=True))
+    parameters: Any = setting(None, "the scene file's <default> values, name = value as the XML writes them (or a "
+                              "[world.parameters] table)", _parameters, example={"lamp": "0, 0, 0"})
 
 
 @dataclass(frozen=True)
@@ -283,7 +315,7 @@ class WorldRunConfig:
 
     solver: Solver
     budget: Budget
-    max_depth: int
+    max_depth: int | None  # None: the scene file's <integrator>, else 3
     variant: str | None
     out_dir: Path
 
@@ -305,6 +337,8 @@ class WorldConfig:
     camera: CameraSpec | None
     source: Path | None = None
     files: list[Path] = field(default_factory=list)  # every file the numbers depend on (XML, meshes, CSVs)
+    parameters: dict[str, str] = field(default_factory=dict)  # the scene file's <default> values
+    unit_m: float = 1.0  # the scene file's unit [m]
 
     @property
     def n_frames(self) -> int:
@@ -331,7 +365,7 @@ def load_world_config(source: str | Path | dict, base_dir: str | Path | None = N
     run: WorldRunSection = WORLD_SCHEMA.read("run", tables["run"])
     solver = make_solver(run.solver)
     budget = make_budget(solver, run.spp, None, run.target_rel_stderr, run.replicates, run.seed)
-    run_cfg = WorldRunConfig(solver, budget, run.max_depth, run.variant or None,
+    run_cfg = WorldRunConfig(solver, budget, run.max_depth or None, run.variant or None,
                              _path("run", "out_dir", run.out_dir, base))
     mincam = _world_mincam(WORLD_SCHEMA.read("mincam", tables["mincam"]), tables["mixel"], base)
     w: WorldSection = WORLD_SCHEMA.read("world", tables["world"])
@@ -348,6 +382,9 @@ def load_world_config(source: str | Path | dict, base_dir: str | Path | None = N
     lights = [_light(i, t) for i, t in enumerate(tables["world.light"])]
     if scene_file is None and not objects:
         raise ConfigError("[world] needs a scene = \"file.xml\" or at least one [[world.object]]")
+    if scene_file is None and (w.parameters or w.unit_m != 1.0):
+        raise ConfigError("[world] parameters and unit_m apply to a scene file: give [world] scene = \"file.xml\" "
+                          "or remove them")
     ids = [o.id for o in objects] + [light.id for light in lights]
     dupes = sorted({i for i in ids if ids.count(i) > 1})
     if dupes:
@@ -363,7 +400,7 @@ def load_world_config(source: str | Path | dict, base_dir: str | Path | None = N
         raise ConfigError(f"[[world.mover]] ids {names}: each shape can move in one mover table only")
     camera = _camera(tables["world.camera"]) if "camera" in (raw.get("world") or {}) else None
     return WorldConfig(run_cfg, mincam, scene_file, w.up, w.frame_rate_hz, w.background, objects, lights, movers,
-                       camera, path, files)
+                       camera, path, files, w.parameters or {}, w.unit_m)
 
 
 def referenced_files(xml_path: Path) -> list[Path]:

@@ -49,6 +49,14 @@ from mincam_sim.render.kernels.map_tracing import FRAME_CHUNK_BYTES, check_radia
 from mincam_sim.render.kernels.stratified import buffers_key
 from mincam_sim.render.scene.mincam_scene import CAMERA_KEY, SENSOR_KEY, MincamScene
 from mincam_sim.render.scene.scene_dicts import mincam_body_shapes
+from mincam_sim.render.scene.scene_files import SceneFile, check_parameters, in_metres
+from mincam_sim.render.scene.updates import removal_updates
+from mincam_sim.render.scene.world_checks import (
+    check_unit,
+    require_light,
+    warn_if_implausible_size,
+    warn_if_inside,
+)
 from mincam_sim.render.scene.world_input import check_radiant_params, check_update, expand_elements
 from mincam_sim.render.solvers import Aperture, ResponseMap, Solver, StratifiedChange
 from mincam_sim.scene.display import FrameSource, Screen, as_frame_source
@@ -56,6 +64,8 @@ from mincam_sim.storage.identity import display_frames_identity, fingerprint, sc
 
 Updates = Mapping[str, np.ndarray]
 DEFAULT_SOLVERS = {"display": ResponseMap, "world": Aperture}  # Simulation.measure's solver by scene kind
+DEFAULT_MAX_DEPTH = 3  # world scenes without a given depth or a file's integrator: one inter-reflection
+MAX_FILE_DEPTH = 16  # a file's unbounded (-1) or longer max_depth is taken as this
 
 
 class Simulation:
@@ -68,42 +78,69 @@ class Simulation:
     screen : Screen, optional
         An emissive display in a dark room (frames are its radiance images).
     world : dict, mitsuba.Scene, or path, optional
-        A world: elements ``name -> Mitsuba dict or object`` (in metres), a loaded ``mi.Scene`` (its shapes and
-        emitters), or a Mitsuba 3 XML scene file (loaded with every shape kept as built, addressed by its id).
-    max_depth : int
-        World scenes: longest path, in segments from the mask (2 = direct light only; 3 adds one bounce).
+        A world: elements ``name -> Mitsuba dict or object`` (a loaded ``mi.Scene`` or a
+        :class:`~mincam_sim.render.scene.scene_files.SceneFile` among them contributes its shapes and lights), a
+        loaded ``mi.Scene``, or a Mitsuba 3 XML scene file (loaded with every shape kept as built, addressed by its
+        id; shapes without an id are static geometry). Lengths in metres, or in units of ``unit_m``.
+    max_depth : int, optional
+        World scenes: longest path, in segments from the mask (2 = direct light only; 3 adds one bounce). Default:
+        the scene file's ``<integrator>`` ``max_depth`` if it has one, else 3 (:attr:`max_depth_source` says
+        which).
     camera : dict, optional
         World scenes: a ground-truth pinhole camera (``mincam_sim.render.scene.scene_dicts.pinhole_camera``).
+    parameters : dict, optional
+        A scene file's ``<default>`` values, ``name -> value`` as the XML writes them (``{"lamp": "0, 0, 0"}``),
+        set through Mitsuba's loader; part of :meth:`identity`.
+    unit_m : float
+        World scenes: the length of one scene unit in metres (0.01 for a scene modelled in cm); the mincam, the
+        camera, :attr:`params` and updates stay in metres.
     """
 
-    def __init__(self, mincam: Mincam, *, screen: Screen | None = None, world=None, max_depth: int = 3,
-                 camera: dict | None = None) -> None:
+    def __init__(self, mincam: Mincam, *, screen: Screen | None = None, world=None, max_depth: int | None = None,
+                 camera: dict | None = None, parameters: Mapping[str, object] | None = None,
+                 unit_m: float = 1.0) -> None:
         if not isinstance(mincam, Mincam):
             raise InputError(f"mincam must be a Mincam (e.g. mincam_sim.cross_layout()), got {type(mincam).__name__}")
         if (screen is None) == (world is None):
             raise InputError("a Simulation holds either screen=Screen(...) or world=..., exactly one of them")
         if screen is not None and not isinstance(screen, Screen):
             raise InputError(f"screen must be a mincam_sim.Screen, got {type(screen).__name__}")
+        if screen is not None and (parameters or unit_m != 1.0):
+            raise InputError("parameters and unit_m belong to world scenes (a scene file); a display has neither")
         self.mincam, self.screen = mincam, screen
         self.kind = "display" if screen is not None else "world"
         self.source: Path | None = None
         self._display_scene: MincamScene | None = None
         if world is not None:
-            if isinstance(world, (str, PathLike)):
-                from mincam_sim.render.scene.scene_files import load_scene_file
+            self.unit_m = check_unit(unit_m)
+            self._build_world(self._world_elements(world, parameters), max_depth, camera)
 
-                self.source = Path(world)
-                world = {"scene": load_scene_file(self.source)}
-            self._build_world(world, max_depth, camera)
+    def _world_elements(self, world, parameters) -> dict:
+        """``world`` as elements: a file path becomes a :class:`SceneFile` (with ``parameters``), a loaded scene
+        one element."""
+        if isinstance(world, (str, PathLike)):
+            self.source = Path(world)
+            return {"scene": SceneFile(self.source, check_parameters(parameters))}
+        if parameters:
+            raise InputError("parameters set a scene file's <default> values: give world='scene.xml' (or a SceneFile "
+                             "element) with them")
+        if isinstance(world, Mapping):
+            return dict(world)
+        if isinstance(world, backend.mitsuba().Scene):
+            return {"scene": world}
+        raise InputError(f"world must be a dict of elements, a loaded mitsuba Scene or the path of a Mitsuba XML "
+                         f"scene file, got {type(world).__name__}")
 
     # ------------------------------------------------------------------------------------------ world state
-    def _build_world(self, elements, max_depth: int, camera: dict | None) -> None:
+    def _build_world(self, elements, max_depth: int | None, camera: dict | None) -> None:
         backend.require_jit("The fast mixel sensor (a Python Mitsuba plugin)")
         # replay the stratified launches (dr.freeze) instead of tracing them per frame: on LLVM, where the moving
         # meshes' vertices are written in place and their buffers' addresses key the recordings
         self.freeze_launches = backend.variant().startswith("llvm")
         self.pair_lanes = True  # background pass: trace again only the lanes whose frame paths met a moving shape
-        elements = expand_elements(elements)
+        elements, self._loaded = expand_elements(elements)
+        self._loaded.note()
+        max_depth, self.max_depth_source = _resolved_depth(max_depth, self._loaded.max_depth)
         self.scene_origin_m = self.mincam.centre_m
         self.scene_mincam = self.mincam.translated(-self.scene_origin_m)
         try:
@@ -120,7 +157,14 @@ class Simulation:
         scene_params = self.mincam_scene.params
         check_radiant_params(scene_params)
         self._shifted = _shifted_keys(self.scene, scene_params, self._own)
-        self.mincam_scene.update({key: _shift(key, scene_params[key], -self.scene_origin_m) for key in self._shifted})
+        shape_ids = {s.id() for s in self.scene.shapes()}
+        # file units -> metres once (not the camera, given in metres), then the scene is built around the mincam
+        self.mincam_scene.update({key: _shift(key, scene_params[key] if key.startswith(CAMERA_KEY) else in_metres(
+            key, scene_params[key], self.unit_m, shape_ids), -self.scene_origin_m)
+            for key in self._shifted})
+        skip = self._own | {CAMERA_KEY}
+        warn_if_implausible_size(self.scene, self.scene_mincam, skip, self.unit_m)
+        warn_if_inside(self.scene, self.scene_mincam, skip)
         self._params = WorldParameters(self)
         self._mirrors = delta_surfaces(self.scene)
         self._content_key: str | None = None
@@ -187,6 +231,35 @@ class Simulation:
     def _remember_as_built(self, key: str) -> None:
         if key not in self._as_built and key in self._params:
             self._as_built[key] = self._params[key]
+
+    def movable(self) -> list[str]:
+        """Names of the user's shapes and lights that updates can move: shapes with a ``to_world`` or vertex
+        positions, point and spot lights (not the ground-truth camera, an environment, shapes a loaded scene gave
+        without an id, or the mincam's bodies)."""
+        keys = set(self._params.keys())
+        names = {key.split(".", 1)[0] for key in keys if key.endswith((".to_world", ".vertex_positions", ".position"))}
+        directional = {e.id() for e in self.scene.emitters() if e.is_environment() or
+                       int(e.flags()) & int(backend.mitsuba().EmitterFlags.Infinite)}
+        return sorted(names - directional - {CAMERA_KEY} - self._own - self._loaded.static)
+
+    def without(self, *names: str) -> dict:
+        """Parameter updates that take the named shapes or lights out of the scene (a change's background):
+        a mesh's vertices all at its centre (no area left), a shape with a ``to_world`` shrunk about its centre
+        to a speck of 1 um, with its emission set to 0 if it emits, a point or spot light's intensity set to 0.
+
+        Raises
+        ------
+        InputError
+            A name that is not a movable shape or light (the message lists those that are).
+        """
+        self._require_world("parameters and updates")
+        movable, out = self.movable(), {}
+        for name in names:
+            if name not in movable:
+                raise InputError(f"{name!r} is not a shape or light of the scene that can move; movable: "
+                                 f"{', '.join(movable) or 'none'}")
+            out.update(removal_updates(self._params, name, name in self.shapes_by_id))
+        return out
 
     @functools.cached_property
     def shapes_by_id(self) -> dict:
@@ -261,17 +334,34 @@ class Simulation:
     def identity(self) -> dict:
         """What determines this scene's numbers (JSON-able): the mincam and the screen (displays); the mincam,
         the scene's content as built and, for a world from a file, every file it names, recursively
-        (``<include>``d files, meshes and textures, also through ``$parameter`` defaults)."""
+        (``<include>``d files, meshes and textures, also through ``$parameter`` defaults or the ``parameters``
+        given), the parameters given and the unit (``unit_m``) when it is not the metre."""
         # the masks again by mixel, so that a refusal names the masks that changed rather than "the mincam"
         masks = {m.name: fingerprint(m.mask) for m in self.mincam}
         if self.kind == "display":
             return {"kind": "display", "mincam": fingerprint(self.mincam), "masks": masks,
                     "screen": fingerprint(self.screen)}
         out = {"kind": "world", "mincam": fingerprint(self.mincam), "masks": masks, "scene": self._content_key}
-        if self.source is not None:
-            top = self.source.resolve().parent
-            out["files"] = {os.path.relpath(k, top): v for k, v in scene_file_digests(self.source).items()}
+        if self._loaded.files:
+            top = self._loaded.files[0].path.resolve().parent
+            out["files"] = {}
+            for file in self._loaded.files:
+                digests = scene_file_digests(file.path, parameters=file.parameters)
+                out["files"].update({os.path.relpath(k, top): v for k, v in digests.items()})
+                if file.parameters:  # absent when none are set: the identity of a run without them is unchanged
+                    out.setdefault("parameters", {}).update(file.parameters)
+                if file.unit_m != 1.0:
+                    out.setdefault("file_unit_m", {})[os.path.relpath(file.path.resolve(), top)] = file.unit_m
+        if self.unit_m != 1.0:
+            out["unit_m"] = self.unit_m
         return out
+
+    def world_meta(self) -> dict:
+        """What a world result's meta records of the scene's own settings: the path depth and where it came
+        from, the unit."""
+        self._require_world("scene settings")
+        return {"max_depth": self.mincam_scene.max_depth, "max_depth_from": self.max_depth_source,
+                "unit_m": self.unit_m}
 
     def content_fingerprint(self) -> str:
         """Content key of the scene (world: every traversed parameter as built; display: the screen)."""
@@ -320,6 +410,8 @@ class Simulation:
 
     def _solve(self, solver: Solver, frames, budget: Budget, background, sink: FrameSink | None,
                show_progress: bool):
+        if self.kind == "world":
+            require_light(self.scene)
         sink = MemorySink() if sink is None else sink
         plan = solver.plan(self, frames, budget, background=background, cache=sink.cache,
                            show_progress=show_progress)
@@ -426,6 +518,21 @@ class WorldParameters(Mapping):
     def __len__(self) -> int:
         return sum(1 for _ in self)
 
+
+
+def _resolved_depth(given: int | None, from_file: tuple[int, str] | None) -> tuple[int, str]:
+    """(max_depth, where it came from): the caller's, else the loaded scene's integrator's, else 3."""
+    if given is not None:
+        return given, "given"
+    if from_file is None:
+        return DEFAULT_MAX_DEPTH, "default (no max_depth given and no integrator in the scene)"
+    depth, where = from_file
+    if depth < 0 or depth > MAX_FILE_DEPTH:
+        return MAX_FILE_DEPTH, f"{where} (max_depth {depth}, taken as {MAX_FILE_DEPTH}: pass max_depth to choose)"
+    if depth < 2:
+        raise InputError(f"{where} has max_depth {depth}: the mincam's paths need at least 2 segments (mask -> "
+                         "emitter); pass max_depth=2 or more, or fix the file")
+    return depth, where
 
 
 def _param_array(value) -> np.ndarray:

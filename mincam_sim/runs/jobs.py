@@ -21,6 +21,7 @@ camera ``camera.npz`` (every frame's image and the background's) plus the change
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -36,7 +37,7 @@ from mincam_sim.errors import ConfigError
 from mincam_sim.measurements import Measurements
 from mincam_sim.render import backend
 from mincam_sim.render.scene import scene_dicts as sd
-from mincam_sim.render.scene.scene_files import Y_UP_TO_Z_UP, load_scene_file, read_mesh, turn_scene
+from mincam_sim.render.scene.scene_files import SceneFile, read_mesh
 from mincam_sim.render.simulation import Simulation
 from mincam_sim.render.solvers import Aperture, PlainChange, Reference, ResponseMap, Solver, StratifiedChange
 from mincam_sim.runs.run import Run
@@ -165,13 +166,11 @@ def rotation_deg(angles_deg) -> np.ndarray:
 
 
 def build_elements(cfg: WorldConfig) -> dict:
-    """The world's elements: the XML scene (turned z-up if authored y-up) and the config's objects and lights."""
+    """The world's elements: the XML scene with its parameters (turned z-up if authored y-up) and the config's
+    objects and lights."""
     elements: dict = {}
     if cfg.scene_file is not None:
-        scene = load_scene_file(cfg.scene_file)
-        if cfg.up == "y":
-            turn_scene(scene, Y_UP_TO_Z_UP)
-        elements["scene"] = scene
+        elements["scene"] = SceneFile(cfg.scene_file, cfg.parameters, cfg.up, cfg.unit_m)  # in metres once loaded
     for obj in cfg.objects:
         vertices, faces = read_mesh(obj.mesh)
         placed = (vertices * obj.scale) @ rotation_deg(obj.rotation_deg).T + np.asarray(obj.position_m)
@@ -198,42 +197,48 @@ def _light_dict(light) -> dict:
 
 def mover_updates(sim: Simulation, cfg: WorldConfig) -> tuple[list[dict], dict, dict[str, np.ndarray]]:
     """(frames, background, centres): each frame's parameter updates (world coordinates), the background's,
-    and each mover's centre per frame [m] (its as-built bounding-box centre moved with it)."""
+    and each mover's centre per frame [m] (its as-built bounding-box centre moved with it). A mover is a mesh
+    (its vertices), a shape or spot light with a ``to_world``, or a point light (its position); the background
+    without movers takes them out (:meth:`Simulation.without`)."""
     params = sim.params
+    movable = sim.movable()
     n = cfg.n_frames
     frames: list[dict] = [{} for _ in range(n)]
-    background: dict = {}
     centres: dict[str, np.ndarray] = {}
     for mover in cfg.movers:
-        vkey, tkey = f"{mover.id}.vertex_positions", f"{mover.id}.to_world"
+        if mover.id not in movable:
+            raise ConfigError(f"[[world.mover]] id {mover.id!r} is not a shape or light of the scene that can move; "
+                              f"movable: {', '.join(movable) or 'none'}")
+        rotations = [np.eye(3) if mover.rotations_deg is None else rotation_deg(mover.rotations_deg[i])
+                     for i in range(n)]
+        vkey, tkey, pkey = (f"{mover.id}.{part}" for part in ("vertex_positions", "to_world", "position"))
         if vkey in params:
             v0 = params[vkey].reshape(-1, 3)
             centre = 0.5 * (v0.min(axis=0) + v0.max(axis=0))
             for i in range(n):
-                rot = np.eye(3) if mover.rotations_deg is None else rotation_deg(mover.rotations_deg[i])
-                frames[i][vkey] = ((v0 - centre) @ rot.T + centre + mover.offsets_m[i]).ravel()
-            if cfg.background == "without_movers":  # every vertex at one point: no area, nothing to hit
-                background[vkey] = np.repeat(centre[None], len(v0), axis=0).ravel()
+                frames[i][vkey] = ((v0 - centre) @ rotations[i].T + centre + mover.offsets_m[i]).ravel()
         elif tkey in params:
             m0 = params[tkey]
             centre = m0[:3, 3].copy()
             for i in range(n):
-                rot = np.eye(3) if mover.rotations_deg is None else rotation_deg(mover.rotations_deg[i])
                 m = m0.copy()
-                m[:3, :3] = rot @ m0[:3, :3]
+                m[:3, :3] = rotations[i] @ m0[:3, :3]
                 m[:3, 3] = centre + mover.offsets_m[i]
                 frames[i][tkey] = m
-            if cfg.background == "without_movers":  # shrunk to a micrometre speck where it stands
-                m = m0.copy()
-                m[:3, :3] *= 1e-6 / max(float(np.abs(m0[:3, :3]).max()), 1e-300)
-                background[tkey] = m
-        else:
-            known = sorted({k.split(".", 1)[0] for k in params})
-            raise ConfigError(f"[[world.mover]] id {mover.id!r} is not a shape of the scene; shapes: "
-                              f"{', '.join(known)}")
+        else:  # a point light: its position (a rotation turns nothing)
+            centre = np.asarray(params[pkey], dtype=np.float64).ravel()[:3]
+            for i in range(n):
+                frames[i][pkey] = centre + mover.offsets_m[i]
         centres[mover.id] = centre + mover.offsets_m
     if cfg.background == "first_frame":
         background = dict(frames[0])
+    elif cfg.background == "without_movers":
+        background = sim.without(*(mover.id for mover in cfg.movers))
+        for key in background:  # a light the background switches off shines in every frame as built
+            for frame in frames:
+                frame.setdefault(key, params[key])
+    else:
+        background = {}
     return frames, background, centres
 
 
@@ -261,7 +266,21 @@ def _ground_truth(sim: Simulation, camera: CameraSpec, frames, background, out: 
         cols.append(c.mean() if c.size else np.nan)
     sim.update(background)
     atomic_save_npz(out / "camera.npz", background=bg, frames=np.array(images))
-    return np.array(rows), np.array(cols)
+    rows, cols = np.array(rows), np.array(cols)
+    _warn_undefined_centroids(images, bg, rows, camera.threshold)
+    return rows, cols
+
+
+def _warn_undefined_centroids(images: list, bg: np.ndarray, rows: np.ndarray, threshold: float) -> None:
+    """One warning when frames that change the image have no pixel above the threshold (their centroid NaN):
+    the background's brightest pixel, often a light in view, sets the threshold."""
+    changed = np.array([float(np.abs(image - bg).max()) > 0 for image in images], dtype=bool)
+    undefined = np.isnan(rows) & changed
+    if undefined.any():
+        warnings.warn(f"the camera's change centroid is undefined (NaN) in {int(undefined.sum())} of {len(rows)} "
+                      f"frames that change the image: no pixel changed by more than threshold {threshold:g} x the "
+                      f"background's brightest pixel ({float(bg.max()):.4g} W m^-2 sr^-1, a light in view?); lower "
+                      "[world.camera] threshold", UserWarning, stacklevel=3)
 
 
 def plot_changes(ch: Changes, path: Path) -> Path:
@@ -309,7 +328,7 @@ def estimate_seconds(cfg: RenderConfig | WorldConfig, variant: str | None = None
     n_mixels = len(cfg.mincam)
     if isinstance(cfg, WorldConfig):
         n_frames, traced = cfg.n_frames, budget.rays()
-        depth = cfg.run.max_depth / 3.0  # segments per path, relative to the measured max_depth 3
+        depth = (cfg.run.max_depth or 3) / 3.0  # segments per path, relative to the measured max_depth 3
         samples = float(n_frames) * traced * n_mixels * depth
         what = f"{n_frames} frames x {traced} rays x {n_mixels} mixels"
         seconds = samples / SAMPLES_PER_S[type(solver)]
@@ -437,7 +456,8 @@ def world_summary(cfg: WorldConfig, variant: str | None) -> list[str]:
     for mover in cfg.movers:
         span = np.ptp(mover.offsets_m, axis=0)
         lines.append(f"mover {mover.id}: {len(mover.offsets_m)} frames, travel {np.round(span, 4).tolist()} m")
-    lines.append(f"solver: {solver_name(cfg.run.solver)}, {_budget_text(cfg)}, max_depth {cfg.run.max_depth}, "
+    depth = cfg.run.max_depth or "from the scene file's <integrator>, else 3"
+    lines.append(f"solver: {solver_name(cfg.run.solver)}, {_budget_text(cfg)}, max_depth {depth}, "
                  f"background {cfg.background}, variant {variant or 'automatic'}")
     lines.append(_estimate_line(cfg, variant))
     lines.append(f"out dir: {cfg.run.out_dir}")

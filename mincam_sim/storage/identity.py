@@ -454,11 +454,13 @@ def display_frames_identity(frames, chunk_frames: int, check=None) -> dict:
 _XML_FILE_ATTRIBUTES = ("filename", "value")
 
 
-def scene_file_digests(path, _seen: dict | None = None) -> dict[str, str]:
+def scene_file_digests(path, _seen: dict | None = None, parameters: Mapping[str, str] | None = None
+                       ) -> dict[str, str]:
     """sha256 of a Mitsuba XML scene file and of every file it names, recursively: ``<include>``d scene files,
     and meshes, textures and other files named by a ``filename`` or ``value`` attribute, also through a
-    ``$parameter`` whose ``<default>`` names a file. Paths are resolved as Mitsuba does, from the naming file's
-    folder. A file that does not exist is recorded as ``"missing"``."""
+    ``$parameter`` whose ``<default>`` (or the loader's ``parameters``, which override the defaults) names a file.
+    Paths are resolved as Mitsuba does, from the naming file's folder. A file that does not exist is recorded as
+    ``"missing"``."""
     import re
     import xml.etree.ElementTree as ET
     from pathlib import Path
@@ -480,6 +482,7 @@ def scene_file_digests(path, _seen: dict | None = None) -> dict[str, str]:
     except ET.ParseError:
         return seen
     defaults = {e.get("name"): e.get("value") for e in root.iter("default") if e.get("name")}
+    defaults.update(parameters or {})
 
     def resolve(text: str) -> str:
         return re.sub(r"\$(\w+)", lambda m: defaults.get(m.group(1), m.group(0)), text)
@@ -495,7 +498,7 @@ def scene_file_digests(path, _seen: dict | None = None) -> dict[str, str]:
             candidate = Path(named) if Path(named).is_absolute() else path.parent / named
             names_a_file = element.tag == "include" or attribute == "filename" or element.get("name") == "filename"
             if names_a_file or candidate.is_file():
-                scene_file_digests(candidate, seen)
+                scene_file_digests(candidate, seen, parameters)
     return seen
 
 

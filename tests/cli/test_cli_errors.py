@@ -339,6 +339,40 @@ CASES: list[Case] = [
          outputs=("m.png",)),
     Case("masks_export_srgb_exr", ["masks", "export", "file:m.exr", "--out", "m.png", "--srgb"],
          {"m.exr": lambda p: _exr_mask(p, 0.002)}, keywords=("sRGB",)),
+    # worlds: a lamp and a card in cm (s.xml), its parameters, units and movers
+    Case("world_parameter_unknown", R, {
+        "s.xml": (_CARD_XML := '<scene version="3.0.0"><default name="lamp" value="3"/><shape type="rectangle" '
+                  'id="lamp"><transform name="to_world"><scale x="55" y="31"/></transform><emitter type="area">'
+                  '<spectrum name="radiance" value="$lamp"/></emitter></shape><shape type="rectangle" id="card">'
+                  '<transform name="to_world"><scale x="5" y="2.5"/><rotate x="1" angle="180"/><translate z="25"/>'
+                  '</transform></shape></scene>'),
+        "c.toml": (_CARD_TOML := '[run]\nspp = 1024\nreplicates = 4\nout_dir = "out"\n[mincam]\n'
+                   'position_m = [0.0, 0.0, 0.5]\n[world]\nscene = "s.xml"\nunit_m = 0.01\n')
+        + '[world.parameters]\nlmp = 0\n[[world.mover]]\nid = "card"\noffsets_m = [[0, 0, 0]]\n'},
+        keywords=("lmp",)),
+    Case("world_mover_is_the_camera", R, {"s.xml": _CARD_XML, "c.toml": _CARD_TOML
+                                          + '[world.camera]\nposition_m = [0, -1, 1]\nlook_at_m = [0, 0, 0]\n'
+                                          '[[world.mover]]\nid = "ground_truth_camera"\noffsets_m = [[0, 0, 0]]\n'},
+         keywords=("movable: card, lamp",)),
+    Case("world_unit_m_zero", R, {"s.xml": _CARD_XML, "c.toml": _CARD_TOML.replace("unit_m = 0.01", "unit_m = 0")
+                                  + '[[world.mover]]\nid = "card"\noffsets_m = [[0, 0, 0]]\n'}, keywords=("unit_m",)),
+    Case("world_max_depth_one", R, {"s.xml": _CARD_XML,
+                                    "c.toml": _CARD_TOML.replace("[run]\n", "[run]\nmax_depth = 1\n")
+                                    + '[[world.mover]]\nid = "card"\noffsets_m = [[0, 0, 0]]\n'},
+         keywords=("max_depth",)),
+    Case("world_instances", R, {"s.xml": _CARD_XML.replace(
+        "</scene>", '<shape type="shapegroup" id="g"><shape type="sphere"/></shape><shape type="instance" id="i">'
+        '<ref id="g"/></shape></scene>'), "c.toml": _CARD_TOML + '[[world.mover]]\nid = "card"\n'
+                                                                 'offsets_m = [[0, 0, 0]]\n'}, keywords=("instance",)),
+    Case("world_without_light", R, {"c.toml": '[run]\nspp = 1024\nreplicates = 4\n[world]\n[[world.object]]\n'
+                                              'id = "toy"\nmesh = "m.obj"\n[[world.mover]]\nid = "toy"\n'
+                                              'offsets_m = [[0, 0, 0]]\n',
+                                    "m.obj": "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"},
+         keywords=("no light",)),
+    Case("world_card_and_lamp_move", R, {"s.xml": _CARD_XML, "c.toml": _CARD_TOML + '[world.parameters]\nlamp = 2.0\n'
+                                         '[[world.mover]]\nid = "card"\noffsets_m = [[0, 0, 0], [0.05, 0, 0]]\n'
+                                         '[[world.mover]]\nid = "lamp"\noffsets_m = [[0, 0, 0], [0, 0.02, 0]]\n'},
+         expect="ok", outputs=("out/measurements.csv", "out/dP.png")),
 ]
 
 MESH = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"

@@ -182,7 +182,8 @@ def test_bad_files_are_one_clear_error(tmp_path):
         ms.Simulation(CAM, world=broken)
     cfg = load_world_config(_write(tmp_path, "c.toml", '[world]\nscene = "room.xml"\n[[world.mover]]\n'
                                                        'id = "car"\noffsets_m = [[0, 0, 0]]\n'))
-    with pytest.raises(ConfigError, match="'car' is not a shape of the scene; shapes: .*toy_car"):
+    with pytest.raises(ConfigError, match="'car' is not a shape or light of the scene that can move; movable: "
+                                          ".*toy_car"):
         run_world_config(cfg)
     _write(tmp_path, "junk.obj", "this is not a mesh\n")
     cfg = load_world_config(_write(tmp_path, "d.toml", '[world]\n[[world.object]]\nid = "junk"\nmesh = "junk.obj"\n'

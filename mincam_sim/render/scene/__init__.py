@@ -6,8 +6,12 @@ name, world coordinates).
 * ``scene_dicts.py``: Mitsuba scene dictionaries from small pure functions (meshes, planes, lights, cameras).
 * ``elements.py``: the pure scene descriptions of :mod:`mincam_sim.scene` turned into Mitsuba elements.
 * ``world_input.py``: what a world accepts (elements, loaded scenes, updates), checked at the boundary.
-* ``scene_files.py``: Mitsuba XML scene files and trimesh meshes, with clear errors; turning a y-up file.
+* ``world_checks.py``: a built world's silent answers said (no light, a mincam inside a shape, a scene in
+  other units than metres).
+* ``scene_files.py``: Mitsuba XML scene files (their ``<default>`` parameters, units, integrator depth) and
+  trimesh meshes, with clear errors; turning a y-up file.
 * ``textures.py``: bitmap textures from numpy arrays (masks, frames, printed backgrounds).
-* ``updates.py``: parameter updates of a world scene by name, in world coordinates.
+* ``updates.py``: parameter updates of a world scene by name, in world coordinates (and those that take a shape
+  or light out).
 * ``mincam_scene.py``: one scene object for a mincam anywhere (a display or a world).
 """

@@ -7,7 +7,10 @@ of another mesh's size accepted, a negative radiance giving negative irradiance,
 
 from __future__ import annotations
 
+import re
+import warnings
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -17,14 +20,42 @@ from mincam_sim.render import backend
 RADIANT_PARTS = ("radiance", "intensity", "irradiance")  # emitter parameters that must be >= 0
 
 
-def expand_elements(elements) -> dict:
-    """``elements`` (name -> Mitsuba dict, Mitsuba object, or a loaded ``mi.Scene``) as a flat dict whose values
-    are dicts or single Mitsuba objects: a loaded scene contributes its shapes and its emitters that are not
-    attached to a shape, under their own ids (its sensors and integrator are the mincam's business)."""
+class WorldWarning(UserWarning):
+    """A world input that is taken, but not as it may have been meant (a file's camera ignored, a mincam inside
+    a shape, a scene in other units than metres)."""
+
+
+@dataclass
+class LoadedScenes:
+    """What the loaded scenes among a world's elements bring beside their shapes: the scene files (for the
+    identity), their integrator's ``max_depth`` (with where it came from) and the sensors that are ignored."""
+
+    files: list = field(default_factory=list)  # SceneFile
+    max_depth: tuple[int, str] | None = None
+    ignored_sensors: list[str] = field(default_factory=list)
+    static: set[str] = field(default_factory=set)  # names given to shapes and lights without an id
+
+    def note(self) -> None:
+        """One :class:`WorldWarning` if a loaded scene brought sensors (the mincam is the world's sensor)."""
+        if self.ignored_sensors:
+            warnings.warn(f"the scene's own sensor(s) ({', '.join(self.ignored_sensors)}) and their films are "
+                          "ignored: the mincam measures the world (give camera=... for a ground-truth camera)",
+                          WorldWarning, stacklevel=4)
+
+
+def expand_elements(elements) -> tuple[dict, LoadedScenes]:
+    """``elements`` (name -> Mitsuba dict, Mitsuba object, a loaded ``mi.Scene`` or a
+    :class:`~mincam_sim.render.scene.scene_files.SceneFile`) as a flat dict whose values are dicts or single
+    Mitsuba objects, and what the loaded scenes bring besides: a loaded scene contributes its shapes (those
+    without an id as static geometry, named ``<element>_shape<i>``) and its emitters that are not attached to a
+    shape, under their own ids; its integrator's ``max_depth`` is offered to the caller, its sensors ignored."""
+    from mincam_sim.render.scene.scene_files import SceneFile, file_max_depth
+
     if not isinstance(elements, Mapping):
         raise InputError(f"elements must be a dict name -> Mitsuba dict or object, got {type(elements).__name__}")
     mi = backend.mitsuba()
     out: dict = {}
+    loaded = LoadedScenes()
 
     def add(name, value, origin: str) -> None:
         if name in out:
@@ -35,9 +66,21 @@ def expand_elements(elements) -> dict:
         if not isinstance(name, str) or not name or "." in name:
             raise InputError(f"element name {name!r} must be a non-empty string without '.' (parameters are "
                              "addressed as 'name.parameter'); rename it")
+        if isinstance(value, SceneFile):
+            loaded.files.append(value)
+            value = value.load()
+            where = f"the <integrator> of {loaded.files[-1].path.name}"
+        else:
+            where = f"the integrator of the loaded scene {name!r}"
         if isinstance(value, mi.Scene):
-            for item in _scene_items(mi, value):
-                add(item.id(), item, f"from the loaded scene {name!r}")
+            for item_name, item, named in _scene_items(mi, value, name):
+                add(item_name, item, f"from the loaded scene {name!r}")
+                if not named:
+                    loaded.static.add(item_name)
+            depth = file_max_depth(value)
+            if depth is not None and loaded.max_depth is None:
+                loaded.max_depth = (depth, where)
+            loaded.ignored_sensors += [s.id() or "<sensor>" for s in value.sensors()]
             continue
         if isinstance(value, Mapping):
             kind = value.get("type")
@@ -50,19 +93,21 @@ def expand_elements(elements) -> dict:
         elif not isinstance(value, mi.Object):
             raise InputError(f"element {name!r} is a {type(value).__name__}, not a Mitsuba dict or object")
         add(name, value, "given")
-    return out
+    return out, loaded
 
 
-def _scene_items(mi, scene) -> list:
-    items = list(scene.shapes())
-    items += [e for e in scene.emitters() if not int(e.flags()) & int(mi.EmitterFlags.Surface)]
-    if not items:
+def _scene_items(mi, scene, element: str) -> list[tuple[str, object, bool]]:
+    """(name, object, whether it has an id of its own) of a loaded scene's shapes and its emitters that are no
+    shape's: by their id, those without one (static geometry: nothing addresses them) as ``<element>_shape<i>``
+    / ``<element>_light<i>``."""
+    shapes = list(scene.shapes())
+    lights = [e for e in scene.emitters() if not int(e.flags()) & int(mi.EmitterFlags.Surface)]
+    if not shapes and not lights:
         raise InputError("a loaded scene passed as an element holds no shapes and no emitters")
-    for item in items:
-        if not item.id():
-            raise InputError("a shape or emitter of the loaded scene has no id; give every shape an id in the "
-                             "scene file")
-    return items
+    generated = re.compile(rf"{re.escape(element)}_(shape|light)\d+")  # named by an earlier load of this scene
+    items = [(s.id() or f"{element}_shape{i}", s) for i, s in enumerate(shapes)]
+    items += [(e.id() or f"{element}_light{i}", e) for i, e in enumerate(lights)]
+    return [(name, item, bool(item.id()) and not generated.fullmatch(item.id())) for name, item in items]
 
 
 def check_radiant_params(params, keys: Sequence[str] | None = None) -> None:
@@ -96,8 +141,10 @@ def check_update(key: str, current, value) -> None:
     if key.endswith(".to_world"):
         if value.shape != (4, 4):
             raise InputError(f"{key}: a transform must be a 4 x 4 matrix, got shape {value.shape}")
-        if abs(np.linalg.det(value[:3, :3])) < 1e-18:
-            raise InputError(f"{key}: the transform is singular (zero scale along some axis); fix the matrix")
+        scales = np.linalg.svd(value[:3, :3], compute_uv=False)
+        if scales.max() == 0 or scales.min() <= 1e-7 * scales.max():
+            raise InputError(f"{key}: the transform is singular (zero scale along some axis: scales "
+                             f"{np.round(scales, 9).tolist()}); fix the matrix")
         return
     if key.endswith(".vertex_positions"):
         import drjit as dr

@@ -241,7 +241,7 @@ class ChangePlan(Plan):
                 "correlated_seeds": self.solver.correlated, "replicates": self.replicates,
                 "background_w_m2": bg.mean(0).tolist(), "masks": {m.name: mask_model_meta(m.mask) for m in sim.mincam},
                 "background_stderr_w_m2": (bg.std(0, ddof=1) / np.sqrt(self.replicates)).tolist(),
-                **backend.describe(), **geometry_meta(sim.mincam), **self.resolved}
+                **backend.describe(), **geometry_meta(sim.mincam), **sim.world_meta(), **self.resolved}
         reached = worst_relative_stderr(values[:, :n], errors[:, :n], significance=3.0)
         meta["reached_rel_stderr"] = reached if np.isfinite(reached) else None
         meta["target_rel_stderr"] = self.target

@@ -1,0 +1,131 @@
+"""Checks of a built world that would otherwise give silent or misleading numbers: no light at all, a mincam
+inside a shape, a scene whose size is implausible against the rig (modelled in other units than metres), and
+the file units scaled to metres (``unit_m``)."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from mincam_sim.errors import InputError
+from mincam_sim.model.optics import Mincam
+from mincam_sim.render import backend
+from mincam_sim.render.scene.world_input import WorldWarning
+
+INSIDE_FRACTION = 0.5  # a mixel whose view meets the back of one-sided faces in this share of directions is inside
+SCENE_TOO_LARGE = 1e3  # scene extent / rig size above this: a scene modelled in cm or mm, read as metres?
+SCENE_TOO_SMALL = 1.0  # scene extent / rig size below this: the scene is smaller than the rig
+MIN_RIG_M = 0.01  # a mincam is taken as at least this size [m] (a single mixel's 2 mm mask sits in a device)
+
+
+def require_light(scene) -> None:
+    """Refuse a world in which nothing emits: every mixel would read exactly 0 in every frame."""
+    if not scene.emitters():
+        raise InputError("the world holds no light (no area light, point or spot light, sky): every mixel would "
+                         "measure 0 in every frame; add an emitter (e.g. ms.sky(1.0) or an area light)")
+
+
+def rig_size_m(mincam: Mincam) -> float:
+    """The rig's size [m]: the spread of its mixels' positions, its largest mask or detector, or
+    :data:`MIN_RIG_M`, whichever is largest."""
+    positions = np.array([m.pose.position_m for m in mincam])
+    spread = float(np.linalg.norm(np.ptp(positions, axis=0)))
+    parts = [max(m.mask.width_m, m.mask.height_m, m.detector_size_m) for m in mincam]
+    return max(spread, max(parts), MIN_RIG_M)
+
+
+def user_extent_m(scene, skip: set[str]) -> float | None:
+    """The diagonal [m] of the bounding box of the scene's shapes but ``skip`` (None without any)."""
+    boxes = [s.bbox() for s in scene.shapes() if s.id() not in skip and s.sensor() is None]
+    if not boxes:
+        return None
+    lo = np.min([np.array(b.min, dtype=float).ravel() for b in boxes], axis=0)
+    hi = np.max([np.array(b.max, dtype=float).ravel() for b in boxes], axis=0)
+    extent = float(np.linalg.norm(hi - lo))
+    return extent if np.isfinite(extent) else None
+
+
+def warn_if_implausible_size(scene, mincam: Mincam, skip: set[str], unit_m: float) -> None:
+    """One :class:`WorldWarning` when the scene is more than :data:`SCENE_TOO_LARGE` times the rig's size
+    (:func:`rig_size_m`; a file modelled in cm or mm read as metres) or smaller than the rig."""
+    extent, rig = user_extent_m(scene, skip), rig_size_m(mincam)
+    if extent is None or rig <= 0:
+        return
+    units = "metres" if unit_m == 1.0 else f"units of {unit_m:g} m"
+    if extent > SCENE_TOO_LARGE * rig:
+        warnings.warn(f"the scene spans {extent:.4g} m, {extent / rig:.3g} times the mincam ({rig:.3g} m), read in "
+                      f"{units}: a file modelled in cm or mm needs unit_m = 0.01 or 0.001 (a scene this large on "
+                      "purpose needs nothing)", WorldWarning, stacklevel=4)
+    elif extent < SCENE_TOO_SMALL * rig:
+        warnings.warn(f"the scene spans {extent:.4g} m, less than the mincam ({rig:.3g} m): read in {units}; check "
+                      "unit_m (files are in metres unless unit_m says otherwise)", WorldWarning, stacklevel=4)
+
+
+def fibonacci_directions(n: int) -> np.ndarray:
+    """``n`` unit vectors spread evenly over the sphere (n, 3)."""
+    i = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * i / n
+    r = np.sqrt(1.0 - z * z)
+    phi = np.pi * (1.0 + 5.0**0.5) * i
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+
+def inside_shapes(scene, mincam: Mincam, skip: set[str], n_directions: int = 256) -> dict[str, str]:
+    """Mixels (name -> shape id) that look out at the back of one shape's one-sided faces in at least
+    :data:`INSIDE_FRACTION` of the directions in front of their mask: a mixel inside a closed shape (a wall, a
+    box) sees only the inside of its faces, which a one-sided material leaves black."""
+    import drjit as dr
+
+    mi = backend.mitsuba()
+    candidates = [s for s in scene.shapes() if s.id() not in skip and s.sensor() is None and _one_sided(mi, s)]
+    if not candidates:
+        return {}
+    dirs = fibonacci_directions(n_directions)
+    origins, directions, owners = [], [], []
+    for k, mixel in enumerate(mincam):
+        forward = np.asarray(mixel.pose.axes()[2])
+        front = dirs[dirs @ forward > 0.05]
+        centre = mixel.pose.to_world(np.array([0.0, 0.0, mixel.d_f_m]))
+        origins.append(np.repeat(centre[None] + 1e-6 * forward, len(front), axis=0))
+        directions.append(front)
+        owners.append(np.full(len(front), k))
+    o, d, owner = np.concatenate(origins), np.concatenate(directions), np.concatenate(owners)
+    ray = mi.Ray3f(mi.Point3f(*[mi.Float(o[:, j]) for j in range(3)]),
+                   mi.Vector3f(*[mi.Float(d[:, j]) for j in range(3)]))
+    si = scene.ray_intersect(ray)
+    back = si.is_valid() & (dr.dot(si.n, ray.d) > 0)
+    found: dict[str, str] = {}
+    for shape in candidates:
+        hits = np.array(back & (si.shape == mi.ShapePtr(shape)), dtype=bool)
+        for k, mixel in enumerate(mincam):
+            mine = owner == k
+            if mixel.name not in found and hits[mine].mean() >= INSIDE_FRACTION:
+                found[mixel.name] = shape.id()
+    return found
+
+
+def _one_sided(mi, shape) -> bool:
+    bsdf = shape.bsdf()
+    if bsdf is None:
+        return False
+    flags = int(bsdf.flags())
+    return not flags & int(mi.BSDFFlags.BackSide) and not flags & int(mi.BSDFFlags.Transmission)
+
+
+def warn_if_inside(scene, mincam: Mincam, skip: set[str]) -> None:
+    """One :class:`WorldWarning` naming the mixels that sit inside a shape (:func:`inside_shapes`)."""
+    inside = inside_shapes(scene, mincam, skip)
+    if inside:
+        where = ", ".join(f"{name} inside {shape!r}" for name, shape in sorted(inside.items()))
+        warnings.warn(f"the mincam is inside a shape ({where}): its mixels see the back of one-sided faces, which "
+                      "are black; move the mincam out of the shape (or give the shape a two-sided material)",
+                      WorldWarning, stacklevel=4)
+
+
+def check_unit(unit_m) -> float:
+    """``unit_m`` as a positive finite float, or one :class:`InputError`."""
+    if isinstance(unit_m, bool) or not isinstance(unit_m, (int, float)) or not np.isfinite(unit_m) or unit_m <= 0:
+        raise InputError(f"unit_m must be the length of the scene's unit in metres (0.01 for a scene modelled in "
+                         f"cm), a positive number; got {unit_m!r}")
+    return float(unit_m)
