@@ -35,7 +35,6 @@ from mincam_sim.errors import ConfigError
 ENV_THREADS = "MINCAM_DRJIT_THREADS"
 SCHEDULER_TIMEOUT_S = 5.0
 CLOSE_TIMEOUT_S = 3.0
-NANNY_CLOSING_S = 0.5
 
 
 def available_cores() -> int:
@@ -101,13 +100,14 @@ def check_scheduler(address: str, timeout_s: float = SCHEDULER_TIMEOUT_S) -> int
         A malformed address, no answer within ``timeout_s``, or an answer that is not a dask scheduler's.
     """
     from distributed.comm import parse_address
+    from distributed.comm.registry import get_backend
 
     if not isinstance(address, str) or not address.strip():
         raise ConfigError(f"--scheduler must be an address like tcp://host:8786, got {address!r}")
     try:
-        parse_address(address)
-        host = address.split("://", 1)[-1]
-        if ":" not in host or not host.rsplit(":", 1)[1].isdigit():
+        scheme, location = parse_address(address)
+        get_backend(scheme)  # a scheme dask knows
+        if scheme in ("tcp", "tls") and not location.rpartition(":")[2].isdigit():
             raise ValueError(f"missing port number in address {address!r}")
     except ValueError as err:
         raise ConfigError(f"--scheduler {address} is not a scheduler address ({err}); write it like "
@@ -243,14 +243,17 @@ def _close_all(*closing) -> None:
 
 
 def _stop_at_once(client, cluster, before: set[int]) -> None:
-    """Stop an embedded cluster now: its nannies start closing (so that a killed worker is not restarted), the
-    worker processes are killed rather than drained, and whatever is left is killed after a few seconds."""
+    """Stop an embedded cluster now: its nannies told not to restart their workers, the worker processes killed
+    (not drained: a busy worker would keep computing, and would log the scheduler going away), then the
+    cluster and the client closed, and whatever is still alive after a few seconds killed."""
+    for nanny in getattr(cluster, "workers", {}).values() if cluster is not None else ():
+        with contextlib.suppress(Exception):
+            nanny.close_gracefully(reason="study stopped")  # dask's "do not restart": the nanny closes after it
+    _kill_children(before)
     closer = threading.Thread(target=_close_all, args=(cluster, client), daemon=True)
     closer.start()
-    closer.join(NANNY_CLOSING_S)
-    _kill_children(before)
     closer.join(2 * CLOSE_TIMEOUT_S)
-    _kill_children(before)  # a worker restarted meanwhile
+    _kill_children(before)  # a worker a nanny started meanwhile
 
 
 @contextlib.contextmanager
