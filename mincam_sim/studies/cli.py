@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -35,6 +36,8 @@ def run_study_command(study_file: Path, workers: int | None, scheduler: str | No
                                     say=lambda m: typer.echo(m, err=True), time_limit_s=limit_s)
         except StudyInterrupted as stop:
             typer.echo(f"error: {stop}", err=True)
+            for name in ("asyncio", "distributed"):  # this process ends: no notices of the tasks it dropped
+                logging.getLogger(name).setLevel(logging.CRITICAL)
             raise SystemExit(130) from None
     try:
         plot = plot_study(ds, list(spec.metrics), Path(out) / "study.png")

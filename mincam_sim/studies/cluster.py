@@ -11,7 +11,8 @@ Ctrl-C stops at once, an existing scheduler checked within seconds, and Ctrl-C h
   point; :func:`held_interrupts`: SIGINT inside the block is raised when the block ends, so a point's values and
   its completion record are written whole.
 * :func:`embedded_client` / :func:`scheduler_client`: a ``distributed.Client``. The embedded cluster's worker
-  processes ignore SIGINT (the terminal sends Ctrl-C to the whole process group): the study itself stops them.
+  processes start with SIGINT ignored (the terminal sends Ctrl-C to the whole process group): the study itself
+  stops them.
   On an interrupt or an error they are killed at once (not drained), the cluster is closed within seconds with
   dask's shutdown chatter muted, and no process this study started is left behind.
 """
@@ -23,7 +24,10 @@ import contextlib
 import logging
 import multiprocessing
 import os
+import shlex
 import signal
+import subprocess
+import tempfile
 import threading
 import warnings
 from collections.abc import Iterator
@@ -257,18 +261,46 @@ def _stop_at_once(client, cluster, before: set[int]) -> None:
 
 
 @contextlib.contextmanager
+def _spawned_ignoring_sigint() -> Iterator[None]:
+    """Processes spawned in the block start with SIGINT ignored, so that a Ctrl-C while the workers start
+    reaches only this process (a worker importing its modules would print a traceback). The interpreter is
+    started through a two-line shell script, ``trap '' INT; exec python "$@"`` (an ignored signal stays ignored
+    across ``exec``, and Python then leaves it so); where the script cannot run (no ``/bin/sh``, a ``noexec``
+    temporary folder) the plain interpreter is used."""
+    import multiprocessing.spawn as mp_spawn
+
+    previous = mp_spawn.get_executable()
+    with tempfile.TemporaryDirectory(prefix="mincam_study_") as folder:
+        script = Path(folder) / "python_ignoring_sigint"
+        try:
+            script.write_text(f"#!/bin/sh\ntrap '' INT\nexec {shlex.quote(os.fsdecode(previous))} \"$@\"\n")
+            script.chmod(0o755)
+            subprocess.run([str(script), "-c", "pass"], check=True, timeout=60, capture_output=True)
+        except (OSError, subprocess.SubprocessError):
+            yield
+            return
+        multiprocessing.set_executable(str(script))
+        try:
+            yield
+        finally:
+            mp_spawn.set_executable(previous)
+
+
+@contextlib.contextmanager
 def embedded_client(n_workers: int, cache_root: Path) -> Iterator:
     """A client of a ``LocalCluster`` of ``n_workers`` spawned process workers (Dr.Jit threads capped so that
     workers x threads <= cores, one kernel cache each under ``cache_root``); stopped at once on any exception."""
     import dask
     from distributed import Client, LocalCluster
+    from distributed.deploy.spec import SpecCluster
 
     before = {p.pid for p in multiprocessing.active_children()}
+    clusters_before = set(SpecCluster._instances)
     client = cluster = None
     try:
         threads = max(1, available_cores() // n_workers)
         with dask.config.set({"distributed.worker.multiprocessing-method": "spawn",
-                              "distributed.worker.daemon": False}):
+                              "distributed.worker.daemon": False}), _spawned_ignoring_sigint():
             cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
                                    dashboard_address=None, env={ENV_THREADS: str(threads)})
         client = Client(cluster)
@@ -278,6 +310,9 @@ def embedded_client(n_workers: int, cache_root: Path) -> Iterator:
     except BaseException:
         with held_interrupts(), _muted_dask():  # a second Ctrl-C does not cut the clean-up short
             _stop_at_once(client, cluster, before)
+            if cluster is None:  # stopped while it started: its workers are gone, dask's exit hook must not wait
+                for half_built in [c for c in list(SpecCluster._instances) if c not in clusters_before]:
+                    SpecCluster._instances.discard(half_built)
         raise
     client.close()
     cluster.close()

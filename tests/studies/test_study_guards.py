@@ -168,6 +168,61 @@ def test_ctrl_c_stops_study_run_within_10_s_and_the_rerun_resumes_bit_for_bit(tm
         np.testing.assert_array_equal(resumed[var].values, clean[var].values)
 
 
+def test_workers_are_spawned_with_ctrl_c_ignored():
+    """The embedded cluster's processes start through an interpreter that ignores SIGINT (a terminal's Ctrl-C
+    goes to every process of the group: only the study itself must see it)."""
+    import multiprocessing.spawn as mp_spawn
+
+    plain = mp_spawn.get_executable()
+    probe = "import signal; print(signal.getsignal(signal.SIGINT) is signal.SIG_IGN)"
+    with cluster_mod._spawned_ignoring_sigint():
+        spawned = os.fsdecode(mp_spawn.get_executable())
+        out = subprocess.run([spawned, "-c", probe], capture_output=True, text=True, check=True, timeout=60)
+    assert out.stdout.strip() == "True"
+    assert mp_spawn.get_executable() == plain
+    out = subprocess.run([os.fsdecode(plain), "-c", probe], capture_output=True, text=True, check=True, timeout=60)
+    assert out.stdout.strip() == "False"
+
+
+def _spawned_worker(sid: int) -> bool:
+    for cmdline in Path("/proc").glob("[0-9]*/cmdline"):
+        try:
+            if b"spawn_main" in cmdline.read_bytes() and os.getsid(int(cmdline.parent.name)) == sid:
+                return True
+        except (OSError, ValueError):
+            continue
+    return False
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc/self/stat").is_file(), reason="reads the process table from /proc")
+def test_ctrl_c_while_the_workers_start_is_one_line_and_leaves_no_process(tmp_path):
+    study = tmp_path / "ctrl_c.toml"
+    study.write_text(CTRL_C_STUDY)
+    cmd = [sys.executable, "-m", "mincam_sim.cli", "--quiet", "study", "run", str(study), "--quick", "--workers",
+           "2", "--out", str(tmp_path / "out")]
+    proc = subprocess.Popen(cmd, cwd=tmp_path, env={**os.environ, "PYTHONPATH": str(ROOT)}, start_new_session=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 240
+        while not _spawned_worker(proc.pid) and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert _spawned_worker(proc.pid), "no worker process started"
+        sent = time.monotonic()
+        os.killpg(proc.pid, signal.SIGINT)  # the workers are still starting
+        _, stderr = proc.communicate(timeout=30)
+        took = time.monotonic() - sent
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
+    assert proc.returncode == 130 and took < 10, (proc.returncode, took, stderr)
+    lines = [line for line in stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: interrupted: "), stderr
+    time.sleep(1.0)
+    assert _session_processes(proc.pid) == [], "a process of the study outlived it"
+
+
 # ----------------------------------------------------------------------------------------------- --workers
 
 
