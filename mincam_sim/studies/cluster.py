@@ -12,9 +12,8 @@ Ctrl-C stops at once, an existing scheduler checked within seconds, and Ctrl-C h
   its completion record are written whole.
 * :func:`embedded_client` / :func:`scheduler_client`: a ``distributed.Client``. The embedded cluster's worker
   processes start with SIGINT ignored (the terminal sends Ctrl-C to the whole process group): the study itself
-  stops them.
-  On an interrupt or an error they are killed at once (not drained), the cluster is closed within seconds with
-  dask's shutdown chatter muted, and no process this study started is left behind.
+  stops them. On an interrupt or an error they are killed at once (not drained), the cluster is closed within
+  seconds with dask's shutdown chatter muted, and no process this study started is left behind.
 """
 
 from __future__ import annotations
