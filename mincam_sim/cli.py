@@ -786,13 +786,18 @@ def study_run(
     overwrite: Annotated[bool, typer.Option("--overwrite", help="replace a different study's results")] = False,
     max_points: Annotated[int | None, typer.Option("--max-points", help="refuse studies with more points than "
                                                                          "this (default 10000)")] = None,
+    time_limit_s: Annotated[float | None, typer.Option(help="refuse a study estimated to take longer than this [s]: "
+                                                            "points x replicates x the target's typical seconds "
+                                                            "per point / workers (default 86400)")] = None,
 ) -> None:
-    """Run a parameter study on dask.distributed: results.zarr (xarray), summary.json and study.png in --out."""
+    """Run a parameter study on dask.distributed: results.zarr (xarray), summary.json and study.png in --out.
+
+    Ctrl-C stops it within seconds (exit code 130), keeping every completed point; the same command resumes."""
     from mincam_sim.studies.cli import run_study_command
 
     check_variant()
     run_study_command(study_file, workers, scheduler, out_dir, quick, overwrite, quiet=not _show_progress(),
-                      max_points=max_points)
+                      max_points=max_points, time_limit_s=time_limit_s)
 
 
 @app.command()

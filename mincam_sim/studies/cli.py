@@ -1,7 +1,9 @@
-"""What ``mincam-sim study run STUDY.toml [--workers N | --scheduler ADDRESS] [--out DIR] [--quick]`` does."""
+"""What ``mincam-sim study run STUDY.toml [--workers N | --scheduler ADDRESS] [--out DIR] [--quick]
+[--time-limit-s S]`` does; Ctrl-C ends it with exit code 130 and one line saying what is kept."""
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -9,19 +11,34 @@ import typer
 
 
 def run_study_command(study_file: Path, workers: int | None, scheduler: str | None, out_dir: Path | None,
-                      quick: bool, overwrite: bool, quiet: bool = False, max_points: int | None = None) -> None:
-    """Run a parameter study on dask.distributed; results.zarr (xarray), summary.json and a plot in --out."""
-    from mincam_sim.errors import ConfigError, StoreError
+                      quick: bool, overwrite: bool, quiet: bool = False, max_points: int | None = None,
+                      time_limit_s: float | None = None) -> None:
+    """Run a parameter study on dask.distributed; results.zarr (xarray), summary.json and a plot in --out.
+
+    Ctrl-C: one line ``error: interrupted: K of N points are complete and kept in ...; run the same command
+    again to resume ...`` on stderr and exit code 130 (the generic Ctrl-C line of the CLI is not added)."""
+    from mincam_sim.errors import StoreError
+    from mincam_sim.studies.cluster import check_workers, watched_interrupts
     from mincam_sim.studies.plots import plot_study
-    from mincam_sim.studies.runner import run_study
+    from mincam_sim.studies.runner import DEFAULT_TIME_LIMIT_S, StudyInterrupted, check_time_limit, run_study
     from mincam_sim.studies.spec import DEFAULT_MAX_POINTS, load_study
 
-    if workers is not None and workers < 1:  # before anything is read or started
-        raise ConfigError(f"--workers must be an integer >= 1 (1 = in this process), got {workers}")
-    spec = load_study(study_file, quick=quick, max_points=DEFAULT_MAX_POINTS if max_points is None else max_points)
-    out = out_dir or spec.out_dir
-    ds, summary = run_study(spec, workers=workers, scheduler=scheduler, quick=quick, out_dir=out,
-                            overwrite=overwrite, show_progress=not quiet, say=lambda m: typer.echo(m, err=True))
+    check_workers(workers, scheduler)  # before anything is read or started
+    limit_s = DEFAULT_TIME_LIMIT_S if time_limit_s is None else time_limit_s
+    check_time_limit(limit_s)
+    with watched_interrupts():  # an interrupt swallowed while the study loads still stops it
+        spec = load_study(study_file, quick=quick,
+                          max_points=DEFAULT_MAX_POINTS if max_points is None else max_points)
+        out = out_dir or spec.out_dir
+        try:
+            ds, summary = run_study(spec, workers=workers, scheduler=scheduler, quick=quick, out_dir=out,
+                                    overwrite=overwrite, show_progress=not quiet,
+                                    say=lambda m: typer.echo(m, err=True), time_limit_s=limit_s)
+        except StudyInterrupted as stop:
+            typer.echo(f"error: {stop}", err=True)
+            for name in ("asyncio", "distributed"):  # this process ends: no notices of the tasks it dropped
+                logging.getLogger(name).setLevel(logging.CRITICAL)
+            raise SystemExit(130) from None
     try:
         plot = plot_study(ds, list(spec.metrics), Path(out) / "study.png")
     except OSError as err:

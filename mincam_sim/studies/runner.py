@@ -16,18 +16,27 @@
 * ``OUT`` is locked while a study runs: a second study there is refused, naming the holder. The store's
   attributes hold the study's identity; a different study in the same directory is refused unless ``overwrite``.
 * A failed write (a full disk) raises :class:`~mincam_sim.errors.StoreError` naming the file; the point then
-  has no completion record, so nothing half-written is ever reused.
+  has no completion record, so nothing half-written is ever reused. A store that lacks a variable or a
+  coordinate, or whose coordinates no longer hold the study's values, is refused (``--overwrite`` recomputes).
+* Before anything is computed, a study whose estimated time (pending points x replicates x the target's typical
+  seconds per point / workers) exceeds ``time_limit_s`` is refused, naming the estimate and ``--time-limit-s``.
+* Ctrl-C (SIGINT) stops a study within seconds: a point being written is finished first, the embedded cluster's
+  workers are killed, and :class:`StudyInterrupted` (a ``KeyboardInterrupt``) says how many points are kept;
+  the same call resumes them bit for bit.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
+import math
 import os
 import shutil
 import sys
 import time
 import warnings
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -39,9 +48,19 @@ from mincam_sim.progress import progress
 from mincam_sim.storage.atomic import atomic_write_json, atomic_write_text
 from mincam_sim.storage.identity import build_identity, canonical, diff_identities, fingerprint
 from mincam_sim.storage.store import lock_out_dir
-from mincam_sim.studies.spec import StudySpec
+from mincam_sim.studies.cluster import (
+    ENV_THREADS,
+    check_scheduler,
+    embedded_client,
+    held_interrupts,
+    raise_if_interrupted,
+    scheduler_client,
+    watched_interrupts,
+    worker_count,
+)
+from mincam_sim.studies.spec import StudySpec, duration_text
 
-ENV_THREADS = "MINCAM_DRJIT_THREADS"
+DEFAULT_TIME_LIMIT_S = 24 * 3600.0
 STORE_NAME = "results.zarr"
 RECORDS_NAME = "points"
 HOLDER_NAME = ".study_holder.json"
@@ -177,6 +196,29 @@ def _open(store: Path):
                          "with --overwrite") from None
 
 
+def _check_layout(spec: StudySpec, store: Path, ds) -> None:
+    """Refuse a store that lacks a variable or a coordinate on disk, or whose coordinates changed (a lost chunk
+    reads as fill values: the points would be plotted at the wrong coordinates)."""
+    coords = {dim: np.asarray(values) for dim, values in spec.dims.items()}
+    coords.update({key: np.asarray([p[key] for p in spec.points]) for key in _varying(spec)})
+
+    def lost(names) -> list[str]:
+        return [n for n in names if not (store / n / ".zarray").is_file() or n not in ds.variables]
+
+    for kind, names in (("variable(s)", [*variables(spec), "done"]), ("coordinate(s)", list(coords))):
+        if lost(names):
+            raise StoreError(f"{store} lacks {kind} {', '.join(lost(names))} (deleted from the store); rerun with "
+                             "--overwrite to recompute the study, or use another --out")
+    for name, values in coords.items():
+        try:
+            same = np.array_equal(np.asarray(ds[name].values), values)
+        except Exception:  # noqa: BLE001 - an unreadable coordinate is a changed one
+            same = False
+        if not same:
+            raise StoreError(f"{store}: coordinate {name} no longer holds the study's values (a chunk was lost or "
+                             "changed); rerun with --overwrite to recompute the study, or use another --out")
+
+
 def _verified(spec: StudySpec, ds, records: Path, say: Callable[[str], None]) -> np.ndarray:
     """Which points are complete: a completion record whose values every store variable still holds."""
     missing_vars = [v for v in [*variables(spec), "done"] if v not in ds.data_vars]
@@ -267,50 +309,126 @@ def _holder(out: Path) -> str:
         return "another run"
 
 
+class StudyInterrupted(KeyboardInterrupt):
+    """Ctrl-C stopped a study; the message says how many points are kept and how to resume."""
+
+    def __init__(self, kept: int, total: int, store: Path):
+        self.kept, self.total, self.store = kept, total, store
+        super().__init__(f"interrupted: {kept} of {total} points are complete and kept in {store}; run the same "
+                         "command again to resume (the kept points are reused, the numbers are the same)")
+
+
+def estimated_seconds(spec: StudySpec, n_points: int, workers: int, quick: bool) -> float:
+    """A study's rough wall time [s]: points x replicates x the target's typical seconds per point / workers."""
+    per_point = spec.experiment.seconds_per_point[0 if quick else 1] * spec.replicates
+    return n_points * per_point / max(1, min(workers, n_points) if n_points else 1)
+
+
+def check_time(spec: StudySpec, n_points: int, workers: int, quick: bool, limit_s: float, where: str) -> float:
+    """Refuse ``n_points`` points whose :func:`estimated_seconds` exceed ``limit_s``; return the estimate.
+
+    Raises
+    ------
+    ConfigError
+        Naming the estimate, what it counts and the two fixes (a smaller grid, or ``--time-limit-s``).
+    """
+    seconds = estimated_seconds(spec, n_points, workers, quick)
+    if seconds > limit_s:
+        per_point = spec.experiment.seconds_per_point[0 if quick else 1]
+        raise ConfigError(
+            f"study {spec.name} would take about {duration_text(seconds)} ({n_points:,} points x {spec.replicates} "
+            f"replicates x ~{per_point:g} s / {where}), over the limit of {duration_text(limit_s)}: shrink the grid, "
+            f"or raise the limit with --time-limit-s {math.ceil(1.5 * seconds)} (time_limit_s)")
+    return seconds
+
+
+def check_time_limit(time_limit_s: float) -> None:
+    """Refuse a time limit that is not a positive, finite number of seconds (:class:`ConfigError`)."""
+    if isinstance(time_limit_s, bool) or not isinstance(time_limit_s, int | float) or not (
+            math.isfinite(time_limit_s) and time_limit_s > 0):
+        raise ConfigError(f"--time-limit-s must be a positive number of seconds, got {time_limit_s!r}")
+
+
+def _kept_points(records: Path) -> int:
+    return len(list(records.glob("p_*.json"))) if records.is_dir() else 0
+
+
 def run_study(spec: StudySpec, workers: int | None = None, scheduler: str | None = None, quick: bool = False,
               out_dir: str | Path | None = None, overwrite: bool = False, show_progress: bool = True,
-              say: Callable[[str], None] = _stderr_say):
+              say: Callable[[str], None] = _stderr_say, time_limit_s: float = DEFAULT_TIME_LIMIT_S):
     """Compute every pending point; return ``(dataset, summary)``.
 
     Parameters
     ----------
     workers : int, optional
-        1: run here, serially; >= 2: process workers of an embedded cluster (default: min(2, cores)).
+        1: run here, serially; >= 2: process workers of an embedded cluster (default: min(2, cores)); more than
+        the cores this process may use: capped, with a warning.
     scheduler : str, optional
-        Address of an existing dask scheduler (``tcp://host:8786``); ``workers`` is then ignored.
+        Address of an existing dask scheduler (``tcp://host:8786``), checked within a few seconds; not together
+        with ``workers``.
     say : callable
         Where notices go (a damaged point being recomputed); default: standard error.
+    time_limit_s : float
+        Refuse a study whose estimated time (:func:`estimated_seconds` of its pending points) is longer [s].
 
     Raises
     ------
     ConfigError
-        ``workers`` < 1.
+        ``workers`` < 1 or with ``scheduler``, an unreachable scheduler, a bad ``time_limit_s``, or a study
+        estimated to take longer than it.
     OutDirLockedError
         Another study runs in the output directory (the message names it).
     StaleResultError, StoreError
-        A different study's store, an unreadable one, or a failed write (naming the file).
+        A different study's store, an unreadable or incomplete one, or a failed write (naming the file).
+    StudyInterrupted
+        Ctrl-C: the points completed so far are kept; the same call resumes.
     """
-    import xarray as xr
-
-    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
-        raise ConfigError(f"--workers must be an integer >= 1 (1 = in this process), got {workers!r}")
+    n_workers = worker_count(workers, scheduler)
+    check_time_limit(time_limit_s)
+    where = f"{n_workers} worker{'s' if n_workers > 1 else ''}"
+    if scheduler is not None:
+        n_workers = max(1, check_scheduler(scheduler))
+        where = f"the scheduler's {n_workers} worker{'s' if n_workers > 1 else ''}"
     out = Path(out_dir) if out_dir is not None else spec.out_dir
+    if overwrite or not (out / STORE_NAME).exists():  # before the lock creates the out dir: nothing is left behind
+        check_time(spec, len(spec.points), n_workers, quick, time_limit_s, where)
     try:
         lock = lock_out_dir(out)
     except OutDirLockedError as err:
         raise OutDirLockedError(f"{err} [{_holder(out)}]") from None
     try:
-        return _run_locked(spec, workers, scheduler, quick, out, overwrite, show_progress, say, xr)
+        plan = _Plan(n_workers, scheduler, quick, overwrite, show_progress, time_limit_s, where)
+        with watched_interrupts():
+            result = _run_locked(spec, out, plan, say)
+            raise_if_interrupted()  # one swallowed during the last point: still an interrupted run (rc 130)
+        return result
+    except KeyboardInterrupt:
+        raise StudyInterrupted(_kept_points(out / RECORDS_NAME), len(spec.points), out / STORE_NAME) from None
     finally:
         (out / HOLDER_NAME).unlink(missing_ok=True)
         lock.release()
 
 
-def _run_locked(spec, workers, scheduler, quick, out, overwrite, show_progress, say, xr):
+@dataclass(frozen=True)
+class _Plan:
+    """How a study runs (validated options)."""
+
+    workers: int
+    scheduler: str | None
+    quick: bool
+    overwrite: bool
+    show_progress: bool
+    time_limit_s: float
+    where: str
+
+
+def _run_locked(spec: StudySpec, out: Path, plan: _Plan, say: Callable[[str], None]):
+    import xarray as xr
+
     atomic_write_json(out / HOLDER_NAME, {"study": spec.name, "pid": os.getpid()})
     store, records = out / STORE_NAME, out / RECORDS_NAME
-    identity = study_identity(spec, quick)
-    if overwrite:
+    identity = study_identity(spec, plan.quick)
+    if plan.overwrite:
         shutil.rmtree(store, ignore_errors=True)
         shutil.rmtree(records, ignore_errors=True)
     if store.exists():
@@ -319,6 +437,7 @@ def _run_locked(spec, workers, scheduler, quick, out, overwrite, show_progress, 
             changed = ", ".join(diff_identities(old, identity)) or "its identity"
             raise StaleResultError(f"{store} holds a different study (changed: {changed}); use another --out or "
                                    "--overwrite to replace it")
+        _check_layout(spec, store, ds)
     else:
         shutil.rmtree(records, ignore_errors=True)  # records of a store that is gone describe nothing
         _create(spec, store, identity)
@@ -326,23 +445,24 @@ def _run_locked(spec, workers, scheduler, quick, out, overwrite, show_progress, 
     records.mkdir(parents=True, exist_ok=True)
     complete = _verified(spec, ds, records, say)
     pending = [(idx, p) for idx, p in zip(spec.indices, spec.points, strict=True) if not complete[idx]]
+    check_time(spec, len(pending), plan.workers, plan.quick, plan.time_limit_s, plan.where)
     reused = len(spec.points) - len(pending)
-    cores = os.cpu_count() or 1
-    n_workers = workers if workers is not None else min(2, cores)
     t0 = time.perf_counter()
-    if pending and scheduler is None and n_workers == 1:
-        for idx, params in progress(pending, desc=f"study {spec.name}", disable=not show_progress):
+    if pending and plan.scheduler is None and plan.workers == 1:
+        for idx, params in progress(pending, desc=f"study {spec.name}", disable=not plan.show_progress):
+            raise_if_interrupted()
             result = _refused_point(spec, idx, lambda p=params: compute_point(
-                spec.experiment.ref, p, point_seeds(spec, p), quick, list(spec.metrics)))
-            _write_point(spec, store, records, idx, params, result)
+                spec.experiment.ref, p, point_seeds(spec, p), plan.quick, list(spec.metrics)))
+            with held_interrupts():  # a point's values and its completion record are written whole
+                _write_point(spec, store, records, idx, params, result)
     elif pending:
-        _run_distributed(spec, store, records, pending, n_workers, scheduler, quick, show_progress, out)
+        _run_distributed(spec, store, records, pending, plan, out)
     wall = time.perf_counter() - t0
     result = xr.open_zarr(store, consolidated=True).load()
     summary = {"points_total": len(spec.points), "points_computed": len(pending), "points_reused": reused,
                "replicates": spec.replicates, "common_random_numbers": spec.common_random_numbers,
-               "workers": n_workers if scheduler is None else f"scheduler {scheduler}", "wall_seconds": wall,
-               "store": str(store)}
+               "workers": plan.workers if plan.scheduler is None else f"scheduler {plan.scheduler}",
+               "wall_seconds": wall, "store": str(store)}
     path = out / "summary.json"
     try:
         atomic_write_text(path, json.dumps(summary, indent=1))
@@ -352,40 +472,24 @@ def _run_locked(spec, workers, scheduler, quick, out, overwrite, show_progress, 
     return result, summary
 
 
-def _run_distributed(spec, store, records, pending, n_workers, scheduler, quick, show_progress, out) -> None:
-    import dask
-    from distributed import Client, LocalCluster, as_completed
+def _run_distributed(spec: StudySpec, store: Path, records: Path, pending: list, plan: _Plan, out: Path) -> None:
+    from distributed import as_completed
 
-    cluster = None
-    if scheduler is None:
-        threads = max(1, (os.cpu_count() or 1) // n_workers)
-        cache_root = out / "drjit_cache"
-        with dask.config.set({"distributed.worker.multiprocessing-method": "spawn",
-                              "distributed.worker.daemon": False}):
-            cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, env={ENV_THREADS: str(threads)})
-        client = Client(cluster)
-        # one Dr.Jit kernel cache per worker process
-        client.run(_set_worker_cache, str(cache_root))
-    else:
-        client = Client(scheduler)
-    try:
-        futures = {client.submit(compute_point, spec.experiment.ref, params, point_seeds(spec, params), quick,
+    opened = (scheduler_client(plan.scheduler) if plan.scheduler is not None
+              else embedded_client(plan.workers, out / "drjit_cache"))
+    with opened as client:
+        futures = {client.submit(compute_point, spec.experiment.ref, params, point_seeds(spec, params), plan.quick,
                                  list(spec.metrics), pure=False): (idx, params) for idx, params in pending}
-        for future in progress(as_completed(futures), desc=f"study {spec.name}", total=len(futures),
-                               disable=not show_progress):
-            idx, params = futures[future]
-            _write_point(spec, store, records, idx, params, _refused_point(spec, idx, future.result))
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
-
-
-def _set_worker_cache(root: str, dask_worker=None) -> str:
-    """Give this worker process its own Dr.Jit kernel cache (before Dr.Jit is first imported there)."""
-    name = "".join(c if c.isalnum() else "_" for c in str(getattr(dask_worker, "name", os.getpid())))
-    path = Path(root) / f"worker_{name}"
-    path.mkdir(parents=True, exist_ok=True)
-    os.environ.setdefault("DRJIT_CACHE_DIR", str(path))
-    return str(path)
+        try:
+            for future in progress(as_completed(futures), desc=f"study {spec.name}", total=len(futures),
+                                   disable=not plan.show_progress):
+                idx, params = futures[future]
+                result = _refused_point(spec, idx, future.result)
+                with held_interrupts():  # a point's values and its completion record are written whole
+                    _write_point(spec, store, records, idx, params, result)
+                raise_if_interrupted()
+        except BaseException:
+            if plan.scheduler is not None:  # an existing cluster stops computing them (an embedded one is killed)
+                with held_interrupts(), contextlib.suppress(Exception):
+                    client.cancel(list(futures), force=True)
+            raise

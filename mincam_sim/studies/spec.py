@@ -186,7 +186,8 @@ def _values(section: str, key: str, value: Any, experiment: StudyExperiment, uni
     return out
 
 
-def _hours(seconds: float) -> str:
+def duration_text(seconds: float) -> str:
+    """A duration as it reads best: seconds, minutes or hours."""
     if seconds < 120:
         return f"{seconds:.0f} s"
     if seconds < 7200:
@@ -198,8 +199,8 @@ def _check_size(n_points: int, experiment: StudyExperiment, replicates: int, qui
     if n_points > max_points:
         per_point = experiment.seconds_per_point[0 if quick else 1] * replicates
         raise ConfigError(f"the study has {n_points:,} points (limit {max_points:,}): about "
-                          f"{_hours(n_points * per_point)} of one worker at ~{per_point:g} s a point; shrink the "
-                          f"grid or raise the limit with --max-points {n_points} (max_points={n_points})")
+                          f"{duration_text(n_points * per_point)} of one worker at ~{per_point:g} s a point; shrink "
+                          f"the grid or raise the limit with --max-points {n_points} (max_points={n_points})")
 
 
 def load_study(source: str | Path | dict, quick: bool = False, base_dir: str | Path | None = None,

@@ -373,6 +373,35 @@ CASES: list[Case] = [
                                          '[[world.mover]]\nid = "card"\noffsets_m = [[0, 0, 0], [0.05, 0, 0]]\n'
                                          '[[world.mover]]\nid = "lamp"\noffsets_m = [[0, 0, 0], [0, 0.02, 0]]\n'},
          expect="ok", outputs=("out/measurements.csv", "out/dP.png")),
+    # studies (one block; study: a one-point study file, run: its command, big: a 60-point tracking grid,
+    # about 30 h at the tracking target's typical 1800 s a point)
+    *(lambda study, run, big: [
+        Case("study_workers_zero", [*run, "--workers", "0"], {"s.toml": study}, keywords=("--workers",)),
+        Case("study_workers_negative", [*run, "--workers", "-2"], {"s.toml": study}, keywords=("--workers",)),
+        Case("study_workers_with_scheduler", [*run, "--workers", "2", "--scheduler", "tcp://127.0.0.1:9"],
+             {"s.toml": study}, keywords=("--workers 2 does not apply with --scheduler",)),
+        Case("study_scheduler_unreachable", [*run, "--scheduler", "tcp://127.0.0.1:9"], {"s.toml": study},
+             keywords=("tcp://127.0.0.1:9 within 5 s",)),
+        Case("study_scheduler_without_port", [*run, "--scheduler", "localhost"], {"s.toml": study},
+             keywords=("--scheduler localhost",)),
+        Case("study_scheduler_http_address", [*run, "--scheduler", "http://127.0.0.1:8786"], {"s.toml": study},
+             keywords=("http://127.0.0.1:8786",)),
+        Case("study_estimated_over_the_time_limit", ["study", "run", "big.toml"], {"big.toml": big},
+             keywords=("--time-limit-s",)),
+        Case("study_time_limit_zero", [*run, "--time-limit-s", "0"], {"s.toml": study}, keywords=("--time-limit-s",)),
+        Case("study_store_lacks_a_variable", [*run, "--out", "so"], {"s.toml": study}, pre=[[*run, "--out", "so"]],
+             between=lambda tmp: [f.unlink() for f in (tmp / "so/results.zarr/avg_after_pct_stderr").iterdir()],
+             keywords=("lacks variable(s) avg_after_pct_stderr",)),
+        Case("study_store_lacks_a_coordinate", [*run, "--out", "so"], {"s.toml": study},
+             pre=[[*run, "--out", "so"]],
+             between=lambda tmp: [f.unlink() for f in (tmp / "so/results.zarr/depth_m").iterdir()],
+             keywords=("lacks coordinate(s) depth_m",)),
+        Case("study_workers_above_the_cores", [*run, "--workers", "99", "--out", "so"], {"s.toml": study},
+             expect="ok", notes=("warning: --workers 99 is more than the",), outputs=("so/study.png",)),
+    ])('[study]\nexperiment = "spacing"\nreplicates = 1\n[grid]\ndepth_m = [0.5]\n[metrics]\n'
+       'keep = ["avg_after_pct"]\n', ["study", "run", "s.toml", "--quick"],
+       '[study]\nexperiment = "tracking"\n[grid]\nspacing_m = ['
+       + ", ".join(f"{0.001 * i:.3f}" for i in range(1, 61)) + "]\n"),
 ]
 
 MESH = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"
