@@ -195,6 +195,15 @@ def _global(
     backend.request_variant(variant)
 
 
+def _ignored(message: str) -> None:
+    """One warning line for an option that does not apply (:class:`IgnoredSettingWarning`)."""
+    import warnings
+
+    from mincam_sim.configuration.schema import IgnoredSettingWarning
+
+    warnings.warn(message, IgnoredSettingWarning, stacklevel=2)
+
+
 def _say(msg: str) -> None:
     typer.echo(msg, err=True)
 
@@ -318,7 +327,7 @@ def _render_world(config: Path, out_dir: Path | None, check: bool, overwrite: bo
     variant = check_variant(cfg.run.variant)
     if check:
         check_out_dir(cfg.run.out_dir, create=False)
-        for line in world_summary(cfg, variant):
+        for line in world_summary(cfg, variant, time_limit_s):
             typer.echo(line)
         return
     check_out_dir(cfg.run.out_dir)
@@ -357,6 +366,8 @@ def render(
 
     if not (np.isfinite(time_limit_s) and time_limit_s > 0):
         raise ConfigError(f"--time-limit-s must be a positive number of seconds, got {time_limit_s}")
+    if check and overwrite:
+        _ignored("--overwrite is ignored: --check renders nothing and writes nothing")
     raw, _, _ = read_document(config, None)
     if not raw:
         typer.echo(f"warning: {config} sets nothing: rendering the default job (every key at its default, "
@@ -374,7 +385,7 @@ def render(
                           "(llvm_ad_mono or cuda_ad_mono); scalar_rgb renders only solver = \"reference\"")
     if check:
         check_out_dir(cfg.run.out_dir, create=False)
-        for line in config_summary(cfg, variant):
+        for line in config_summary(cfg, variant, time_limit_s):
             typer.echo(line)
         return
     check_out_dir(cfg.run.out_dir)
@@ -482,6 +493,8 @@ def masks_export(
         check_out_file(preview, "--preview file")
         if preview.suffix.lower() != ".exr":
             raise ConfigError(f"--preview {preview}: the preview is OpenEXR; give a name ending in .exr")
+    if srgb and not spec.startswith("file:"):
+        _ignored(f"--srgb is ignored: it decodes the PNG values of a file: mask, and {spec!r} is generated")
     mask = parse_mask(spec, size_m, 512, "mask", encoding="srgb" if srgb else "linear")
     _check_print_grid(mask, size_m, dpi)
     try:
