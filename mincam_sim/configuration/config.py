@@ -598,8 +598,11 @@ def _custom_mincam(m: MincamSection, mixel_tables: list, base: Path) -> Mincam:
             raise ConfigError(f"{where}: {err}") from None
     try:
         return Mincam(tuple(mixels))
-    except ValueError as err:
-        raise ConfigError(f"[[mixel]]: {err}") from None
+    except ValueError as err:  # the Python fix (allow_overlap=True) is no key of a config file
+        text = str(err).replace("move them apart, or pass allow_overlap=True to render an idealised mincam in which "
+                                "each mixel sees the scene as if it were alone",
+                                "move them apart (position_m of their [[mixel]] tables)")
+        raise ConfigError(f"[[mixel]]: {text}") from None
 
 
 def _build_screen(s: ScreenSection) -> Screen:

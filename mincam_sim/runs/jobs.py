@@ -398,8 +398,8 @@ def check_budget(cfg: RenderConfig | WorldConfig, variant: str | None,
                           f"{_duration(limit_s)}: lower [run] {key} (or {frames}), or raise the limit with "
                           f"--time-limit-s {max(limit_s, 1.5 * seconds):.0f}")
     n_bytes, held = estimate_bytes(cfg)
-    check_memory(n_bytes, held, "fewer frames" + (" or a smaller [world.camera]" if world else
-                                                   " or a lower [screen] resolution"))
+    check_memory(n_bytes, held, "fewer frames or a smaller [world.camera]" if world else
+                 "fewer frames, fewer mixels or a lower [screen] resolution")
     return seconds
 
 
