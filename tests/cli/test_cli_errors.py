@@ -373,7 +373,7 @@ CASES: list[Case] = [
          keywords=("omega_rad_per_m",)),
     Case("guard_mixel_d_f_negative", R, {"c.toml": toml(mixel(d_f_m="-1.0"), mincam=CUSTOM)}, keywords=("d_f_m",)),
     Case("guard_mixels_overlapping", R,
-         {"c.toml": toml(mixel(name='"a"') + mixel(name='"b"'), mincam=CUSTOM)}, keywords=("overlap",)),
+         {"c.toml": toml(mixel(name='"a"') + mixel(name='"b"'), mincam=CUSTOM)}, keywords=("position_m",)),
     Case("guard_mixel_forward_1e308", R, {"c.toml": toml(mixel(forward="[1e308, 1e308, 0]"), mincam=CUSTOM)},
          keywords=("forward",)),
     Case("guard_world_frame_rate_zero", R,
