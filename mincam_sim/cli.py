@@ -12,6 +12,8 @@ import os
 import re
 import sys
 import traceback
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -195,6 +197,27 @@ def _global(
     backend.request_variant(variant)
 
 
+@contextmanager
+def _warnings_once_valid() -> Iterator[None]:
+    """Hold the warnings raised while a config is read and checked; show them once it passes. A refused config
+    shows its one ``error:`` line alone (its warnings come back when it is fixed)."""
+    import warnings
+
+    with warnings.catch_warnings(record=True) as held:
+        yield
+    for w in held:
+        warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+
+
+def _ignored(message: str) -> None:
+    """One warning line for an option that does not apply (:class:`IgnoredSettingWarning`)."""
+    import warnings
+
+    from mincam_sim.configuration.schema import IgnoredSettingWarning
+
+    warnings.warn(message, IgnoredSettingWarning, stacklevel=2)
+
+
 def _say(msg: str) -> None:
     typer.echo(msg, err=True)
 
@@ -307,15 +330,18 @@ def _echo_table(m) -> None:
 
 def _render_world(config: Path, out_dir: Path | None, check: bool, overwrite: bool, time_limit_s: float) -> None:
     from mincam_sim.configuration.world_config import load_world_config
-    from mincam_sim.runs.jobs import run_world_config, world_summary
+    from mincam_sim.runs.jobs import check_budget, run_world_config, world_summary
 
-    cfg = load_world_config(config)
-    if out_dir is not None:
-        cfg.run.out_dir = out_dir
-    variant = check_variant(cfg.run.variant)
-    if check:
+    with _warnings_once_valid():
+        cfg = load_world_config(config)
+        if out_dir is not None:
+            cfg.run.out_dir = out_dir
+        variant = check_variant(cfg.run.variant)
         check_out_dir(cfg.run.out_dir, create=False)
-        for line in world_summary(cfg, variant):
+        if not check:
+            check_budget(cfg, variant, time_limit_s)
+    if check:
+        for line in world_summary(cfg, variant, time_limit_s):
             typer.echo(line)
         return
     check_out_dir(cfg.run.out_dir)
@@ -350,10 +376,12 @@ def render(
     from mincam_sim.configuration.toml_files import read_document
     from mincam_sim.plotting.plots import plot_render, plot_response_maps
     from mincam_sim.render.solvers import Reference, ResponseMap
-    from mincam_sim.runs.jobs import config_summary, run_render_config
+    from mincam_sim.runs.jobs import check_budget, config_summary, run_render_config
 
     if not (np.isfinite(time_limit_s) and time_limit_s > 0):
         raise ConfigError(f"--time-limit-s must be a positive number of seconds, got {time_limit_s}")
+    if check and overwrite:
+        _ignored("--overwrite is ignored: --check renders nothing and writes nothing")
     raw, _, _ = read_document(config, None)
     if not raw:
         typer.echo(f"warning: {config} sets nothing: rendering the default job (every key at its default, "
@@ -361,17 +389,20 @@ def render(
     if "world" in raw:
         _render_world(config, out_dir, check, overwrite, time_limit_s)
         return
-    cfg = load_config(config)
-    if out_dir is not None:
-        cfg.run.out_dir = out_dir
-    variant = check_variant(cfg.run.variant)
-    cfg.run.variant = variant
-    if variant == "scalar_rgb" and not isinstance(cfg.run.solver, Reference):
-        raise ConfigError(f"[run] solver = {solver_name(cfg.run.solver)!r} needs a vectorised Mitsuba variant "
-                          "(llvm_ad_mono or cuda_ad_mono); scalar_rgb renders only solver = \"reference\"")
-    if check:
+    with _warnings_once_valid():
+        cfg = load_config(config)
+        if out_dir is not None:
+            cfg.run.out_dir = out_dir
+        variant = check_variant(cfg.run.variant)
+        cfg.run.variant = variant
+        if variant == "scalar_rgb" and not isinstance(cfg.run.solver, Reference):
+            raise ConfigError(f"[run] solver = {solver_name(cfg.run.solver)!r} needs a vectorised Mitsuba variant "
+                              "(llvm_ad_mono or cuda_ad_mono); scalar_rgb renders only solver = \"reference\"")
         check_out_dir(cfg.run.out_dir, create=False)
-        for line in config_summary(cfg, variant):
+        if not check:
+            check_budget(cfg, variant, time_limit_s)
+    if check:
+        for line in config_summary(cfg, variant, time_limit_s):
             typer.echo(line)
         return
     check_out_dir(cfg.run.out_dir)

@@ -21,7 +21,7 @@ import numpy as np
 
 from mincam_sim import masks as masks_mod
 from mincam_sim import paper
-from mincam_sim.budget import Budget
+from mincam_sim.budget import MAX_REPLICATES, Budget, field_problem
 from mincam_sim.configuration.schema import (
     Choice,
     Integer,
@@ -39,8 +39,9 @@ from mincam_sim.configuration.schema import (
     read_section,
     read_sections,
     setting,
+    warn_ignored,
+    where,
 )
-from mincam_sim.configuration.schema import integer as _integer
 from mincam_sim.configuration.schema import number as _number
 from mincam_sim.configuration.schema import path as _path
 from mincam_sim.configuration.schema import string as _string
@@ -91,7 +92,6 @@ _VARIANTS = ("", "cuda_ad_mono", "llvm_ad_mono", "scalar_rgb")
 
 MAX_MASK_RESOLUTION = 8192  # texels per side (masks.MAX_TEXELS = 8192^2)
 MAX_SCREEN_TEXELS = 4096 * 4096  # Screen's own limit
-MAX_REPLICATES = 4096
 
 
 # ------------------------------------------------------------------------------------------------ solvers
@@ -165,17 +165,14 @@ def make_budget(solver: Solver, spp: int, samples_per_texel: int | None, target_
 
 
 # ------------------------------------------------------------------------------------------------ checks
-def _samples_per_texel(section: str, key: str, value: Any) -> int:
-    count = _integer(section, key, value)
-    if count < 2:
-        raise ConfigError("[run] samples_per_texel must be >= 2 (its spread gives the standard error)")
-    return count
-
-
-def _replicates(section: str, key: str, value: Any) -> int:
-    if isinstance(value, int) and not isinstance(value, bool) and value < 2:
-        raise ConfigError("[run] replicates must be >= 2 (the standard error needs two estimates)")
-    return _integer(section, key, value, minimum=2, maximum=MAX_REPLICATES)
+def budget_field(section: str, key: str, value: Any) -> int | float:
+    """A ``[run]`` key of the budget (``spp``, ``samples_per_texel``, ``replicates``, ``seed``,
+    ``target_rel_stderr``), checked by the budget's own rule (:func:`mincam_sim.budget.field_problem`): a
+    ``Budget(...)`` in Python refuses the same values with the same words."""
+    problem = field_problem(key, value)
+    if problem is not None:
+        raise ConfigError(where(section, key) + problem.removeprefix(key))
+    return float(value) if key == "target_rel_stderr" else int(value)
 
 
 def _variant(section: str, key: str, value: Any) -> str:
@@ -243,16 +240,17 @@ class RunSection:
                           '"aperture" (rays through the mask aperture) or "reference" (the literal scene)',
                           solver_check("display"))
     spp: int = setting(65536, 'samples per mixel per frame ("aperture"/"reference"); rounded UP to a multiple of '
-                       "replicates (65536 with 8 replicates runs exactly)", Integer())
+                       "replicates (65536 with 8 replicates runs exactly)", budget_field)
     samples_per_texel: int = setting(
         64, 'samples per display texel per mixel ("response_map"): traced as replicates x k^2 stratified samples, '
         "k = floor(sqrt(samples_per_texel / replicates)), i.e. rounded DOWN:\n64 with 8 replicates traces 32 "
         "(8 x 2^2); 72 (8 x 3^2) and 128 (8 x 4^2) run exactly. `render` prints the count it traces when it "
-        "differs from the one asked.", _samples_per_texel)
+        "differs from the one asked.", budget_field)
     target_rel_stderr: float = setting(0.0, "> 0: pick samples automatically to reach this relative standard error",
-                                       Number(minimum=0.0))
-    replicates: int = setting(8, "independent estimates per value, for the standard error", _replicates)
-    seed: int = setting(0, "same seed, same numbers", Integer(minimum=0))
+                                       budget_field)
+    replicates: int = setting(8, f"independent estimates per value, for the standard error (2 .. {MAX_REPLICATES})",
+                              budget_field)
+    seed: int = setting(0, "same seed, same numbers", budget_field)
     variant: str = setting("", '"" = automatic (cuda_ad_mono > llvm_ad_mono > scalar_rgb)', _variant)
     out_dir: str = setting("out/render", "measurements.npz / .csv (+ response maps as OpenEXR); relative to this "
                            "file", _out_dir)
@@ -600,8 +598,11 @@ def _custom_mincam(m: MincamSection, mixel_tables: list, base: Path) -> Mincam:
             raise ConfigError(f"{where}: {err}") from None
     try:
         return Mincam(tuple(mixels))
-    except ValueError as err:
-        raise ConfigError(f"[[mixel]]: {err}") from None
+    except ValueError as err:  # the Python fix (allow_overlap=True) is no key of a config file
+        text = str(err).replace("move them apart, or pass allow_overlap=True to render an idealised mincam in which "
+                                "each mixel sees the scene as if it were alone",
+                                "move them apart (position_m of their [[mixel]] tables)")
+        raise ConfigError(f"[[mixel]]: {text}") from None
 
 
 def _build_screen(s: ScreenSection) -> Screen:
@@ -673,6 +674,51 @@ def _build_frames(f: FramesSection, screen: Screen, base: Path) -> tuple[FrameSo
     return frames, sweep.positions_m
 
 
+#: The ``[frames]`` keys each kind uses (``kind`` aside); the others are ignored with a warning.
+FRAME_KEYS = {"line_sweep": ("start_m", "end_m", "n", "square_m", "radiance_w_m2_sr", "background_w_m2_sr"),
+              "grid_sweep": ("x_range_m", "y_range_m", "nx", "ny", "square_m", "radiance_w_m2_sr",
+                             "background_w_m2_sr"),
+              "npy": ("path",)}
+
+
+def _is_file_mask(spec: Any) -> bool:
+    return isinstance(spec, str) and spec.startswith("file:")
+
+
+def warn_ignored_mincam(given: dict, mixel_tables: list, mincam: Mincam, cls: type,
+                        placed: tuple[str, ...] = ("spacing_m",)) -> None:
+    """One warning per ``[mincam]`` / ``[[mixel]]`` key that the rest of the file makes ineffective (``placed``:
+    the keys that place a pair or cross layout, ignored by ``layout = "custom"``)."""
+    custom = given.get("layout") == "custom"
+    if custom:
+        warn_ignored("mincam", given, placed, 'layout = "custom" places each [[mixel]] at its own position_m', cls)
+    if not any(mx.optics == "wave" for mx in mincam):
+        warn_ignored("mincam", given, ("wavelengths_m",), 'no mixel has optics = "wave"', cls)
+    masks = [t.get("mask") for t in mixel_tables] if custom else []
+    if not any(_is_file_mask(m) for m in masks):
+        warn_ignored("mincam", given, ("mask_encoding",), "it applies to file: masks, and no mixel has one", cls)
+    elif all(_is_file_mask(m) for m in masks):
+        warn_ignored("mincam", given, ("mask_resolution",), "every mask is a file: image (its pixels are the "
+                     "texels)", cls)
+    for i, table_ in enumerate(mixel_tables if custom else []):
+        if not _is_file_mask(table_.get("mask")):
+            warn_ignored(f"[[mixel]] #{i + 1}", table_, ("mask_encoding",), "its mask is not a file: image")
+
+
+def _warn_ignored(tables: dict, run: RunSection, mincam: Mincam, frames_kind: str) -> None:
+    """One warning line per key the rest of a display file makes ineffective (nothing is refused)."""
+    if run.solver == "response_map":
+        warn_ignored("run", tables["run"], ("spp",), 'solver = "response_map" traces samples_per_texel (spp is for '
+                     'the "aperture" and "reference" solvers)', RunSection)
+    else:
+        warn_ignored("run", tables["run"], ("samples_per_texel",), f"solver = {run.solver!r} traces spp rays per "
+                     'mixel per frame (samples_per_texel is for the "response_map" solver)', RunSection)
+    warn_ignored_mincam(tables["mincam"], tables["mixel"], mincam, MincamSection)
+    unused = [k for keys in FRAME_KEYS.values() for k in keys if k not in FRAME_KEYS[frames_kind]]
+    warn_ignored("frames", tables["frames"], list(dict.fromkeys(unused)), f'kind = "{frames_kind}" uses only '
+                 f"{', '.join(FRAME_KEYS[frames_kind])}", FramesSection)
+
+
 def load_config(source: str | Path | dict, base_dir: str | Path | None = None) -> RenderConfig:
     """Parse and validate a TOML file (path), TOML text, or an already-parsed dict.
 
@@ -689,6 +735,12 @@ def load_config(source: str | Path | dict, base_dir: str | Path | None = None) -
     ConfigError
         For every problem with the document (never TypeError, KeyError ...): the message names the field and
         the fix.
+
+    Warns
+    -----
+    IgnoredSettingWarning
+        One line per key that the rest of the file makes ineffective (``spp`` with ``solver = "response_map"``,
+        a ``grid_sweep`` key with ``kind = "line_sweep"`` ...).
     """
     raw, base, path = read_document(source, base_dir)
     tables = RENDER_SCHEMA.tables(raw)
@@ -709,5 +761,6 @@ def load_config(source: str | Path | dict, base_dir: str | Path | None = None) -
     except ValueError as err:
         raise ConfigError(f"[mincam]/[screen]: {err}") from None
     frames, positions = _build_frames(sections["frames"], screen, base)
+    _warn_ignored(tables, run, mincam, sections["frames"].kind)
     run_cfg = RunConfig(solver, budget, run.variant or None, _path("run", "out_dir", run.out_dir, base))
     return RenderConfig(run_cfg, mincam, screen, frames, positions, path, sections["frames"].kind)

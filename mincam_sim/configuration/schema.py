@@ -21,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import textwrap
+import warnings
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from decimal import Decimal
@@ -72,6 +73,22 @@ def refuse_unknown(section: str, given: Iterable[Any], allowed: Sequence[str], w
     plural = "s" if len(unknown) > 1 else ""
     raise ConfigError(f"{bracket(section)}: unknown {what}{plural} {', '.join(hints)}; allowed {what}s are "
                       f"{', '.join(sorted(allowed))}")
+
+
+class IgnoredSettingWarning(UserWarning):
+    """A key (or an option) that the rest of the file (or the command) makes ineffective: it is ignored."""
+
+
+def warn_ignored(section: str, given: dict, keys: Sequence[str], why: str, cls: type | None = None) -> None:
+    """One :class:`IgnoredSettingWarning` line naming the ``keys`` that ``given`` sets (to other than their default
+    in the section dataclass ``cls``, when given: a default written out changes nothing) and ``why`` they are
+    ignored."""
+    default = defaults(cls) if cls is not None else {}
+    named = [k for k in keys if k in given and (k not in default or plain(given[k]) != default[k])]
+    if named:
+        verb = "is" if len(named) == 1 else "are"
+        warnings.warn(f"{where(section, ', '.join(named))} {verb} ignored: {why}", IgnoredSettingWarning,
+                      stacklevel=3)
 
 
 # ------------------------------------------------------------------------------------------------ values

@@ -22,10 +22,12 @@ from mincam_sim.configuration.config import (
     MincamSection,
     MixelTable,
     _build_mincam,
+    budget_field,
     make_budget,
     make_solver,
     refuse_old_solver_keys,
     solver_check,
+    warn_ignored_mincam,
 )
 from mincam_sim.configuration.schema import (
     Choice,
@@ -38,6 +40,7 @@ from mincam_sim.configuration.schema import (
     describe,
     read_section,
     setting,
+    warn_ignored,
 )
 from mincam_sim.configuration.schema import number as _number
 from mincam_sim.configuration.schema import path as _path
@@ -53,6 +56,11 @@ UP_AXES = ("z", "y")
 LIGHT_KINDS = ("area", "point", "spot", "sky")
 BACKGROUNDS = ("without_movers", "as_built", "first_frame")
 MAX_WORLD_FRAMES = 1_000_000
+#: The ``[[world.light]]`` keys each kind uses (``id`` and ``kind`` aside); the others are ignored with a warning.
+LIGHT_KEYS = {"area": ("position_m", "forward", "size_m", "radiance_w_m2_sr"),
+              "point": ("position_m", "intensity_w_sr"),
+              "spot": ("position_m", "forward", "intensity_w_sr", "cutoff_deg"),
+              "sky": ("radiance_w_m2_sr",)}
 
 
 def _world_variant(section: str, key: str, value: Any) -> str:
@@ -131,12 +139,11 @@ class WorldRunSection:
 
     solver: str = setting("stratified_change", '"stratified_change" (rays where the change is) or "plain_change" '
                           "(whole-aperture rays, the reference)", solver_check("world"))
-    spp: int = setting(16384, "rays per mixel per frame and pass", Integer())
+    spp: int = setting(16384, "rays per mixel per frame and pass", budget_field)
     target_rel_stderr: float = setting(0.0, "> 0: raise spp until the worst significant dP reaches this",
-                                       Number(minimum=0.0))
-    replicates: int = setting(8, "independent estimates per value, for the standard error",
-                              Integer(minimum=2, maximum=4096))
-    seed: int = setting(0, "same seed, same numbers", Integer(minimum=0))
+                                       budget_field)
+    replicates: int = setting(8, "independent estimates per value, for the standard error", budget_field)
+    seed: int = setting(0, "same seed, same numbers", budget_field)
     max_depth: int = setting(0, "path length from the mask: 2 = direct light, 3 = one inter-reflection; 0 = the "
                              "scene file's <integrator> max_depth, else 3", _depth)
     variant: str = setting("", '"" = automatic (cuda_ad_mono > llvm_ad_mono)', _world_variant)
@@ -399,6 +406,11 @@ def load_world_config(source: str | Path | dict, base_dir: str | Path | None = N
     if len(set(names)) != len(names):
         raise ConfigError(f"[[world.mover]] ids {names}: each shape can move in one mover table only")
     camera = _camera(tables["world.camera"]) if "camera" in (raw.get("world") or {}) else None
+    warn_ignored_mincam(tables["mincam"], tables["mixel"], mincam, WorldMincamSection,
+                        placed=("spacing_m", "position_m", "forward", "up"))
+    if scene_file is None:
+        warn_ignored("world", tables["world"], ("up",), "it turns the XML scene, and [world] names no scene",
+                     WorldSection)
     return WorldConfig(run_cfg, mincam, scene_file, w.up, w.frame_rate_hz, w.background, objects, lights, movers,
                        camera, path, files, w.parameters or {}, w.unit_m)
 
@@ -464,6 +476,9 @@ def _light(i: int, given: dict) -> WorldLight:
     kind = _required(f"{where} ({lid})", "kind", t.kind, f"one of {', '.join(LIGHT_KINDS)}")
     if np.linalg.norm(t.forward) == 0:
         raise ConfigError(f"{where} ({lid}): forward must be a non-zero direction")
+    unused = [k for keys in LIGHT_KEYS.values() for k in keys if k not in LIGHT_KEYS[kind]]
+    warn_ignored(f"{where} ({lid})", given, list(dict.fromkeys(unused)), f'a {kind} light uses only '
+                 f"{', '.join(LIGHT_KEYS[kind])}")
     return WorldLight(lid, kind, t.position_m, t.forward, t.size_m, t.radiance_w_m2_sr, t.intensity_w_sr,
                       t.cutoff_deg)
 
@@ -488,6 +503,8 @@ def _mover(i: int, given: dict, base: Path, rate: float, files: list[Path]) -> M
     if len(chosen) != 1:
         raise ConfigError(f"{where}: give exactly one of offsets_m, keyframes_m (with times_s) or csv; got "
                           f"{chosen or 'none'}")
+    if t.keyframes_m is None:
+        warn_ignored(where, given, ("times_s",), f"it times keyframes_m, and this mover gives {chosen[0]}")
     if t.offsets_m is not None:
         offsets = t.offsets_m
     elif t.keyframes_m is not None:

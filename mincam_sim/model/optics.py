@@ -98,7 +98,7 @@ class Mixel:
         object.__setattr__(self, "wavelengths_m", lam)
         if self.detector_size_m > min(self.mask.width_m, self.mask.height_m):
             raise InputError(
-                f"mixel {self.name!r}: detector ({self.detector_size_m} m) is larger than its mask aperture "
+                f"mixel {self.name!r}: detector_size_m ({self.detector_size_m} m) is larger than its mask aperture "
                 f"({self.mask.width_m} x {self.mask.height_m} m); the housing tube has the mask's cross-section"
             )
 

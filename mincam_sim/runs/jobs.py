@@ -21,6 +21,7 @@ camera ``camera.npz`` (every frame's image and the background's) plus the change
 
 from __future__ import annotations
 
+import os
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -203,6 +204,7 @@ def mover_updates(sim: Simulation, cfg: WorldConfig) -> tuple[list[dict], dict, 
     params = sim.params
     movable = sim.movable()
     n = cfg.n_frames
+    _check_update_memory(params, cfg)
     frames: list[dict] = [{} for _ in range(n)]
     centres: dict[str, np.ndarray] = {}
     for mover in cfg.movers:
@@ -240,6 +242,18 @@ def mover_updates(sim: Simulation, cfg: WorldConfig) -> tuple[list[dict], dict, 
     else:
         background = {}
     return frames, background, centres
+
+
+def _check_update_memory(params, cfg: WorldConfig) -> None:
+    """Refuse, before they are made, per-frame updates that would not fit in memory: every frame holds each
+    moving mesh's vertices (3 float64 each) or each moving shape's 4 x 4 transform."""
+    floats = 0
+    for mover in cfg.movers:
+        vkey = f"{mover.id}.vertex_positions"
+        floats += int(np.size(params[vkey])) if vkey in params else 16
+    n_bytes = float(cfg.n_frames) * floats * 8
+    check_memory(n_bytes, f"{cfg.n_frames} frames x {floats} floats of the movers' vertices and transforms",
+                 "fewer frames (a lower [world] frame_rate_hz or shorter trajectories) or simpler moving meshes")
 
 
 def _camera_dict(camera: CameraSpec) -> dict:
@@ -307,51 +321,66 @@ def plot_changes(ch: Changes, path: Path) -> Path:
 
 
 # --------------------------------------------------------------------------------------- size and time guard
-# Samples traced per second per solver, measured with llvm_ad_mono on a shared 2-core CPU (a 128 x 72 screen,
-# 2 mixels; worlds: the room of scenes/world, max_depth 3): the estimate is an upper bound of the time on faster
-# machines (a CUDA GPU is far faster).
-SAMPLES_PER_S: dict[type[Solver], float] = {ResponseMap: 2.0e7, Aperture: 1.0e7, Reference: 1.0e6,
-                                             PlainChange: 4.0e6, StratifiedChange: 4.0e6}
+# The cost model of a render, measured with llvm_ad_mono on the project's shared 2-core CPU as CPU seconds (one
+# core's work; on an idle 2-core machine the wall time is between half of it, where the tracing runs on both
+# cores, and all of it, for the per-frame work in Python). ``tests/core/test_estimates.py`` times real runs
+# against it.
+STARTUP_S = 3.5  # a tiny render: imports, the backend, the scene, the result files and figures
+#: Samples traced per CPU second per solver (response maps: texel samples; the others: rays; worlds: paths of
+#: max_depth 3 in the room of scenes/world).
+SAMPLES_PER_S: dict[type[Solver], float] = {ResponseMap: 3.0e7, Aperture: 5.0e6, Reference: 2.0e6,
+                                             PlainChange: 2.5e6, StratifiedChange: 1.5e6}
+#: Seconds per frame besides tracing: making or reading the frame, its row in the store, its lines in the CSV, the
+#: printed table and the figure (the ray solvers and worlds add a scene update and kernel launches per frame).
+FRAME_S: dict[type[Solver], float] = {ResponseMap: 2.0e-4, Aperture: 7.0e-3, Reference: 7.0e-3,
+                                       PlainChange: 1.2e-2, StratifiedChange: 1.2e-2}
+TEXEL_S = 6.0e-9  # per display texel and frame: making the frame, checking its radiance
+TEXEL_MIXEL_S = 3.0e-9  # per display texel, mixel and frame: the products with the response maps
+CAMERA_IMAGE_S = 0.05  # per ground-truth camera image, besides its samples
 SCALAR_SLOWDOWN = 10.0  # scalar_rgb traces one ray at a time
-DOT_PRODUCTS_PER_S = 5.0e8  # response_map: frame x map products (numpy)
 DEFAULT_TIME_LIMIT_S = 4 * 3600.0
+RESULT_BYTES_PER_VALUE = 64  # per frame and mixel: values and errors in the store, the result, the CSV, the figure
 
 
 def estimate_seconds(cfg: RenderConfig | WorldConfig, variant: str | None = None) -> tuple[float, str]:
-    """A rough upper estimate of a render's time [s] and what it counts (from :data:`SAMPLES_PER_S`), for display
-    and world configs alike; nothing is built.
+    """A rough estimate of a render's time [s] and what it counts, for display and world configs alike
+    (:data:`STARTUP_S` + samples / :data:`SAMPLES_PER_S` + frames x (:data:`FRAME_S` + texel terms)); nothing is
+    built.
 
     With ``target_rel_stderr > 0`` the sample counts grow until the target is met; the estimate is then that of
     the first pass only (the text says so).
     """
     solver, budget = cfg.run.solver, cfg.run.budget
     n_mixels = len(cfg.mincam)
+    kind = type(solver)
     if isinstance(cfg, WorldConfig):
         n_frames, traced = cfg.n_frames, budget.rays()
         depth = (cfg.run.max_depth or 3) / 3.0  # segments per path, relative to the measured max_depth 3
         samples = float(n_frames) * traced * n_mixels * depth
         what = f"{n_frames} frames x {traced} rays x {n_mixels} mixels"
-        seconds = samples / SAMPLES_PER_S[type(solver)]
+        seconds = samples / SAMPLES_PER_S[kind] + n_frames * FRAME_S[kind]
         if cfg.camera is not None:
             pixels = float(n_frames + 1) * cfg.camera.width_px * cfg.camera.height_px * cfg.camera.spp
-            seconds += pixels / SAMPLES_PER_S[Aperture]
+            seconds += pixels / SAMPLES_PER_S[Aperture] + (n_frames + 1) * CAMERA_IMAGE_S
             what += f" + camera {n_frames + 1} images"
-    elif isinstance(solver, ResponseMap):
-        n_frames, (traced, _) = len(cfg.frames), traced_samples(cfg.run)
-        rows, cols = cfg.screen.shape
-        samples = float(rows * cols) * traced * n_mixels
-        what = f"{rows * cols} texels x {traced} samples x {n_mixels} mixels"
-        seconds = samples / SAMPLES_PER_S[ResponseMap] + n_frames * rows * cols * n_mixels / DOT_PRODUCTS_PER_S
     else:
         n_frames, (traced, _) = len(cfg.frames), traced_samples(cfg.run)
-        samples = float(n_frames) * traced * n_mixels
-        what = f"{n_frames} frames x {traced} samples x {n_mixels} mixels"
-        seconds = samples / SAMPLES_PER_S[type(solver)]
+        rows, cols = cfg.screen.shape
+        texels = rows * cols
+        per_frame = FRAME_S[kind] + texels * TEXEL_S
+        if isinstance(solver, ResponseMap):
+            samples = float(texels) * traced * n_mixels
+            what = f"{texels} texels x {traced} samples x {n_mixels} mixels, then {n_frames} frames"
+            per_frame += texels * n_mixels * TEXEL_MIXEL_S
+        else:
+            samples = float(n_frames) * traced * n_mixels
+            what = f"{n_frames} frames x {traced} samples x {n_mixels} mixels"
+        seconds = samples / SAMPLES_PER_S[kind] + n_frames * per_frame
     if variant == "scalar_rgb":
         seconds *= SCALAR_SLOWDOWN
     if budget.target_rel_stderr > 0:
         what += " (first pass; target_rel_stderr adds passes)"
-    return seconds, what
+    return STARTUP_S + seconds, what
 
 
 def _duration(seconds: float) -> str:
@@ -364,23 +393,89 @@ def _duration(seconds: float) -> str:
     return f"{seconds / 86400:.3g} days"
 
 
+def _gib(n_bytes: float) -> str:
+    return f"{n_bytes / 2**30:.3g} GiB"
+
+
 def check_budget(cfg: RenderConfig | WorldConfig, variant: str | None,
                  limit_s: float = DEFAULT_TIME_LIMIT_S) -> float:
-    """Refuse a render whose estimated time (:func:`estimate_seconds`) exceeds ``limit_s``; return the estimate.
+    """Refuse a render whose estimated time (:func:`estimate_seconds`) exceeds ``limit_s``, or whose arrays
+    (:func:`estimate_bytes`) would not fit in the memory free now; return the time estimate [s].
 
     Raises
     ------
     ConfigError
-        Naming the estimate, what it counts, and the two fixes (fewer samples or frames, or a higher limit).
+        Naming the estimate, what it counts, and the fixes (fewer samples or frames, or a higher limit; for
+        memory: the GiB needed and free).
     """
     seconds, what = estimate_seconds(cfg, variant)
+    world = isinstance(cfg, WorldConfig)
     if seconds > limit_s:
         key = "samples_per_texel" if isinstance(cfg.run.solver, ResponseMap) else "spp"
-        frames = "the movers' frames" if isinstance(cfg, WorldConfig) else "the frames"
+        frames = "the movers' frames" if world else "the frames"
         raise ConfigError(f"this render would take about {_duration(seconds)} ({what}), over the limit of "
                           f"{_duration(limit_s)}: lower [run] {key} (or {frames}), or raise the limit with "
                           f"--time-limit-s {max(limit_s, 1.5 * seconds):.0f}")
+    n_bytes, held = estimate_bytes(cfg)
+    check_memory(n_bytes, held, "fewer frames or a smaller [world.camera]" if world else
+                 "fewer frames, fewer mixels or a lower [screen] resolution")
     return seconds
+
+
+# Memory: what a render holds at once besides the scene (frames stream in chunks; tracing launches are bounded).
+def estimate_bytes(cfg: RenderConfig | WorldConfig) -> tuple[float, str]:
+    """The bytes a render's arrays hold at once, roughly, and what they are (nothing is built).
+
+    Per frame and mixel the results (:data:`RESULT_BYTES_PER_VALUE`); displays: the response maps (weights and
+    variances per texel and mixel, and their copies) and the chunk of frames in memory; worlds: each frame's
+    parameter updates (one 4 x 4 transform per mover here; the vertices of moving meshes are counted by
+    :func:`mover_updates` once the scene is built) and the camera's images.
+    """
+    n_mixels = len(cfg.mincam)
+    if isinstance(cfg, WorldConfig):
+        n = cfg.n_frames
+        n_bytes = float(n) * n_mixels * RESULT_BYTES_PER_VALUE + float(n) * len(cfg.movers) * (16 + 6) * 8 * 2
+        what = f"{n} frames x {len(cfg.movers)} movers"
+        if cfg.camera is not None:
+            n_bytes += 2.0 * (n + 1) * cfg.camera.width_px * cfg.camera.height_px * 8
+            what += f" + {n + 1} camera images of {cfg.camera.width_px} x {cfg.camera.height_px} px"
+        return n_bytes, what
+    n = len(cfg.frames)
+    rows, cols = cfg.screen.shape
+    maps = float(rows * cols) * n_mixels * 8 * 4 if isinstance(cfg.run.solver, ResponseMap) else 0.0  # W, var, copies
+    chunk = float(min(n, cfg.frames.chunk_size())) * cfg.frames.nbytes_per_frame * 3
+    n_bytes = float(n) * n_mixels * RESULT_BYTES_PER_VALUE + maps + chunk
+    return n_bytes, f"{n} frames x {n_mixels} mixels, {rows} x {cols} texels"
+
+
+def available_bytes() -> float:
+    """Memory free for a new allocation now [bytes]: the kernel's MemAvailable (Linux), else the physical
+    memory."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, OSError, ValueError):
+        return float("inf")
+
+
+def check_memory(n_bytes: float, what: str, fix: str) -> None:
+    """Refuse, before allocating, arrays of ``n_bytes`` that do not fit in the memory free now.
+
+    Raises
+    ------
+    ConfigError
+        Naming the GiB needed (and what they hold), the GiB free, and ``fix``.
+    """
+    free = available_bytes()
+    if n_bytes > free:
+        raise ConfigError(f"this render would hold about {_gib(n_bytes)} in memory ({what}), more than the "
+                          f"{_gib(free)} free on this machine: {fix}")
 
 
 # ----------------------------------------------------------------------------------------------- --check
@@ -397,8 +492,9 @@ def _budget_text(cfg: RenderConfig | WorldConfig) -> str:
     return f"{text}, seed {b.seed}"
 
 
-def config_summary(cfg: RenderConfig, variant: str | None) -> list[str]:
-    """What a validated config will render, one line per part (``mincam-sim render --check``)."""
+def config_summary(cfg: RenderConfig, variant: str | None, limit_s: float = DEFAULT_TIME_LIMIT_S) -> list[str]:
+    """What a validated config will render, one line per part (``mincam-sim render --check``); the estimate
+    against ``limit_s`` [s]."""
     run, screen = cfg.run, cfg.screen
     lines = [f"config: {cfg.source or 'text'} is valid"]
     def vec(v) -> str:
@@ -414,16 +510,15 @@ def config_summary(cfg: RenderConfig, variant: str | None) -> list[str]:
     lines.append(f"screen: {screen.width_m:.4f} x {screen.height_m:.4f} m, {screen.resolution[0]} x "
                  f"{screen.resolution[1]} texels, {-screen.pose.position_m[2]:g} m from the mincam")
     f = cfg.frames
-    lo = min(float(x.min()) for x in f)
-    hi = max(float(x.max()) for x in f)
+    lo, hi, seen = _radiance_range(f)
     lines.append(f"frames: {len(f)} ({cfg.frames_kind}), {f.shape[2]} x {f.shape[1]} texels, radiance "
-                 f"{lo:g} .. {hi:g} W m^-2 sr^-1, {len(f) * f.nbytes_per_frame / 2**20:.1f} MiB if held at once "
-                 "(streamed in chunks)")
+                 f"{lo:g} .. {hi:g} W m^-2 sr^-1{seen}, {len(f) * f.nbytes_per_frame / 2**20:.1f} MiB if held at "
+                 "once (streamed in chunks)")
     lines.append(f"solver: {solver_name(run.solver)}, {_budget_text(cfg)}, variant {variant or 'automatic'}")
     _, rounding = traced_samples(run)
     if rounding is not None:
         lines.append(f"samples: {rounding}")
-    lines.append(_estimate_line(cfg, variant))
+    lines.append(_estimate_line(cfg, variant, limit_s))
     out = Path(run.out_dir)
     state = "exists" if out.is_dir() else "will be created"
     if (out / RESULT).exists() or (out / f"{RESULT}.npz").exists():
@@ -432,14 +527,36 @@ def config_summary(cfg: RenderConfig, variant: str | None) -> list[str]:
     return lines
 
 
-def _estimate_line(cfg: RenderConfig | WorldConfig, variant: str | None) -> str:
+SUMMARY_FRAMES = 64  # --check reads at most this many frames (evenly spread) for the radiance range
+
+
+def _radiance_range(frames) -> tuple[float, float, str]:
+    """(lowest, highest radiance, a note) over the frames, or over :data:`SUMMARY_FRAMES` of them spread evenly
+    (a million-frame sweep is summarised in a moment; the note says so)."""
+    n = len(frames)
+    picked = np.unique(np.linspace(0, n - 1, min(n, SUMMARY_FRAMES)).round().astype(int))
+    sample = [frames[int(i)] for i in picked]
+    note = "" if len(picked) == n else f" (in {len(picked)} frames spread over the {n})"
+    return min(float(x.min()) for x in sample), max(float(x.max()) for x in sample), note
+
+
+def _estimate_line(cfg: RenderConfig | WorldConfig, variant: str | None, limit_s: float) -> str:
+    """``estimate: ...``: the time and memory :func:`check_budget` weighs, and whether it would refuse them."""
     seconds, what = estimate_seconds(cfg, variant)
-    return (f"estimate: about {_duration(seconds)} ({what}; limit {_duration(DEFAULT_TIME_LIMIT_S)}, "
-            "--time-limit-s raises it)")
+    n_bytes, _ = estimate_bytes(cfg)
+    free = available_bytes()
+    line = (f"estimate: about {_duration(seconds)} ({what}; limit {_duration(limit_s)}, --time-limit-s raises it), "
+            f"about {_gib(n_bytes)} of arrays in memory ({_gib(free)} free)")
+    if seconds > limit_s:
+        line += f"; OVER THE TIME LIMIT: render refuses it unless --time-limit-s {1.5 * seconds:.0f}"
+    if n_bytes > free:
+        line += "; MORE THAN THE FREE MEMORY: render refuses it"
+    return line
 
 
-def world_summary(cfg: WorldConfig, variant: str | None) -> list[str]:
-    """What a validated world config will render, one line per part (``mincam-sim render --check``)."""
+def world_summary(cfg: WorldConfig, variant: str | None, limit_s: float = DEFAULT_TIME_LIMIT_S) -> list[str]:
+    """What a validated world config will render, one line per part (``mincam-sim render --check``); the estimate
+    against ``limit_s`` [s]."""
     lines = [f"config: {cfg.source or 'text'} is valid (world scene)"]
     for mixel in cfg.mincam:
         p = ", ".join(f"{v:+.4f}" for v in mixel.pose.position_m)
@@ -459,6 +576,6 @@ def world_summary(cfg: WorldConfig, variant: str | None) -> list[str]:
     depth = cfg.run.max_depth or "from the scene file's <integrator>, else 3"
     lines.append(f"solver: {solver_name(cfg.run.solver)}, {_budget_text(cfg)}, max_depth {depth}, "
                  f"background {cfg.background}, variant {variant or 'automatic'}")
-    lines.append(_estimate_line(cfg, variant))
+    lines.append(_estimate_line(cfg, variant, limit_s))
     lines.append(f"out dir: {cfg.run.out_dir}")
     return lines

@@ -38,7 +38,7 @@ def test_shipped_scene_configs_load(path):
         ("[runn]\n", "unknown section"),
         ("[run]\nspp = 0", r"spp must be an integer > 0"),
         ("[run]\nspp = -4", r"spp must be an integer > 0"),
-        ("[run]\nreplicates = 1", "replicates must be >= 2"),
+        ("[run]\nreplicates = 1", "replicates must be an integer >= 2"),
         ("[run]\nsolver = 'magic'", "solver = 'magic' is not one of"),
         ("[run]\nform = 'magic'", r"\[run\] form is the old key of the solver: use \[run\] solver"),
         ("[mincam]\nd_f_m = 0.0", r"d_f_m must be a number > 0"),

@@ -254,7 +254,10 @@ def test_a_budget_refuses_fewer_samples_per_texel_than_replicates_in_python_and_
         ms.Budget(samples_per_texel=16, replicates=64)
     with pytest.raises(ConfigError, match=r"\[run\] samples_per_texel = 16 is fewer than its 64 replicates"):
         load_config("[run]\nreplicates = 64\nsamples_per_texel = 16\n")
-    load_config("[run]\nsolver = 'aperture'\nreplicates = 64\nsamples_per_texel = 16\n")  # not its count
+    from mincam_sim.configuration.schema import IgnoredSettingWarning
+
+    with pytest.warns(IgnoredSettingWarning, match=r"\[run\] samples_per_texel is ignored"):  # not its count
+        load_config("[run]\nsolver = 'aperture'\nreplicates = 64\nsamples_per_texel = 16\n")
 
 
 def test_config_example_prints_each_generated_file():

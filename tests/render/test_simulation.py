@@ -93,7 +93,7 @@ def test_run_keeps_resumes_and_refuses(tmp_path):
 
 
 @pytest.mark.parametrize("make, message", [
-    (lambda: ms.Budget(spp=0), "Budget.spp must be an integer >= 1"),
+    (lambda: ms.Budget(spp=0), "Budget.spp must be an integer > 0"),
     (lambda: ms.Budget(spp=4, replicates=8), "fewer than its 8 replicates"),
     (lambda: ms.Budget(target_rel_stderr=-1e-3), "target_rel_stderr"),
     (lambda: ms.Budget(replicates=1), "replicates must be an integer >= 2"),

@@ -189,10 +189,24 @@ class StratifiedChange(ChangeSolver):
         self.shares()
 
     def shares(self) -> np.ndarray:
-        shares = np.asarray(self.strata_shares, dtype=float)
+        """The shares as an array, after refusing (naming ``strata_shares`` / ``strata_expansions``, the fields
+        a user gives) what the strata cannot use."""
+        try:
+            shares = np.asarray(self.strata_shares, dtype=float)
+            expansions = np.asarray(self.strata_expansions, dtype=float)
+        except (TypeError, ValueError):
+            raise InputError(f"strata_shares and strata_expansions must be sequences of numbers, got "
+                             f"{self.strata_shares!r} and {self.strata_expansions!r}") from None
         if shares.ndim != 1 or not np.all(np.isfinite(shares) & (shares > 0)):
             raise InputError(f"strata_shares (share of rays per stratum) must be positive numbers, "
                              f"got {self.strata_shares!r}")
+        if expansions.ndim != 1 or not len(expansions) or expansions[0] != 1.0 or np.any(np.diff(expansions) <= 0):
+            raise InputError(f"strata_expansions (scale factors of the nested rectangles) must start at 1 and grow, "
+                             f"got {self.strata_expansions!r}")
+        if len(shares) != len(expansions) + 1:
+            raise InputError(f"strata_shares needs {len(expansions) + 1} shares (one per strata_expansions entry, "
+                             f"{len(expansions)}, plus one for the rest of the aperture), got {len(shares)}: "
+                             f"{self.strata_shares!r}")
         return shares
 
     def background_estimates(self, sim, spp, seed, replicates):
