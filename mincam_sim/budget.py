@@ -94,7 +94,9 @@ class Budget:
     seed : int
         Same seed, same numbers.
     max_spp : int, optional
-        Cap of the target search, rays per mixel per frame.
+        Cap of the target search of the ray solvers (``Aperture``, ``Reference``, the change solvers), rays per
+        mixel per frame; default 2^28 for displays, 2^26 for changes. A run that reaches it says so (the target
+        is missed, with what was reached). Response maps cap samples per texel instead.
 
     Raises
     ------

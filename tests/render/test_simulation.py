@@ -114,3 +114,15 @@ def test_import_stays_pure_numpy_until_the_renderer_is_used():
             "assert 'mitsuba' not in sys.modules and 'drjit' not in sys.modules\n"
             "ms.Simulation\nassert 'mincam_sim.render.simulation' in sys.modules\n")
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_max_spp_caps_the_target_search_and_the_run_says_so():
+    """``Budget.max_spp`` is the cap of the ray solvers' target search: an unreachable target stops there, and the
+    result and a warning say that the target was missed."""
+    cam = ms.pair_layout(spacing_m=0.033)
+    screen = ms.Screen(resolution=(16, 9))
+    sim = ms.Simulation(cam, screen=screen)
+    frame = np.ones(screen.shape)
+    with pytest.warns(UserWarning, match="target"):
+        m = sim.measure([frame], ms.Aperture(), ms.Budget(target_rel_stderr=1e-7, max_spp=1 << 15, seed=1))
+    assert m.meta["spp"] <= 1 << 15

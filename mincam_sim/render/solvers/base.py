@@ -135,6 +135,7 @@ class DisplayRayPlan(Plan):
         self.scene = sim.display_scene(solver.form)
         solver.prepare(self.scene)
         self.seed, self.target = budget.seed, budget.target_rel_stderr
+        self.cap = budget.max_spp or MAX_DISPLAY_SPP  # the target search's cap, rays per mixel per frame
         self.n_rows, self.columns = len(self.frames), list(sim.mincam.names)
         spp, self.provenance = budget.rays(), {}
         if self.target > 0:
@@ -145,7 +146,7 @@ class DisplayRayPlan(Plan):
             def pilot(samples: int):
                 return self._measure(pilot_frames, samples, derive_seed(self.seed, "pilot"))
 
-            spp, trail = pilot_to_target(pilot, pilot_spp, self.target, MAX_DISPLAY_SPP, significance=0.0)
+            spp, trail = pilot_to_target(pilot, pilot_spp, self.target, self.cap, significance=0.0)
             self.provenance.update(pilot_spp=pilot_spp, pilot_trail=trail)
         self.spp = int(spp)
 
@@ -175,7 +176,7 @@ class DisplayRayPlan(Plan):
                 **backend.describe(), **geometry_meta(mincam, self.sim.screen), **self.solver.meta(),
                 "target_rel_stderr": self.target, "spp": self.spp, **self.provenance}
         return finish_display(Measurements(values, errors, mincam.names, meta), self.solver, self.target, self.spp,
-                              MAX_DISPLAY_SPP)
+                              self.cap)
 
 
 def finish_display(result: Measurements, solver: Solver, target: float, used: int, cap: int) -> Measurements:

@@ -142,7 +142,7 @@ class ChangeSolver(Solver):
                 ch = plan.result(*collect(plan.rows(table.pending()), table))
             return ch.dp.irradiance_w_m2, ch.dp.stderr_w_m2
 
-        resolved, trail = pilot_to_target(pilot, spp, target, MAX_SPP)
+        resolved, trail = pilot_to_target(pilot, spp, target, budget.max_spp or MAX_SPP)
         return int(resolved), {"pilot_spp": spp, "pilot_worst_rel_stderr": trail[0]["worst_rel_stderr"],
                                "pilot_trail": trail, "target_rel_stderr": target}
 
@@ -230,6 +230,7 @@ class ChangePlan(Plan):
         self.solver, self.sim, self.frames, self.background = solver, sim, frames, background
         self.spp, self.seed, self.replicates, self.resolved = budget.rays(), budget.seed, replicates, resolved
         self.target, self.show_progress = budget.target_rel_stderr, show_progress
+        self.cap = budget.max_spp or MAX_SPP
         sim.update(background)
         self.bg_spp, self.bg = solver.background_estimates(sim, self.spp, self.seed, replicates)
         self.run = solver.run(sim, frames, background, self.spp, self.seed, replicates, self.bg)
@@ -259,7 +260,7 @@ class ChangePlan(Plan):
         reached = worst_relative_stderr(values[:, :n], errors[:, :n], significance=3.0)
         meta["reached_rel_stderr"] = reached if np.isfinite(reached) else None
         meta["target_rel_stderr"] = self.target
-        warn_target_missed(reached, self.target, self.spp, MAX_SPP)
+        warn_target_missed(reached, self.target, self.spp, self.cap)
         run.warn(meta)
         warn_unreached(Measurements(values[:, n:2 * n], errors[:, n:2 * n], names))
         dp = Measurements(values[:, :n], errors[:, :n], names, {**meta, "quantity": "dP = P(frame) - P(background)"})
