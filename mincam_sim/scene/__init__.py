@@ -12,7 +12,18 @@ Files:
 """
 
 from mincam_sim.scene.display import Screen, Sweep, grid_sweep, line_sweep
-from mincam_sim.scene.road import Road
-from mincam_sim.scene.tabletop import Tabletop
+
+# Tabletop and Road load trimesh (about 2 s) on first use, not with the package: a command starts faster, and
+# Ctrl-C in its first seconds is not caught by trimesh's import guard.
+_LAZY = {"Road": "mincam_sim.scene.road", "Tabletop": "mincam_sim.scene.tabletop"}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'mincam_sim.scene' has no attribute {name!r}")
+
 
 __all__ = ["Road", "Screen", "Sweep", "Tabletop", "grid_sweep", "line_sweep"]
