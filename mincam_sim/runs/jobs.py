@@ -501,7 +501,9 @@ def _budget_text(cfg: RenderConfig | WorldConfig) -> str:
     b, solver = cfg.run.budget, cfg.run.solver
     if isinstance(solver, DotProduct):
         effects = ", ".join(solver.effects()) or "the bare model"
-        return f"{effects}, exact quadrature ({solver.nodes} x {solver.nodes} points per texel, no samples)"
+        n = solver.nodes
+        points = f"{n} x {n} points per texel" + (f" x {n} x {n} on the detector" if solver.detector_blur else "")
+        return f"{effects}, exact quadrature ({points}, no samples)"
     if b.target_rel_stderr > 0:
         text = f"target relative stderr {b.target_rel_stderr:g}"
     elif isinstance(cfg.run.solver, ResponseMap):
