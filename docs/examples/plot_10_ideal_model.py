@@ -17,7 +17,7 @@ The tasks: the paper's two screen calibrations, fitted **on the model**, then us
 * the **cross**: the tracking cross (ramps ``x``, ``1 − x``, ``y``, ``1 − y``, each 3.3 cm from the centre), a
   bivariate cubic calibrated on a grid of white squares clipped to the field's disc (Eq. 7).
 
-Both run through one function, :func:`mincam_sim.experiments.ideal_model.calibrated_on_models` (the spacing
+Both run through one function, ``mincam_sim.experiments.ideal_model.calibrated_on_models`` (the spacing
 study's boundary sweep and scoring for the pair, the tracking experiment's grid and 2D fit for the cross),
 keeping the squares every mixel sees whole, as the screen calibration does; errors are % of the calibrated field
 at each depth (50 cm at 0.5 m, scaled with depth, as are the band and the squares).
