@@ -13,6 +13,7 @@ and ``file:`` masks) resolve against the config file's directory.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -61,6 +62,7 @@ from mincam_sim.model.optics import (
 )
 from mincam_sim.render.solvers import (
     Aperture,
+    DotProduct,
     PlainChange,
     PlaneReplay,
     Reference,
@@ -103,7 +105,7 @@ def solver_name(solver: Solver | type[Solver]) -> str:
 
 #: ``[run] solver`` names -> solver classes, for display and world files alike.
 SOLVERS: dict[str, type[Solver]] = {solver_name(cls): cls for cls in (Reference, Aperture, ResponseMap, PlainChange,
-                                                                       StratifiedChange, PlaneReplay)}
+                                                                       StratifiedChange, PlaneReplay, DotProduct)}
 # The keys and values of earlier releases: refused with the new key and value.
 _OLD_SOLVER_KEYS = {"form": {"response_map": "response_map", "fast": "aperture", "reference": "reference"},
                     "estimator": {"stratified": "stratified_change", "plain": "plain_change"}}
@@ -149,6 +151,18 @@ def solver_check(kind: str):
 def make_solver(name: str) -> Solver:
     """The solver object of a checked ``[run] solver`` name."""
     return SOLVERS[name]()
+
+
+def _display_solver(name: str, dot_product_table: dict) -> Solver:
+    """The solver of a display file: ``make_solver(name)``, or for ``"dot_product"`` the model with the options of
+    ``[run.dot_product]`` (the solver's own checks, as one ``[run.dot_product]`` line)."""
+    if name != "dot_product":
+        return make_solver(name)
+    options = RENDER_SCHEMA.read("run.dot_product", dot_product_table)
+    try:
+        return DotProduct(**dataclasses.asdict(options))
+    except InputError as err:
+        raise ConfigError("[run.dot_product] " + str(err).removeprefix("DotProduct ")) from None
 
 
 def make_budget(solver: Solver, spp: int, samples_per_texel: int | None, target_rel_stderr: float,
@@ -237,7 +251,8 @@ class RunSection:
     """``[run]``: how to render."""
 
     solver: str = setting("response_map", '"response_map" (maps over the screen, then a dot product per frame), '
-                          '"aperture" (rays through the mask aperture) or "reference" (the literal scene)',
+                          '"aperture" (rays through the mask aperture), "reference" (the literal scene) or '
+                          '"dot_product" (the idealised model, exact; its options in [run.dot_product])',
                           solver_check("display"))
     spp: int = setting(65536, 'samples per mixel per frame ("aperture"/"reference"); rounded UP to a multiple of '
                        "replicates (65536 with 8 replicates runs exactly)", budget_field)
@@ -254,6 +269,21 @@ class RunSection:
     variant: str = setting("", '"" = automatic (cuda_ad_mono > llvm_ad_mono > scalar_rgb)', _variant)
     out_dir: str = setting("out/render", "measurements.npz / .csv (+ response maps as OpenEXR); relative to this "
                            "file", _out_dir)
+
+
+@dataclass(frozen=True)
+class DotProductTable:
+    """``[run.dot_product]``: the options of ``solver = "dot_product"``
+    (:class:`~mincam_sim.render.solvers.DotProduct`); the defaults are the bare model."""
+
+    parallax: bool = setting(False, "each mixel sees from its own detector centre (the field-of-view offset "
+                             "between mixels), not from the mincam's centre")
+    vignetting: bool = setting(False, "weigh the mask by cos^4 about the mixel's axis (the physical fall-off) "
+                               "instead of uniformly")
+    detector_blur: bool = setting(False, "average the pinhole over the detector's area (the finite detector's "
+                                  "blur; costs nodes^2 times the bare model)")
+    nodes: int = setting(4, "Gauss-Legendre points per axis of each texel's image (and of the detector)",
+                         Integer())
 
 
 @dataclass(frozen=True)
@@ -357,7 +387,10 @@ class FramesSection:
 RENDER_SCHEMA = Schema(
     "mincam-sim render configuration. Units are in the key names: _m metres, _in inches, _deg degrees,\n"
     "_rad_per_m radians per metre, _w_m2_sr radiance (W m^-2 sr^-1).",
-    (Part("run", RunSection), Part("mincam", MincamSection),
+    (Part("run", RunSection),
+     Part("run.dot_product", DotProductTable, commented=True,
+          intro='For solver = "dot_product" (the idealised model), its options (defaults: the bare model):'),
+     Part("mincam", MincamSection),
      Part("mixel", MixelTable, array=True, commented=True, intro='For layout = "custom", one table per mixel:'),
      Part("screen", ScreenSection), Part("frames", FramesSection)),
 )
@@ -707,10 +740,17 @@ def warn_ignored_mincam(given: dict, mixel_tables: list, mincam: Mincam, cls: ty
 
 def _warn_ignored(tables: dict, run: RunSection, mincam: Mincam, frames_kind: str) -> None:
     """One warning line per key the rest of a display file makes ineffective (nothing is refused)."""
+    if run.solver == "dot_product":
+        warn_ignored("run", tables["run"], ("spp", "samples_per_texel", "target_rel_stderr", "replicates", "seed"),
+                     'solver = "dot_product" is exact quadrature (no samples, standard error 0)', RunSection)
+    else:
+        warn_ignored("run.dot_product", tables["run.dot_product"], list(tables["run.dot_product"]),
+                     f'they are the options of solver = "dot_product", and this file\'s solver is "{run.solver}"',
+                     DotProductTable)
     if run.solver == "response_map":
         warn_ignored("run", tables["run"], ("spp",), 'solver = "response_map" traces samples_per_texel (spp is for '
                      'the "aperture" and "reference" solvers)', RunSection)
-    else:
+    elif run.solver != "dot_product":
         warn_ignored("run", tables["run"], ("samples_per_texel",), f"solver = {run.solver!r} traces spp rays per "
                      'mixel per frame (samples_per_texel is for the "response_map" solver)', RunSection)
     warn_ignored_mincam(tables["mincam"], tables["mixel"], mincam, MincamSection)
@@ -745,9 +785,9 @@ def load_config(source: str | Path | dict, base_dir: str | Path | None = None) -
     raw, base, path = read_document(source, base_dir)
     tables = RENDER_SCHEMA.tables(raw)
     refuse_old_solver_keys(tables["run"], "display")
-    sections = {name: read_section(name, tables[name], cls) for name, cls in _SECTIONS.items()}
+    sections = {name: RENDER_SCHEMA.read(name, tables[name]) for name in _SECTIONS}
     run: RunSection = sections["run"]
-    solver = make_solver(run.solver)
+    solver = _display_solver(run.solver, tables["run.dot_product"])
     budget = make_budget(solver, run.spp, run.samples_per_texel, run.target_rel_stderr, run.replicates, run.seed)
     mincam = _build_mincam(sections["mincam"], tables["mixel"], base)
     wave = [mx.name for mx in mincam if mx.optics == "wave"]

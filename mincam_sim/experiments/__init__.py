@@ -21,6 +21,8 @@ Files:
 * ``speed.py``: paper Sec. 4.3, speed from one mixel with a sinusoid mask.
 * ``display_timing.py``: how a mixel samples a video shown on a display (refresh, hold, exposure, clock).
 * ``spacing.py``: the spacing study: intrusion error against mixel spacing and depth.
+* ``ideal_model.py``: the pair and the cross calibrated on the idealised model (``DotProduct``), tested on the
+  physics.
 * ``registry.py``: the one registry of what ``reproduce``, ``study`` and ``demo`` run, and its runner.
 * ``reproduce_file.py``: the reproduce file (``mincam-sim reproduce --config FILE``).
 * ``study_targets.py``: what a study target is, and the targets that are no experiment of the paper.
