@@ -28,10 +28,11 @@ def _summary(res: dict) -> dict:
 IDENTITY_FILE = "design_identity.json"
 
 
-def design_identity(task_name: str, task: tr.TrackingTask, quick: bool, seed: int) -> dict:
-    """Everything a design's outputs depend on: task, its sizes (dpi included), seed and library versions."""
-    return build_identity("design", {"task": task_name, "quick": bool(quick), "seed": int(seed),
-                                     "setup": task.as_dict()})
+def design_identity(task_name: str, task: tr.TrackingTask, quick: bool, seed: int, baselines: bool = True) -> dict:
+    """Everything a design's outputs depend on: task, its sizes (dpi included), seed and library versions; a
+    design without the field's baselines says so in its setup (the default's identity is the task's alone)."""
+    setup = task.as_dict() if baselines else {**task.as_dict(), "field_baselines": False}
+    return build_identity("design", {"task": task_name, "quick": bool(quick), "seed": int(seed), "setup": setup})
 
 
 BASELINE = "current ramps, Eq. 7"
@@ -132,7 +133,7 @@ def field_baselines(task: tr.TrackingTask, result, show_progress: bool = False) 
 
 
 def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: int = 0, dpi: float | None = None,
-               show_progress: bool = False, overwrite: bool = False, **overrides) -> dict:
+               show_progress: bool = False, overwrite: bool = False, baselines: bool = True, **overrides) -> dict:
     """Design masks for ``task_name`` and write the outputs in ``out_dir``; return the ``design.json`` dict.
 
     Parameters
@@ -150,6 +151,9 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
     overwrite : bool
         Replace a finished design of another identity (task, sizes, seed, dpi, versions) in ``out_dir``;
         without it that design is refused (StaleResultError naming what changed), as other runs are.
+    baselines : bool
+        Also make and measure the random, PCA and ideal-trained baselines (:func:`field_baselines`; the
+        ideal-trained one doubles the optimisation time); without them ``suite.summary`` has ``hand`` only.
     overrides
         Fields of ``TrackingTask`` (training distribution, geometry, film; ``make_task``).
     """
@@ -164,13 +168,13 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
     offsets_m = _sheet_offsets_m(task)
     # the sheet is written last: what it would refuse (a dpi whose sheet is too large) is refused before any work
     check_print_sheet(task.baseline_masks(), offsets_m, task.dpi, task.film())
-    identity = design_identity(task_name, task, quick, seed)
+    identity = design_identity(task_name, task, quick, seed, baselines)
     _refuse_another_design(out, identity, overwrite)
     grad = check_gradients(seed=seed)
     t_check = time.perf_counter() - start
     result = design(task, show_progress=show_progress)
     t_design = time.perf_counter() - start - t_check
-    field = field_baselines(task, result, show_progress)
+    field = field_baselines(task, result, show_progress) if baselines else None
     t_baselines = time.perf_counter() - start - t_check - t_design
     ev = _evaluate(task, result, show_progress, field)
     t_eval = time.perf_counter() - start - t_check - t_design - t_baselines
@@ -184,7 +188,7 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
                            "method": "forward-mode AD vs central differences, same seed"},
         **_results_report(result, ev),
         "training": _training_report(result, task),
-        "field_baselines": _field_baselines_report(field, task),
+        **({"field_baselines": _field_baselines_report(field, task)} if field is not None else {}),
         "setup": _setup_report(task, ev.held_out),
         "runtime_s": {"gradient_check": t_check, "design": t_design, "baselines": t_baselines, "evaluation": t_eval,
                       "total": time.perf_counter() - start},
@@ -265,7 +269,7 @@ SUITE_KEYS = {BASELINE: "baseline", DESIGNED: "designed", RANDOM: "random", PCA:
 
 
 def _write_figures_and_data(out: Path, task: tr.TrackingTask, result, ev: _Evaluation,
-                            field: FieldBaselines) -> list[str]:
+                            field: FieldBaselines | None) -> list[str]:
     """The print-ready PNG masks, the decoder, the figures and ``design_data.npz``; returns the mixels' labels."""
     from mincam_sim.design.report import plot_error_vs_depth, plot_loss, plot_masks, plot_suite, plot_summary
 
@@ -278,8 +282,8 @@ def _write_figures_and_data(out: Path, task: tr.TrackingTask, result, ev: _Evalu
         result.decoder.to_json(out / "decoder.json")
     plot_loss(result.histories, result.start, out / "loss.png")
     labels = [f"{p} mixel" for p in tr.POSITIONS]
-    printed = {short: [film.print(m) for m in field.printer_masks[label]]
-               for label, short in SUITE_KEYS.items() if label in field.printer_masks}
+    extra = field.printer_masks if field is not None else {}
+    printed = {short: [film.print(m) for m in extra[label]] for label, short in SUITE_KEYS.items() if label in extra}
     plot_masks({"current ramps (baseline)": ev.current, "designed": ev.designed, **printed}, labels,
                out / "masks.png")
     plot_error_vs_depth({"current ramps, Eq. 7 (baseline)": ev.baseline, "designed": ev.ours,
@@ -291,8 +295,8 @@ def _write_figures_and_data(out: Path, task: tr.TrackingTask, result, ev: _Evalu
                     printed_transmission=np.stack([m.transmission for m in ev.designed]), loss_rms=result.loss_rms,
                     **{f"{who}_{k}": v for who, r in (("baseline", ev.baseline), ("designed", ev.ours))
                        for k, v in r["arrays"].items()},
-                    **{f"{short}_printer_input": np.stack([m.transmission for m in field.printer_masks[label]])
-                       for label, short in SUITE_KEYS.items() if label in field.printer_masks},
+                    **{f"{short}_printer_input": np.stack([m.transmission for m in extra[label]])
+                       for label, short in SUITE_KEYS.items() if label in extra},
                     **{f"suite_{case}_{SUITE_KEYS[lab]}_error_pct": err
                        for case, rows in ev.suite["errors"].items() for lab, err in rows.items()
                        if lab in SUITE_KEYS})

@@ -182,3 +182,13 @@ def test_field_baselines_train_through_the_ideal_model_and_refit_on_the_physics(
         np.testing.assert_array_equal(a.decoders[label].coefficients, again.coefficients)
     for m, kept in zip(a.printer_masks[IDEAL_TRAINED], a.ideal.printer_masks, strict=True):
         assert m is kept
+
+
+def test_a_design_without_baselines_has_its_own_identity():
+    from mincam_sim.design.run import design_identity
+
+    task = tr.TrackingTask.quick()
+    with_baselines = design_identity("tracking", task, True, 0)
+    assert with_baselines == design_identity("tracking", task, True, 0, baselines=True)
+    assert with_baselines != design_identity("tracking", task, True, 0, baselines=False)
+    assert "field_baselines" not in str(with_baselines)  # the default's identity is the task's alone
