@@ -973,6 +973,10 @@ def design(
     typer.echo(f"# designed beat the current ramps in {su['n_better']} of {su['n_cases']} suite cases "
                f"(<= half in {su['n_at_most_half']}, worse in {su['n_worse']}); old draw ratio "
                f"{r['goal']['designed_over_baseline_avg']:.2f}; design.json, masks, plots in {out_dir}")
+    sm = su["summary"]
+    typer.echo("# suite mean of avg error [% of field], lower is better: designed " + _pct(sm["designed"], 0) + "; "
+               + ", ".join(f"{k} {_pct(v, 0)} (designed better in {sm['n_cases_designed_better'][k]}/{sm['n_cases']})"
+                           for k, v in sm["baselines"].items()))
 
 
 @app.command()

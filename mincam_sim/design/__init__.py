@@ -14,6 +14,8 @@ renderer itself).
 * :mod:`.evaluate`: the old held-out draw (squares 2-5 cm on black) in the physical simulator (response maps).
 * ``suite``: the held-out suite of every report (sizes, shapes, backgrounds, two objects, depths, tilt,
   contrast), the baseline (ramps of ``cross_layout``, Eq. 7, cubic calibration) beside the design.
+* :mod:`.baselines`: the baselines the field uses (random, PCA, trained through the idealised ``DotProduct``
+  model), measured on the same suite, each decoder refitted on the physics.
 * :mod:`.gradcheck`: AD against central finite differences.
 * :mod:`.run`: one run and its outputs (``mincam-sim design TASK``).
 
@@ -23,7 +25,8 @@ Files:
 * ``parameterization.py``: masks as a coarse grid of logits onto the printer's dots and grey values.
 * ``problem.py``: the design problem as plain arrays (linear forward model, film, sensor noise, targets).
 * ``optimiser.py``: Adam on the mask logits through the forward model, with a decoder fitted in the loop.
-* ``optimise.py``: the tracking problem built from traced samples, and the optimiser run on it.
+* ``optimise.py``: the tracking problem built from traced samples (or DotProduct maps), and the optimiser run on it.
+* ``baselines.py``: random and PCA masks through the film, and the idealised model's linear model on the dots.
 * ``decoder.py``: a learned decoder in plain numpy (a polynomial of gain-free mixel ratios).
 * ``gradcheck.py``: gradients against central finite differences with the same seed.
 * ``evaluate.py``: physical evaluation of a tracking mincam on held-out scenes (response maps, 12-bit sensor).

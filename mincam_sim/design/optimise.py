@@ -39,6 +39,8 @@ class Design:
         The candidate kept: an optimised start (:data:`STARTS`) or, where none beats it, an unoptimised one
         (``"<start> (start, unoptimised)"``); ``starts`` the loss of every run, ``histories`` their curves and
         ``candidates`` every candidate's training RMS on fixed noise draws (what chose the kept one).
+    problem : DesignProblem
+        The linear model it was trained on (its ``model``: ``"physical"`` or ``"ideal"``).
     """
 
     printer_masks: list[Mask]
@@ -52,6 +54,7 @@ class Design:
     starts: dict
     histories: dict
     candidates: dict | None = None
+    problem: object = None
 
 
 @dataclass
@@ -158,16 +161,17 @@ def _combine(rows_per_depth: list[np.ndarray], frames: TrainingFrames) -> np.nda
     return out
 
 
-def build_problem(task: tr.TrackingTask, show_progress: bool = False):
-    """Trace the training objects and backgrounds through the mincam geometry, bin them into per-mixel linear
-    models, and set each frame's exposure and noise (its background and the brightest reading of a clear
-    print: the brightest reading fills ``EXPOSURE_FILL``)."""
+MODELS = ("physical", "ideal")
+
+
+def traced_rows(task: tr.TrackingTask, frames: TrainingFrames, show_progress: bool = False):
+    """The physical linear model: per mixel, the training frames' rows ``(n_frames, D)`` and a uniform plane of
+    unit radiance per training depth ``(n_depths, D)``, traced through the mincam geometry (Monte Carlo) and
+    binned per printer dot [W/m^2 per unit transmission]."""
     from mincam_sim.progress import progress
     from mincam_sim.render.gradients import differentiable as dz
 
     dots = task.dot_shape()
-    film = task.film()
-    frames, targets = training_set(task)
     cam = task.mincam(tr.paper_masks(8))  # the geometry; masks are the design variables
     bodies = dz.bodies_scene(cam)
     matrices, background_rows = [], []
@@ -180,6 +184,28 @@ def build_problem(task: tr.TrackingTask, show_progress: bool = False):
             dz.design_matrix(dz.mixel_samples(cam, k, plane_scene(sc.depth_m), strata=64,
                                               seed=task.seed * 1000 + 500 + i, bodies=bodies), dots)
             for i, sc in enumerate(frames.atoms)]))
+    return matrices, background_rows
+
+
+def build_problem(task: tr.TrackingTask, show_progress: bool = False, model: str = "physical"):
+    """Bin the training objects and backgrounds into per-mixel linear models, and set each frame's exposure and
+    noise (its background and the brightest reading of a clear print: the brightest reading fills
+    ``EXPOSURE_FILL``).
+
+    ``model``: ``"physical"`` traces them through the mincam geometry (:func:`traced_rows`); ``"ideal"`` builds
+    them from :class:`~mincam_sim.render.solvers.DotProduct` response maps, the idealised model
+    (:func:`mincam_sim.design.baselines.ideal_rows`). The training frames, noise and exposure rules are the same.
+    """
+    if model not in MODELS:
+        raise ValueError(f"build_problem model must be one of {', '.join(MODELS)}, got {model!r}")
+    film = task.film()
+    frames, targets = training_set(task)
+    if model == "physical":
+        matrices, background_rows = traced_rows(task, frames, show_progress)
+    else:
+        from mincam_sim.design.baselines import ideal_rows
+
+        matrices, background_rows, _ = ideal_rows(task, frames)
     n_frames, n_depths = len(targets), len(frames.atoms)
     weights = np.zeros((n_frames, n_depths))
     weights[np.arange(n_frames), frames.depth_index] = frames.background
@@ -201,13 +227,13 @@ def build_problem(task: tr.TrackingTask, show_progress: bool = False):
                              * gain / s.dn_per_irradiance)
         return sigma
 
-    index, weight = par.bilinear_upsample(task.grid, dots)
+    index, weight = par.bilinear_upsample(task.grid, task.dot_shape())
     problem = DesignProblem(
         matrices=matrices, upsample_index=index, upsample_weight=weight, targets=targets,
         features=tr.FEATURES[task.decoder], n_params=task.grid**2, t_min=film.t_min, t_max=film.t_max, gamma=film.gamma,
         levels=film.levels, dn_per_w_m2=gain, noise_dn=noise_dn, background_rows=background_rows,
         background_weights=weights, fit_noiseless=task.decoder_fit == "noiseless",
-        error_cap=0.1 if task.decoder_fit == "noiseless" else None)
+        error_cap=0.1 if task.decoder_fit == "noiseless" else None, model=model)
     return problem
 
 
@@ -224,11 +250,12 @@ STARTS = {"paper": (False, False), "x pair swapped": (True, False), "y pair swap
           "both swapped": (True, True)}
 
 
-def design(task: tr.TrackingTask, show_progress: bool = False) -> Design:
-    """Optimise the four masks (and the calibration in the loop) for the tracking task."""
+def design(task: tr.TrackingTask, show_progress: bool = False, problem=None) -> Design:
+    """Optimise the four masks (and the calibration in the loop) for the tracking task, on ``problem`` (default:
+    the physical one, :func:`build_problem`; the idealised model's for the ``ideal_trained`` baseline)."""
     from mincam_sim.design.optimiser import optimise_masks
 
-    problem = build_problem(task, show_progress)
+    problem = problem if problem is not None else build_problem(task, show_progress)
     # Multi-start: the paper's ramps under the four assignments of each pair's two ramps to its two mixels
     # (gradient descent cannot turn a ramp into its complement); the lowest *training* loss wins.
     runs = {}
@@ -266,7 +293,7 @@ def design(task: tr.TrackingTask, show_progress: bool = False) -> Design:
                   scores[chosen], len(problem.targets), decoders[chosen], references, chosen,
                   {k: {"start_rms": float(r.loss_history[0]), "end_rms": float(np.mean(r.loss_history[-20:]))}
                    for k, r in runs.items()},
-                  {k: r.loss_history for k, r in runs.items()}, scores)
+                  {k: r.loss_history for k, r in runs.items()}, scores, problem)
 
 
 def training_rms(problem, transmissions: list[np.ndarray], decoder: Decoder, task: tr.TrackingTask,
@@ -302,5 +329,5 @@ def fit_decoder(problem, transmissions: list[np.ndarray], task: tr.TrackingTask,
     return Decoder(task.decoder, 3, coef)
 
 
-__all__ = ["STARTS", "Design", "TrainingFrames", "build_problem", "design", "fit_decoder", "initial_logits",
-           "plane_scene", "training_rms", "training_set"]
+__all__ = ["MODELS", "STARTS", "Design", "TrainingFrames", "build_problem", "design", "fit_decoder", "initial_logits",
+           "plane_scene", "traced_rows", "training_rms", "training_set"]

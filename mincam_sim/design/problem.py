@@ -43,6 +43,8 @@ class DesignProblem:
     error_cap : float, optional
         Robust loss: a frame's squared error counts at most ``error_cap**2`` (a lost frame, e.g. a change that
         noise cancels, weighs as one error of ``error_cap`` and carries no gradient) [fraction of the field].
+    model : {"physical", "ideal"}
+        What built the linear model: the traced physics, or the idealised dot-product model.
     """
 
     matrices: list
@@ -61,6 +63,7 @@ class DesignProblem:
     background_weights: np.ndarray | None = None
     fit_noiseless: bool = False
     error_cap: float | None = None
+    model: str = "physical"
 
     def background_irradiance(self, transmissions: list) -> np.ndarray | None:
         """Irradiance (n_mixels, n_frames) [W/m^2] of each frame's background through the masks ``T_k``."""

@@ -80,7 +80,7 @@ def plot_suite(suite: dict, path: Path) -> Path:
     masks' ratio to the baseline above each case."""
     cases = suite["cases"]
     labels = list(cases[0]["rows"])
-    colours = {lab: c for lab, c in zip(labels, ("tab:red", "tab:blue", "tab:orange", "tab:gray"), strict=False)}
+    colours = {lab: c for lab, c in zip(labels, SUITE_COLOURS, strict=False)}
     fig, ax = plt.subplots(figsize=(11.0, 4.4), layout="constrained")
     width = 0.8 / len(labels)
     x = np.arange(len(cases))
@@ -107,4 +107,25 @@ def plot_suite(suite: dict, path: Path) -> Path:
     return _save(fig, path)
 
 
-__all__ = ["plot_error_vs_depth", "plot_loss", "plot_masks", "plot_suite"]
+SUITE_COLOURS = ("tab:red", "tab:blue", "tab:orange", "tab:gray", "tab:purple", "tab:olive", "tab:cyan", "tab:brown")
+
+
+def plot_summary(summary: dict, path: Path) -> Path:
+    """The suite's summary: the designed masks' mean error beside every baseline's (lower is better), each
+    with how many cases the designed masks beat it in."""
+    labels = ["designed", *summary["baselines"]]
+    values = [summary["designed"], *summary["baselines"].values()]
+    fig, ax = plt.subplots(figsize=(6.4, 3.6), layout="constrained")
+    bars = ax.bar(labels, values, color=["tab:blue"] + ["tab:gray"] * (len(labels) - 1))
+    wins = summary.get("n_cases_designed_better", {})
+    for bar, lab, v in zip(bars, labels, values, strict=True):
+        text = f"{v:.2f}" + (f"\ndesigned better\nin {wins[lab]}/{summary['n_cases']}" if lab in wins else "")
+        ax.text(bar.get_x() + bar.get_width() / 2, v, text, ha="center", va="bottom", fontsize=8)
+    ax.set_ylim(0, 1.35 * max(values))
+    ax.set_ylabel(f"mean over the suite of {summary['metric']} (lower is better)", fontsize=8)
+    ax.set_title("held-out suite (physical simulator): designed masks against the baselines", fontsize=9)
+    ax.grid(alpha=0.3, axis="y")
+    return _save(fig, path)
+
+
+__all__ = ["SUITE_COLOURS", "plot_error_vs_depth", "plot_loss", "plot_masks", "plot_suite", "plot_summary"]

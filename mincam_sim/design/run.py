@@ -28,16 +28,22 @@ def _summary(res: dict) -> dict:
 IDENTITY_FILE = "design_identity.json"
 
 
-def design_identity(task_name: str, task: tr.TrackingTask, quick: bool, seed: int) -> dict:
-    """Everything a design's outputs depend on: task, its sizes (dpi included), seed and library versions."""
-    return build_identity("design", {"task": task_name, "quick": bool(quick), "seed": int(seed),
-                                     "setup": task.as_dict()})
+def design_identity(task_name: str, task: tr.TrackingTask, quick: bool, seed: int, baselines: bool = True) -> dict:
+    """Everything a design's outputs depend on: task, its sizes (dpi included), seed and library versions; a
+    design without the field's baselines says so in its setup (the default's identity is the task's alone)."""
+    setup = task.as_dict() if baselines else {**task.as_dict(), "field_baselines": False}
+    return build_identity("design", {"task": task_name, "quick": bool(quick), "seed": int(seed), "setup": setup})
 
 
 BASELINE = "current ramps, Eq. 7"
 DESIGNED = "designed, learned decoder"
 RAMPS_LEARNED = "current ramps, learned decoder"
 MIRRORED = "mirrored ramps (old layout), Eq. 7"
+RANDOM = "random masks, learned decoder"
+PCA = "PCA masks, learned decoder"
+IDEAL_TRAINED = "ideal-trained masks, learned decoder"
+# the summary's keys (design.json ``suite.summary``) and the suite's labels they stand for
+SUMMARY_BASELINES = {"hand": BASELINE, "random": RANDOM, "pca": PCA, "ideal_trained": IDEAL_TRAINED}
 
 
 def _sheet_offsets_m(task: tr.TrackingTask) -> list[tuple[float, float]]:
@@ -69,11 +75,13 @@ def make_task(quick: bool = False, seed: int = 0, **overrides) -> tr.TrackingTas
     return replace(base, **overrides)
 
 
-def suite_entries(task: tr.TrackingTask, designed: list, decoder, ramps_decoder=None) -> list:
+def suite_entries(task: tr.TrackingTask, designed: list, decoder, ramps_decoder=None,
+                  baselines: dict | None = None) -> list:
     """The mincams of the held-out suite: the baseline (the ramps of the layout the package builds, as printed,
     with the experiments' Eq. 7 and cubic calibration), the designed masks as printed with ``decoder``, the
-    baseline's masks with the same kind of learned decoder (``ramps_decoder``, where given), and the mirrored
-    layout the package built before (a labelled extra row)."""
+    baseline's masks with the same kind of learned decoder (``ramps_decoder``, where given), the mirrored
+    layout the package built before (a labelled extra row), and ``baselines`` (label -> (printed masks,
+    decoder)): the random, PCA and ideal-trained masks."""
     from mincam_sim.design.suite import Entry
 
     film = task.film()
@@ -82,11 +90,50 @@ def suite_entries(task: tr.TrackingTask, designed: list, decoder, ramps_decoder=
     if ramps_decoder is not None:
         entries.append(Entry(RAMPS_LEARNED, task.mincam(current), ramps_decoder, readings=BASELINE))
     entries.append(Entry(MIRRORED, task.mincam([film.print(m) for m in tr.paper_masks()])))
+    for label, (masks, dec) in (baselines or {}).items():
+        entries.append(Entry(label, task.mincam(masks), dec))
     return entries
 
 
+@dataclass
+class FieldBaselines:
+    """The baselines the field uses (:mod:`mincam_sim.design.baselines`), each as printer input and with its
+    decoder refitted on the physical model (as the designed masks' decoder is).
+
+    Attributes
+    ----------
+    printer_masks : dict
+        Suite label -> four masks (printer input, :data:`~.tracking.POSITIONS` order).
+    decoders : dict
+        Suite label -> :class:`~.decoder.Decoder` fitted on the physical training model (None with Eq. 7).
+    ideal : Design
+        The optimisation through the idealised model (its training history, kept start).
+    """
+
+    printer_masks: dict
+    decoders: dict
+    ideal: object
+
+
+def field_baselines(task: tr.TrackingTask, result, show_progress: bool = False) -> FieldBaselines:
+    """Random, PCA and ideal-trained masks for ``task``; each decoder refitted on ``result.problem`` (the
+    physical training model) as ``result``'s was."""
+    from mincam_sim.design import baselines as bl
+    from mincam_sim.design.optimise import build_problem, design, fit_decoder, training_set
+
+    ideal = design(task, show_progress=show_progress, problem=build_problem(task, show_progress, model="ideal"))
+    frames, _ = training_set(task)
+    _, _, images = bl.ideal_rows(task, frames)
+    masks = {RANDOM: bl.random_masks(task), PCA: bl.pca_masks(task, images), IDEAL_TRAINED: ideal.printer_masks}
+    film = task.film()
+    draws = 0 if task.decoder_fit == "noiseless" else 4
+    decoders = {label: (fit_decoder(result.problem, [film.print(m).transmission.ravel() for m in ms], task, draws)
+                        if task.decoder == "learned" else None) for label, ms in masks.items()}
+    return FieldBaselines(masks, decoders, ideal)
+
+
 def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: int = 0, dpi: float | None = None,
-               show_progress: bool = False, overwrite: bool = False, **overrides) -> dict:
+               show_progress: bool = False, overwrite: bool = False, baselines: bool = True, **overrides) -> dict:
     """Design masks for ``task_name`` and write the outputs in ``out_dir``; return the ``design.json`` dict.
 
     Parameters
@@ -104,6 +151,9 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
     overwrite : bool
         Replace a finished design of another identity (task, sizes, seed, dpi, versions) in ``out_dir``;
         without it that design is refused (StaleResultError naming what changed), as other runs are.
+    baselines : bool
+        Also make and measure the random, PCA and ideal-trained baselines (:func:`field_baselines`; the
+        ideal-trained one doubles the optimisation time); without them ``suite.summary`` has ``hand`` only.
     overrides
         Fields of ``TrackingTask`` (training distribution, geometry, film; ``make_task``).
     """
@@ -118,15 +168,17 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
     offsets_m = _sheet_offsets_m(task)
     # the sheet is written last: what it would refuse (a dpi whose sheet is too large) is refused before any work
     check_print_sheet(task.baseline_masks(), offsets_m, task.dpi, task.film())
-    identity = design_identity(task_name, task, quick, seed)
+    identity = design_identity(task_name, task, quick, seed, baselines)
     _refuse_another_design(out, identity, overwrite)
     grad = check_gradients(seed=seed)
     t_check = time.perf_counter() - start
     result = design(task, show_progress=show_progress)
     t_design = time.perf_counter() - start - t_check
-    ev = _evaluate(task, result, show_progress)
-    t_eval = time.perf_counter() - start - t_check - t_design
-    labels = _write_figures_and_data(out, task, result, ev)
+    field = field_baselines(task, result, show_progress) if baselines else None
+    t_baselines = time.perf_counter() - start - t_check - t_design
+    ev = _evaluate(task, result, show_progress, field)
+    t_eval = time.perf_counter() - start - t_check - t_design - t_baselines
+    labels = _write_figures_and_data(out, task, result, ev, field)
     report = {
         "task": task_name,
         "quick": quick,
@@ -136,8 +188,9 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
                            "method": "forward-mode AD vs central differences, same seed"},
         **_results_report(result, ev),
         "training": _training_report(result, task),
+        **({"field_baselines": _field_baselines_report(field, task)} if field is not None else {}),
         "setup": _setup_report(task, ev.held_out),
-        "runtime_s": {"gradient_check": t_check, "design": t_design, "evaluation": t_eval,
+        "runtime_s": {"gradient_check": t_check, "design": t_design, "baselines": t_baselines, "evaluation": t_eval,
                       "total": time.perf_counter() - start},
     }
     write_print_sheet(list(result.printer_masks), offsets_m, task.dpi, task.film(), out / "print_sheet.png",
@@ -180,7 +233,7 @@ class _Evaluation:
     suite: dict
 
 
-def _evaluate(task: tr.TrackingTask, result, show_progress: bool) -> _Evaluation:
+def _evaluate(task: tr.TrackingTask, result, show_progress: bool, field: FieldBaselines | None = None) -> _Evaluation:
     """Measure the printed current, mirrored and designed masks on the held-out draw (response maps), score
     them (with the references that split the gain between masks and decoder) and run the held-out suite."""
     from mincam_sim.design.evaluate import HeldOut, measure, score
@@ -203,15 +256,22 @@ def _evaluate(task: tr.TrackingTask, result, show_progress: bool) -> _Evaluation
         "designed_masks_with_paper_calibration": score(readings["designed"], task, held_out),
         "mirrored_ramps_old_layout": score(readings["mirrored"], task, held_out),
     }
-    entries = suite_entries(task, designed, learned, result.reference_decoders["x pair swapped"])
+    baselines = ({label: ([film.print(m) for m in masks], field.decoders[label])
+                  for label, masks in field.printer_masks.items()} if field is not None else None)
+    entries = suite_entries(task, designed, learned, result.reference_decoders["x pair swapped"], baselines)
     suite = evaluate_suite(entries, task, task.suite_frames, task.suite_texels, task.suite_samples_per_texel,
                            baseline=BASELINE, show_progress=show_progress)
     return _Evaluation(held_out, current, designed, learned, baseline, ours, references, suite)
 
 
-def _write_figures_and_data(out: Path, task: tr.TrackingTask, result, ev: _Evaluation) -> list[str]:
+SUITE_KEYS = {BASELINE: "baseline", DESIGNED: "designed", RANDOM: "random", PCA: "pca",
+              IDEAL_TRAINED: "ideal_trained"}  # short names of the suite's labels in design_data.npz
+
+
+def _write_figures_and_data(out: Path, task: tr.TrackingTask, result, ev: _Evaluation,
+                            field: FieldBaselines | None) -> list[str]:
     """The print-ready PNG masks, the decoder, the figures and ``design_data.npz``; returns the mixels' labels."""
-    from mincam_sim.design.report import plot_error_vs_depth, plot_loss, plot_masks, plot_suite
+    from mincam_sim.design.report import plot_error_vs_depth, plot_loss, plot_masks, plot_suite, plot_summary
 
     film = task.film()
     for mask, name in zip(result.printer_masks, tr.POSITIONS, strict=True):
@@ -222,18 +282,24 @@ def _write_figures_and_data(out: Path, task: tr.TrackingTask, result, ev: _Evalu
         result.decoder.to_json(out / "decoder.json")
     plot_loss(result.histories, result.start, out / "loss.png")
     labels = [f"{p} mixel" for p in tr.POSITIONS]
-    plot_masks({"current ramps (baseline)": ev.current, "designed": ev.designed}, labels, out / "masks.png")
+    extra = field.printer_masks if field is not None else {}
+    printed = {short: [film.print(m) for m in extra[label]] for label, short in SUITE_KEYS.items() if label in extra}
+    plot_masks({"current ramps (baseline)": ev.current, "designed": ev.designed, **printed}, labels,
+               out / "masks.png")
     plot_error_vs_depth({"current ramps, Eq. 7 (baseline)": ev.baseline, "designed": ev.ours,
                          "mirrored ramps (old layout)": ev.references["mirrored_ramps_old_layout"]},
                         out / "error_vs_depth.png")
     plot_suite(ev.suite, out / "suite.png")
+    plot_summary(suite_summary(ev.suite), out / "baselines.png")
     atomic_save_npz(out / "design_data.npz", printer_input=np.stack([m.transmission for m in result.printer_masks]),
                     printed_transmission=np.stack([m.transmission for m in ev.designed]), loss_rms=result.loss_rms,
                     **{f"{who}_{k}": v for who, r in (("baseline", ev.baseline), ("designed", ev.ours))
                        for k, v in r["arrays"].items()},
-                    **{f"suite_{case}_{'designed' if lab == DESIGNED else 'baseline'}_error_pct": err
+                    **{f"{short}_printer_input": np.stack([m.transmission for m in extra[label]])
+                       for label, short in SUITE_KEYS.items() if label in extra},
+                    **{f"suite_{case}_{SUITE_KEYS[lab]}_error_pct": err
                        for case, rows in ev.suite["errors"].items() for lab, err in rows.items()
-                       if lab in (DESIGNED, BASELINE)})
+                       if lab in SUITE_KEYS})
     return labels
 
 
@@ -252,7 +318,8 @@ def _results_report(result, ev: _Evaluation) -> dict:
                                  "the training set (no physical calibration)" if ev.learned is not None else
                                  "Eq. 7 ratios, cubic calibration at 0.5 m")},
         "references": {k: _summary(v) for k, v in ev.references.items()},
-        "suite": {"cases": suite["cases"], "baseline": BASELINE, "designed": DESIGNED,
+        "suite": {"summary": suite_summary(suite),
+                  "cases": suite["cases"], "baseline": BASELINE, "designed": DESIGNED,
                   "calibration_squares": suite["calibration_squares"],
                   "designed_over_baseline": suite_ratios,
                   "n_cases": len(suite_ratios),
@@ -265,6 +332,47 @@ def _results_report(result, ev: _Evaluation) -> dict:
         "goal": {"designed_over_baseline_avg": ratio, "met": bool(ratio <= 0.5),
                  "statement": "designed average error <= half the baseline's (current ramps, Eq. 7), old "
                               "held-out draw (squares 2-5 cm, black plane); the suite says where it holds"},
+    }
+
+
+def suite_summary(suite: dict) -> dict:
+    """``suite.summary`` of ``design.json``: the mean over the suite's cases of each mincam's average error
+    (lower is better), the designed masks' and every baseline's present in the suite (``hand``: the ramps with
+    Eq. 7), and in how many cases the designed masks beat each."""
+    cases = suite["cases"]
+
+    def mean(label: str) -> float:
+        return float(np.mean([c["rows"][label]["avg_error_pct"] for c in cases]))
+
+    present = {key: label for key, label in SUMMARY_BASELINES.items() if label in cases[0]["rows"]}
+    return {"metric": "avg_error_pct", "lower_is_better": True, "designed": mean(DESIGNED),
+            "baselines": {key: mean(label) for key, label in present.items()},
+            "n_cases": len(cases),
+            "n_cases_designed_better": {key: int(sum(c["rows"][DESIGNED]["avg_error_pct"]
+                                                     < c["rows"][label]["avg_error_pct"] for c in cases))
+                                        for key, label in present.items()},
+            "labels": {"designed": DESIGNED, **present},
+            "definition": "mean over the suite's cases of each case's average |error| [% of the field]; every "
+                          "learned decoder fitted on the physical (traced) training model, noiseless read-out"}
+
+
+def _field_baselines_report(field: FieldBaselines, task: tr.TrackingTask) -> dict:
+    """``field_baselines`` of ``design.json``: how the random, PCA and ideal-trained masks were made."""
+    from mincam_sim.design.baselines import RANDOM_LOGIT_STD
+
+    ideal = field.ideal
+    return {
+        "random": {"label": RANDOM, "masks": f"logits N(0, {RANDOM_LOGIT_STD}^2) on the {task.grid}x{task.grid} "
+                                             f"grid, seed [{task.seed}, 61], the design's parameterisation"},
+        "pca": {"label": PCA, "masks": "principal components 1-4 (left, right, top, bottom) of the training frames' "
+                                       "changes on the dot grid (idealised mapping), mean removed; sign: largest "
+                                       "|entry| positive; printer grey 0.5 + 0.5 p / max|p| (single rail, offset)"},
+        "ideal_trained": {"label": IDEAL_TRAINED,
+                          "masks": "the same optimiser and multi-start on the linear model built from DotProduct "
+                                   "response maps (bare idealised model), then printed and measured physically",
+                          "training_rms_end_pct_ideal_model": 100 * ideal.final_rms, "start_kept": ideal.start,
+                          "candidates_rms_pct_ideal_model": {k: 100 * v for k, v in (ideal.candidates or {}).items()}},
+        "decoder": "each refitted on the physical training model (noiseless read-out), as the designed masks' is",
     }
 
 
@@ -291,4 +399,5 @@ def _setup_report(task: tr.TrackingTask, held_out) -> dict:
                                 "(50 cm at 0.5 m, scaled with depth)"}
 
 
-__all__ = ["BASELINE", "DESIGNED", "MIRRORED", "RAMPS_LEARNED", "TASKS", "make_task", "run_design", "suite_entries"]
+__all__ = ["BASELINE", "DESIGNED", "IDEAL_TRAINED", "MIRRORED", "PCA", "RAMPS_LEARNED", "RANDOM", "SUMMARY_BASELINES",
+           "TASKS", "FieldBaselines", "field_baselines", "make_task", "run_design", "suite_entries", "suite_summary"]

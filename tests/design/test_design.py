@@ -223,6 +223,14 @@ def test_cli_design_tracking_quick(tmp_path):
         assert np.nanmean(err) == pytest.approx(c["rows"][DESIGNED]["avg_error_pct"])
     assert "held-out suite" in r.output and "two_objects" in r.output
     assert "cross_layout" in d["baseline"]["masks"]
+    # the baselines the field uses, on the same suite, and the summary of means over its cases
+    sm = su["summary"]
+    assert sm["metric"] == "avg_error_pct" and sm["lower_is_better"] is True
+    assert set(sm["baselines"]) == {"hand", "random", "pca", "ideal_trained"}
+    for key, label in sm["labels"].items():
+        mean = np.mean([c["rows"][label]["avg_error_pct"] for c in su["cases"]])
+        assert (sm["designed"] if key == "designed" else sm["baselines"][key]) == pytest.approx(mean)
+    assert (out / "baselines.png").stat().st_size > 0 and "designed better in" in r.output
 
 
 def test_poly_terms_is_one_implementation_for_numpy_and_drjit():
