@@ -165,7 +165,8 @@ def _design_point(params: dict, seed: int, quick: bool) -> dict:
     from mincam_sim.design import run_design
 
     with tempfile.TemporaryDirectory(prefix="study_design_") as tmp:
-        r = run_design("tracking", tmp, quick=quick, seed=int(seed), dpi=float(params["dpi"]))
+        r = run_design("tracking", tmp, quick=quick, seed=int(seed), dpi=float(params["dpi"]),
+                       baselines=False)
     out = {}
     for key in ("baseline", "designed"):
         for metric in ("avg_error_pct", "max_error_pct"):
