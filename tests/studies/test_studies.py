@@ -280,15 +280,15 @@ def test_a_design_point_reads_the_design_result(monkeypatch):
 
     seen = {}
 
-    def fake(task, out_dir, quick=False, seed=0, dpi=600.0, show_progress=False):
-        seen.update(task=task, quick=quick, seed=seed, dpi=dpi)
+    def fake(task, out_dir, quick=False, seed=0, dpi=600.0, show_progress=False, baselines=True):
+        seen.update(task=task, quick=quick, seed=seed, dpi=dpi, baselines=baselines)
         return {"baseline": {"avg_error_pct": 3.0, "max_error_pct": 7.0},
                 "designed": {"avg_error_pct": 1.5, "max_error_pct": None}}
 
     monkeypatch.setattr(design_mod, "run_design", fake)
     target = study_target({"name": "design"})
     out = target.point({"dpi": 1200.0}, 5, True)
-    assert seen == {"task": "tracking", "quick": True, "seed": 5, "dpi": 1200.0}
+    assert seen == {"task": "tracking", "quick": True, "seed": 5, "dpi": 1200.0, "baselines": False}
     assert out["baseline_avg_error_pct"] == 3.0 and out["designed_avg_error_pct"] == 1.5
     assert np.isnan(out["designed_max_error_pct"]) and set(out) == set(target.metrics)
 

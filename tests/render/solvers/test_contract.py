@@ -214,7 +214,7 @@ def _ideal_facing(mixel: Mixel, screen: ms.Screen, pinhole_m: np.ndarray, radian
 
 def _bare_model(scene: str) -> np.ndarray:
     """The bare DotProduct model of each display scene, computed independently of the solver."""
-    sim, s = _sim(scene, "oracle"), SCENES[scene]
+    sim, s = _sim(scene), SCENES[scene]
     centre = sim.mincam.centre_m
     if scene == "display":
         one = _ideal_square(sim.mincam[0], sim.screen, centre, (0.04, 0.07, 0.02, 0.05), 2.0)
@@ -226,7 +226,7 @@ def _bare_model(scene: str) -> np.ndarray:
 
 def _physics_without_bodies(scene: str) -> np.ndarray:
     """Every effect on: the scene's physics, the other mixels' bodies left out (the model has none)."""
-    sim, s = _sim(scene, "oracle"), SCENES[scene]
+    sim, s = _sim(scene), SCENES[scene]
     if scene == "display":
         return s.expected
     alone = np.array([open_aperture_view_factor_irradiance(m, sim.screen, 1.0) for m in sim.mincam])
