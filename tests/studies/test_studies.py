@@ -11,30 +11,22 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from study_fixtures import TINY, run_quick
 
 from mincam_sim.errors import ConfigError, OutDirLockedError, StaleResultError, StoreError
-from mincam_sim.studies import load_study, plot_study, run_study
+from mincam_sim.studies import load_study, plot_study
 from mincam_sim.studies import runner as runner_mod
 from mincam_sim.studies.plots import display_scale
 
 ROOT = Path(__file__).resolve().parents[2]
-TINY = {
-    "study": {"name": "tiny", "experiment": "spacing", "seed": 3},
-    "grid": {"spacing_m": [0.0, 0.05], "depth_m": [0.5, 0.8]},
-    "metrics": {"keep": ["avg_after_pct", "noisy_avg_after_pct"]},
-}
-
-
-def _run(spec, out, **kw):
-    return run_study(spec, quick=True, out_dir=out, show_progress=False, **kw)
 
 
 def test_two_workers_equal_one(tmp_path):
     import xarray as xr
 
     spec = load_study(TINY, quick=True)
-    serial, s1 = _run(spec, tmp_path / "one", workers=1)
-    parallel, s2 = _run(spec, tmp_path / "two", workers=2)
+    serial, s1 = run_quick(spec, tmp_path / "one", workers=1)
+    parallel, s2 = run_quick(spec, tmp_path / "two", workers=2)
     assert s1["points_computed"] == s2["points_computed"] == 4 and s2["workers"] == 2
     for var in runner_mod.variables(spec):
         assert np.all(np.isfinite(serial[var].values)), var
@@ -47,7 +39,7 @@ def test_units_on_every_variable_and_coordinate_and_consolidated_metadata(tmp_pa
     import xarray as xr
 
     spec = load_study(TINY, quick=True)
-    ds, _ = _run(spec, tmp_path, workers=1)
+    ds, _ = run_quick(spec, tmp_path, workers=1)
     for name in [*ds.data_vars, *ds.coords]:
         assert ds[name].attrs.get("units"), name
     assert ds["spacing_m"].attrs["units"] == "m" and ds["avg_after_pct_stderr"].attrs["units"] == "%"
@@ -67,17 +59,17 @@ def test_common_random_numbers_keep_the_noiseless_metric_flat_along_bit_depth(tm
     raw = {"study": {"name": "crn", "experiment": "spacing", "seed": 0, "replicates": 2},
            "fixed": {"d_f_m": 1e-3}, "grid": {"bit_depth": [8, 12]},
            "metrics": {"keep": ["avg_after_pct", "noisy_avg_after_pct"]}}
-    crn, _ = _run(load_study(raw, quick=True), tmp_path / "crn", workers=1)
+    crn, _ = run_quick(load_study(raw, quick=True), tmp_path / "crn", workers=1)
     np.testing.assert_array_equal(crn["avg_after_pct"].values[0], crn["avg_after_pct"].values[1])
     assert np.all(crn["avg_after_pct_stderr"].values > 0)  # the replicates differ: a real spread, stored beside
     indep = {**raw, "study": {**raw["study"], "common_random_numbers": False}}
-    own, _ = _run(load_study(indep, quick=True), tmp_path / "own", workers=1)
+    own, _ = run_quick(load_study(indep, quick=True), tmp_path / "own", workers=1)
     assert own["avg_after_pct"].values[0] != own["avg_after_pct"].values[1]
 
 
 def test_killed_study_resumes_with_finished_points(tmp_path, monkeypatch):
     spec = load_study(TINY, quick=True)
-    clean, _ = _run(spec, tmp_path / "clean", workers=1)
+    clean, _ = run_quick(spec, tmp_path / "clean", workers=1)
     original = runner_mod.compute_point
     calls = []
 
@@ -89,9 +81,9 @@ def test_killed_study_resumes_with_finished_points(tmp_path, monkeypatch):
 
     monkeypatch.setattr(runner_mod, "compute_point", dying)
     with pytest.raises(KeyboardInterrupt):
-        _run(spec, tmp_path / "killed", workers=1)
+        run_quick(spec, tmp_path / "killed", workers=1)
     monkeypatch.setattr(runner_mod, "compute_point", original)
-    resumed, summary = _run(spec, tmp_path / "killed", workers=1)
+    resumed, summary = run_quick(spec, tmp_path / "killed", workers=1)
     assert summary["points_reused"] == 2 and summary["points_computed"] == 2
     for var in runner_mod.variables(spec):
         np.testing.assert_array_equal(resumed[var].values, clean[var].values)
@@ -99,13 +91,13 @@ def test_killed_study_resumes_with_finished_points(tmp_path, monkeypatch):
 
 def test_a_damaged_store_is_named_and_recomputed(tmp_path):
     spec = load_study(TINY, quick=True)
-    clean, _ = _run(spec, tmp_path, workers=1)
+    clean, _ = run_quick(spec, tmp_path, workers=1)
     chunks = sorted(p for p in (tmp_path / "results.zarr" / "noisy_avg_after_pct").iterdir()
                     if not p.name.startswith("."))
     assert len(chunks) == 4
     chunks[1].unlink()  # one metric's chunk of one point is lost
     notices = []
-    again, summary = _run(spec, tmp_path, workers=1, say=notices.append)
+    again, summary = run_quick(spec, tmp_path, workers=1, say=notices.append)
     assert summary["points_reused"] == 3 and summary["points_computed"] == 1
     assert len(notices) == 1 and "noisy_avg_after_pct" in notices[0] and "1 point(s)" in notices[0]
     for var in runner_mod.variables(spec):
@@ -118,11 +110,11 @@ def test_a_store_without_a_variable_is_refused(tmp_path):
     import zarr
 
     spec = load_study(TINY, quick=True)
-    _run(spec, tmp_path, workers=1)
+    run_quick(spec, tmp_path, workers=1)
     shutil.rmtree(tmp_path / "results.zarr" / "avg_after_pct_stderr")
     zarr.consolidate_metadata(str(tmp_path / "results.zarr"))
     with pytest.raises(StoreError, match="lacks variable.*avg_after_pct_stderr"):
-        _run(spec, tmp_path, workers=1)
+        run_quick(spec, tmp_path, workers=1)
 
 
 def test_a_full_disk_names_the_file_and_leaves_nothing_half_written(tmp_path, monkeypatch):
@@ -138,11 +130,11 @@ def test_a_full_disk_names_the_file_and_leaves_nothing_half_written(tmp_path, mo
 
     monkeypatch.setattr(runner_mod, "atomic_write_json", full)
     with pytest.raises(StoreError, match=r"No space left on device.*not marked complete") as err:
-        _run(spec, tmp_path, workers=1)
+        run_quick(spec, tmp_path, workers=1)
     assert "points/p_0_1.json" in str(err.value)
     assert sorted(p.name for p in (tmp_path / "points").iterdir()) == ["p_0_0.json"]
     monkeypatch.setattr(runner_mod, "atomic_write_json", original)
-    _, summary = _run(spec, tmp_path, workers=1)
+    _, summary = run_quick(spec, tmp_path, workers=1)
     assert summary["points_reused"] == 1 and summary["points_computed"] == 3
 
 
@@ -154,17 +146,17 @@ def test_a_second_study_in_a_locked_out_dir_is_refused_naming_its_holder(tmp_pat
     try:
         assert holder.stdout.readline().strip() == "locked"
         with pytest.raises(OutDirLockedError, match=f"in use by another run.*{holder.pid}"):
-            _run(load_study(TINY, quick=True), tmp_path, workers=1)
+            run_quick(load_study(TINY, quick=True), tmp_path, workers=1)
     finally:
         holder.kill()
         holder.wait()
 
 
 def test_a_different_study_in_the_same_dir_is_refused(tmp_path):
-    _run(load_study(TINY, quick=True), tmp_path, workers=1)
+    run_quick(load_study(TINY, quick=True), tmp_path, workers=1)
     other = {**TINY, "study": {**TINY["study"], "seed": 4}}
     with pytest.raises(StaleResultError, match="different study.*seed"):
-        _run(load_study(other, quick=True), tmp_path, workers=1)
+        run_quick(load_study(other, quick=True), tmp_path, workers=1)
 
 
 REFUSED = [
@@ -206,7 +198,7 @@ def test_workers_below_one_are_refused(tmp_path):
     spec = load_study(TINY, quick=True)
     for workers in (0, -1):
         with pytest.raises(ConfigError, match="--workers must be an integer >= 1"):
-            _run(spec, tmp_path, workers=workers)
+            run_quick(spec, tmp_path, workers=workers)
     assert not (tmp_path / "results.zarr").exists()
 
 
@@ -304,5 +296,5 @@ def test_a_point_the_experiment_refuses_is_named_and_the_others_kept(tmp_path, m
 
     monkeypatch.setattr(runner_mod, "compute_point", refusing)
     with pytest.raises(ConfigError, match=r"point \(spacing_m=0.05, depth_m=0.8\): only 6 of 8"):
-        _run(spec, tmp_path, workers=1)
+        run_quick(spec, tmp_path, workers=1)
     assert len(list((tmp_path / "points").iterdir())) == 3

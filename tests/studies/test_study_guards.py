@@ -19,22 +19,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from study_fixtures import TINY, run_quick
 
 from mincam_sim.errors import ConfigError, StoreError
-from mincam_sim.studies import StudyInterrupted, load_study, run_study
+from mincam_sim.studies import StudyInterrupted, load_study
 from mincam_sim.studies import cluster as cluster_mod
 from mincam_sim.studies import runner as runner_mod
 
 ROOT = Path(__file__).resolve().parents[2]
-TINY = {
-    "study": {"name": "tiny", "experiment": "spacing", "seed": 3},
-    "grid": {"spacing_m": [0.0, 0.05], "depth_m": [0.5, 0.8]},
-    "metrics": {"keep": ["avg_after_pct", "noisy_avg_after_pct"]},
-}
-
-
-def _run(spec, out, **kw):
-    return run_study(spec, quick=True, out_dir=out, show_progress=False, **kw)
 
 
 def _sigint_to_self() -> None:
@@ -83,13 +75,13 @@ def test_ctrl_c_while_a_record_is_written_keeps_that_point_and_the_rerun_reuses_
     monkeypatch.setattr(runner_mod, "atomic_write_json", interrupted_write)
     with pytest.raises(StudyInterrupted, match=r"interrupted: 2 of 4 points are complete and kept in .*results\.zarr; "
                                                r"run the same command again") as stop:
-        _run(spec, tmp_path, workers=1)
+        run_quick(spec, tmp_path, workers=1)
     assert isinstance(stop.value, KeyboardInterrupt) and stop.value.kept == 2
     assert sorted(p.name for p in (tmp_path / "points").glob("p_*.json")) == ["p_0_0.json", "p_0_1.json"]
     monkeypatch.setattr(runner_mod, "atomic_write_json", original)
-    _, summary = _run(spec, tmp_path, workers=1)
+    _, summary = run_quick(spec, tmp_path, workers=1)
     assert summary["points_reused"] == 2 and summary["points_computed"] == 2
-    _, summary = _run(spec, tmp_path, workers=1, time_limit_s=1e-3)  # nothing pending: no estimate to refuse
+    _, summary = run_quick(spec, tmp_path, workers=1, time_limit_s=1e-3)  # nothing pending: no estimate to refuse
     assert summary["points_reused"] == 4
 
 
@@ -163,7 +155,7 @@ def test_ctrl_c_stops_study_run_within_10_s_and_the_rerun_resumes_bit_for_bit(tm
 
     resumed = xr.open_zarr(out / "results.zarr").load()
     spec = load_study(study, quick=True)
-    clean, _ = _run(spec, tmp_path / "clean", workers=1)
+    clean, _ = run_quick(spec, tmp_path / "clean", workers=1)
     for var in runner_mod.variables(spec):
         np.testing.assert_array_equal(resumed[var].values, clean[var].values)
 
@@ -254,7 +246,7 @@ def test_the_cores_are_those_of_the_process_affinity(monkeypatch):
 ])
 def test_bad_workers_are_refused_before_anything_is_written(tmp_path, workers, scheduler, message):
     with pytest.raises(ConfigError, match=message):
-        _run(load_study(TINY, quick=True), tmp_path / "out", workers=workers, scheduler=scheduler)
+        run_quick(load_study(TINY, quick=True), tmp_path / "out", workers=workers, scheduler=scheduler)
     assert not (tmp_path / "out").exists()
 
 
@@ -275,7 +267,7 @@ def test_a_scheduler_nobody_listens_at_is_refused_within_seconds(tmp_path):
         cluster_mod.check_scheduler(address, timeout_s=1.0)
     assert time.monotonic() - t0 < 4
     with pytest.raises(ConfigError, match=f"cannot reach a dask scheduler at {address} within 5 s"):
-        _run(load_study(TINY, quick=True), tmp_path / "out", scheduler=address)
+        run_quick(load_study(TINY, quick=True), tmp_path / "out", scheduler=address)
     assert not (tmp_path / "out").exists()
 
 
@@ -333,7 +325,7 @@ def test_a_study_estimated_over_the_time_limit_is_refused_before_anything_runs(t
     with pytest.raises(ConfigError, match=r"study tiny would take about 16 s \(4 points x 2 replicates x ~2 s / 1 "
                                           r"worker\), over the limit of 10 s: shrink the grid, or raise the limit "
                                           r"with --time-limit-s 24"):
-        _run(spec, tmp_path / "out", workers=1, time_limit_s=10)
+        run_quick(spec, tmp_path / "out", workers=1, time_limit_s=10)
     assert not (tmp_path / "out").exists()
 
 
@@ -352,7 +344,7 @@ def test_the_default_limit_refuses_an_absurd_grid_and_keeps_the_shipped_studies(
 @pytest.mark.parametrize("limit", [0, -5.0, math.nan, math.inf, True, "1h"])
 def test_a_bad_time_limit_is_refused(tmp_path, limit):
     with pytest.raises(ConfigError, match="--time-limit-s must be a positive number of seconds"):
-        _run(load_study(TINY, quick=True), tmp_path / "out", workers=1, time_limit_s=limit)
+        run_quick(load_study(TINY, quick=True), tmp_path / "out", workers=1, time_limit_s=limit)
 
 
 # ------------------------------------------------------------------------------ stores that lost a part
@@ -361,7 +353,7 @@ def test_a_bad_time_limit_is_refused(tmp_path, limit):
 @pytest.fixture(scope="module")
 def finished_store(tmp_path_factory):
     out = tmp_path_factory.mktemp("finished")
-    _run(load_study(TINY, quick=True), out, workers=1)
+    run_quick(load_study(TINY, quick=True), out, workers=1)
     return out
 
 
@@ -385,5 +377,5 @@ def test_a_store_that_lost_a_variable_or_coordinate_is_refused_in_one_line(finis
     shutil.copytree(finished_store, out)
     damage(out)  # the consolidated metadata still lists it
     with pytest.raises(StoreError, match=message) as err:
-        _run(load_study(TINY, quick=True), out, workers=1)
+        run_quick(load_study(TINY, quick=True), out, workers=1)
     assert "\n" not in str(err.value)
