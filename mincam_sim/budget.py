@@ -7,7 +7,7 @@ change solvers, samples per screen texel for response maps.
 
 Every check of a budget's values lives here, so that a ``Budget(...)`` in Python and a ``[run]`` section in
 a TOML file refuse the same values with the same words: :func:`field_problem` checks one field (the TOML
-reader calls it for each ``[run]`` key) and :meth:`Budget.__post_init__` the fields together. A message names
+reader calls it for each ``[run]`` key) and ``Budget.__post_init__`` the fields together. A message names
 the field first (``"spp must be ..."``); Python shows it as ``Budget.spp ...``, a TOML file as
 ``[run] spp ...``.
 """

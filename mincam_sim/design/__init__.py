@@ -14,7 +14,7 @@ renderer itself).
 * :mod:`.evaluate`: the old held-out draw (squares 2-5 cm on black) in the physical simulator (response maps).
 * ``suite``: the held-out suite of every report (sizes, shapes, backgrounds, two objects, depths, tilt,
   contrast), the baseline (ramps of ``cross_layout``, Eq. 7, cubic calibration) beside the design.
-* :mod:`.baselines`: the baselines the field uses (random, PCA, trained through the idealised ``DotProduct``
+* ``baselines.py``: the baselines the field uses (random, PCA, trained through the idealised ``DotProduct``
   model), measured on the same suite, each decoder refitted on the physics.
 * :mod:`.gradcheck`: AD against central finite differences.
 * :mod:`.run`: one run and its outputs (``mincam-sim design TASK``).

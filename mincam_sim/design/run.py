@@ -152,7 +152,7 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
         Replace a finished design of another identity (task, sizes, seed, dpi, versions) in ``out_dir``;
         without it that design is refused (StaleResultError naming what changed), as other runs are.
     baselines : bool
-        Also make and measure the random, PCA and ideal-trained baselines (:func:`field_baselines`; the
+        Also make and measure the random, PCA and ideal-trained baselines (``field_baselines``; the
         ideal-trained one doubles the optimisation time); without them ``suite.summary`` has ``hand`` only.
     overrides
         Fields of ``TrackingTask`` (training distribution, geometry, film; ``make_task``).

@@ -3,7 +3,7 @@
 * road video (the paper's experiment): a road texture crop slides across the 50" screen by k display pixels
   per frame at 30 frames/s, each frame read once at its instant (ideal); speed in px/s; the stationary mixel's
   signal P(t) -> FFT peak -> v = omega_p/omega_d. Beside it, the paper's own video (one pixel per frame, so its
-  frame rate is the speed) on a display read by a camera on its own clock (``display_*``, :mod:`.display_timing`);
+  frame rate is the speed) on a display read by a camera on its own clock (``display_*``, ``display_timing.py``);
   the road is measured once per crop position and every video is a lookup.
 * vehicle (its physical version): the mixel looks down from height d at a textured road plane that moves at
   v m/s under an overcast sky (the plane moves by a parameter update per frame).
@@ -92,7 +92,7 @@ class SpeedParams:
         at its instant): the video on a display refreshing at ``display_refresh_hz`` (sample-and-hold), read
         by a mixel on its own clock (random phase) at ``display_sample_rate_hz``, integrating
         ``display_exposure_s`` per reading, its instants jittered by ``display_jitter_s`` rms
-        (:mod:`.display_timing`). The paper gives none of these; the defaults (60 Hz, 30 readings/s, 20 ms,
+        (``display_timing.py``). The paper gives none of these; the defaults (60 Hz, 30 readings/s, 20 ms,
         2 ms) are plain camera-like values, not fitted: with the paper's one-pixel-per-frame video they move the
         errors less than the road texture does (``scenes/studies/speed/display_timing.toml``).
     display_timing_draws : int
@@ -196,7 +196,7 @@ def displayed_signal(position_irr: np.ndarray, speed_px_s: float, shift_px: int,
     The video shifts the crop by ``shift_px`` per frame at ``speed_px_s / shift_px`` frames/s (the paper: one
     pixel per frame, so its frame rate is the speed); frames appear at the display's refreshes and are held (a
     video faster than the refresh drops frames), and each reading averages what is shown during its exposure
-    (:mod:`.display_timing`). ``rng`` draws the clock's phase, its jitter and the sensor noise.
+    (``display_timing.py``). ``rng`` draws the clock's phase, its jitter and the sensor noise.
     """
     video_rate_hz = speed_px_s / shift_px
     n_frames = int(round(duration_s * video_rate_hz))

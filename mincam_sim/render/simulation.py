@@ -79,12 +79,12 @@ class Simulation:
         An emissive display in a dark room (frames are its radiance images).
     world : dict, mitsuba.Scene, or path, optional
         A world: elements ``name -> Mitsuba dict or object`` (a loaded ``mi.Scene`` or a
-        :class:`~mincam_sim.render.scene.scene_files.SceneFile` among them contributes its shapes and lights), a
+        ``SceneFile`` (``render/scene/scene_files.py``) among them contributes its shapes and lights), a
         loaded ``mi.Scene``, or a Mitsuba 3 XML scene file (loaded with every shape kept as built, addressed by its
         id; shapes without an id are static geometry). Lengths in metres, or in units of ``unit_m``.
     max_depth : int, optional
         World scenes: longest path, in segments from the mask (2 = direct light only; 3 adds one bounce). Default:
-        the scene file's ``<integrator>`` ``max_depth`` if it has one, else 3 (:attr:`max_depth_source` says
+        the scene file's ``<integrator>`` ``max_depth`` if it has one, else 3 (``max_depth_source`` says
         which).
     camera : dict, optional
         World scenes: a ground-truth pinhole camera (``mincam_sim.render.scene.scene_dicts.pinhole_camera``).
@@ -116,7 +116,7 @@ class Simulation:
             self._build_world(self._world_elements(world, parameters), max_depth, camera)
 
     def _world_elements(self, world, parameters) -> dict:
-        """``world`` as elements: a file path becomes a :class:`SceneFile` (with ``parameters``), a loaded scene
+        """``world`` as elements: a file path becomes a ``SceneFile`` (with ``parameters``), a loaded scene
         one element."""
         if isinstance(world, (str, PathLike)):
             self.source = Path(world)

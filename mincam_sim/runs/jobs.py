@@ -208,7 +208,7 @@ def mover_updates(sim: Simulation, cfg: WorldConfig) -> tuple[list[dict], dict, 
     """(frames, background, centres): each frame's parameter updates (world coordinates), the background's,
     and each mover's centre per frame [m] (its as-built bounding-box centre moved with it). A mover is a mesh
     (its vertices), a shape or spot light with a ``to_world``, or a point light (its position); the background
-    without movers takes them out (:meth:`Simulation.without`)."""
+    without movers takes them out (:meth:`~mincam_sim.render.simulation.Simulation.without`)."""
     params = sim.params
     movable = sim.movable()
     n = cfg.n_frames
@@ -355,7 +355,7 @@ RESULT_BYTES_PER_VALUE = 64  # per frame and mixel: values and errors in the sto
 
 def estimate_seconds(cfg: RenderConfig | WorldConfig, variant: str | None = None) -> tuple[float, str]:
     """A rough estimate of a render's time [s] and what it counts, for display and world configs alike
-    (:data:`STARTUP_S` + samples / :data:`SAMPLES_PER_S` + frames x (:data:`FRAME_S` + texel terms)); nothing is
+    (``STARTUP_S`` + samples / :data:`SAMPLES_PER_S` + frames x (:data:`FRAME_S` + texel terms)); nothing is
     built.
 
     With ``target_rel_stderr > 0`` the sample counts grow until the target is met; the estimate is then that of
@@ -444,7 +444,7 @@ def check_budget(cfg: RenderConfig | WorldConfig, variant: str | None,
 def estimate_bytes(cfg: RenderConfig | WorldConfig) -> tuple[float, str]:
     """The bytes a render's arrays hold at once, roughly, and what they are (nothing is built).
 
-    Per frame and mixel the results (:data:`RESULT_BYTES_PER_VALUE`); displays: the response maps (weights and
+    Per frame and mixel the results (``RESULT_BYTES_PER_VALUE``); displays: the response maps (weights and
     variances per texel and mixel, and their copies) and the chunk of frames in memory; worlds: each frame's
     parameter updates (one 4 x 4 transform per mover here; the vertices of moving meshes are counted by
     :func:`mover_updates` once the scene is built) and the camera's images.

@@ -325,7 +325,7 @@ def estimated_seconds(spec: StudySpec, n_points: int, workers: int, quick: bool)
 
 
 def check_time(spec: StudySpec, n_points: int, workers: int, quick: bool, limit_s: float, where: str) -> float:
-    """Refuse ``n_points`` points whose :func:`estimated_seconds` exceed ``limit_s``; return the estimate.
+    """Refuse ``n_points`` points whose ``estimated_seconds`` exceed ``limit_s``; return the estimate.
 
     Raises
     ------
@@ -369,7 +369,7 @@ def run_study(spec: StudySpec, workers: int | None = None, scheduler: str | None
     say : callable
         Where notices go (a damaged point being recomputed); default: standard error.
     time_limit_s : float
-        Refuse a study whose estimated time (:func:`estimated_seconds` of its pending points) is longer [s].
+        Refuse a study whose estimated time (``estimated_seconds`` of its pending points) is longer [s].
 
     Raises
     ------

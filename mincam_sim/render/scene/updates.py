@@ -22,7 +22,7 @@ SPECK_M = 1e-6  # a shape taken out by its to_world is shrunk to this size [m]: 
 def removal_updates(params, name: str, is_shape: bool) -> dict:
     """Updates (world coordinates) that take shape or light ``name`` out of a scene whose parameters ``params``
     (``name.parameter -> value``) hold: a mesh's vertices all at its bounding-box centre; a ``to_world`` shape
-    shrunk uniformly about its origin to :data:`SPECK_M` (an invertible transform), its emitted radiance set to 0;
+    shrunk uniformly about its origin to ``SPECK_M`` (an invertible transform), its emitted radiance set to 0;
     a light's intensity (or radiance, irradiance) set to 0."""
     out: dict = {}
     vkey, tkey = f"{name}.vertex_positions", f"{name}.to_world"
