@@ -163,15 +163,15 @@ class Mincam:
             raise InputError(f"mixel names must be unique, got {names}")
         object.__setattr__(self, "mixels", mixels)
         if not self.allow_overlap:
-            for i, a in enumerate(mixels):
-                for b in mixels[i + 1 :]:
-                    if bodies_overlap(a, b):
-                        raise InputError(
-                            f"the bodies of mixels {a.name!r} and {b.name!r} intersect (each is a "
-                            f"{a.mask.width_m * 1e3:g} x {a.mask.height_m * 1e3:g} x {a.d_f_m * 1e3:g} mm box from "
-                            "its detector to its mask): move them apart, or pass allow_overlap=True to render an "
-                            "idealised mincam in which each mixel sees the scene as if it were alone"
-                        )
+            for i, j in _overlap_candidates(mixels):
+                a, b = mixels[i], mixels[j]
+                if bodies_overlap(a, b):
+                    raise InputError(
+                        f"the bodies of mixels {a.name!r} and {b.name!r} intersect (each is a "
+                        f"{a.mask.width_m * 1e3:g} x {a.mask.height_m * 1e3:g} x {a.d_f_m * 1e3:g} mm box from "
+                        "its detector to its mask): move them apart, or pass allow_overlap=True to render an "
+                        "idealised mincam in which each mixel sees the scene as if it were alone"
+                    )
 
     @property
     def occluding_bodies(self) -> bool:
@@ -239,6 +239,21 @@ def seen_whole_by_every_mixel(mincam: Mincam, centres_m: np.ndarray, half_size_m
     return keep
 
 
+def _overlap_candidates(mixels: Sequence[Mixel]) -> list[tuple[int, int]]:
+    """Index pairs ``(i, j)``, ``i < j``, whose body boxes' circumscribed spheres meet: the only pairs whose boxes
+    can intersect (a cheap, exact pre-filter for :func:`bodies_overlap`; O(n^2) in numpy, not in Python)."""
+    centres, radii = [], []
+    for m in mixels:
+        axis_z = np.asarray(m.pose.forward, dtype=float)
+        axis_z = axis_z / np.linalg.norm(axis_z)
+        centres.append(np.asarray(m.pose.position_m, dtype=float) + axis_z * m.d_f_m / 2)
+        radii.append(0.5 * np.sqrt(m.mask.width_m ** 2 + m.mask.height_m ** 2 + m.d_f_m ** 2))
+    centres, radii = np.array(centres), np.array(radii)
+    distance = np.linalg.norm(centres[:, None, :] - centres[None, :, :], axis=-1)
+    i, j = np.nonzero(np.triu(distance < radii[:, None] + radii[None, :], k=1))
+    return list(zip(i.tolist(), j.tolist(), strict=True))
+
+
 def bodies_overlap(a: Mixel, b: Mixel, tolerance_m: float = 1e-9) -> bool:
     """True if the two mixels' body boxes share interior volume (separating-axis test of two oriented boxes)."""
     boxes = []
@@ -286,7 +301,7 @@ def layout(
         offset = -dx * left + dy * up
         mixels.append(Mixel(mask, d_f_m, detector_size_m, center.translated(tuple(offset)), name))
     if allow_overlap is None:
-        allow_overlap = any(bodies_overlap(a, b) for i, a in enumerate(mixels) for b in mixels[i + 1 :])
+        allow_overlap = any(bodies_overlap(mixels[i], mixels[j]) for i, j in _overlap_candidates(mixels))
     return Mincam(tuple(mixels), allow_overlap=allow_overlap)
 
 
