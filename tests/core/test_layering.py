@@ -141,9 +141,8 @@ def _store_uses(name: str, path: Path) -> list[str]:
 
 
 def test_render_never_opens_a_store_or_takes_a_lock():
-    """The solvers write rows to the sink they are given (``mincam_sim.frames``); from ``mincam_sim.storage.store`` they
-    take content caches only. (The deprecated ``out_dir=`` of the old entry points reaches a store through
-    ``mincam_sim.frames.resolve_sink``, the one store-opening helper outside the run layer.)"""
+    """The solvers write rows to the sink they are given (``mincam_sim.frames``); from
+    ``mincam_sim.storage.store`` they take content caches only: stores and locks are the run layer's."""
     offenders = sorted(f"{name}: {use}" for name, path in MODULES.items() if _floor(name) == "render"
                        for use in _store_uses(name, path))
     assert offenders == []
