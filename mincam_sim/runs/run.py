@@ -111,7 +111,8 @@ class Run:
         clear_store(self.out_dir / name, extra=extra)
 
     def _finished(self, name: str, key: str, kind):
-        """The finished result in ``out_dir/name.npz`` if it carries this identity key (else None)."""
+        """The finished result in ``out_dir/name.npz`` if it carries this identity key (else None); a result
+        returned is named in :attr:`reused`."""
         path = self.out_dir / f"{name}.npz"
         if self.overwrite or not path.is_file():
             return None
@@ -120,7 +121,17 @@ class Run:
         except (OSError, ValueError, KeyError):
             return None
         meta = done.dp.meta if isinstance(done, Changes) else done.meta
-        return done if meta.get("identity_key") == key else None
+        if meta.get("identity_key") != key:
+            return None
+        self.reused.append(name)
+        return done
+
+    def _open_sink(self, name: str, identity: dict, lock: DirLock) -> StoreSink:
+        """The per-frame store of a run about to be computed, refused (before anything is traced) if it holds
+        another run."""
+        sink = StoreSink(self.out_dir / name, identity, overwrite=self.overwrite, lock=lock)
+        sink.refuse_another_run()
+        return sink
 
     # ------------------------------------------------------------------------------------------- measuring
     def measure(self, sim: Simulation, frames, solver: Solver | None = None, budget: Budget | None = None,
@@ -133,10 +144,8 @@ class Run:
         key = run_key(identity)
         done = self._finished(name, key, Measurements)
         if done is not None:
-            self.reused.append(name)
             return done
-        sink = StoreSink(self.out_dir / name, identity, overwrite=self.overwrite, lock=lock)
-        sink.refuse_another_run()
+        sink = self._open_sink(name, identity, lock)
         m = sim.measure(frames, solver, budget, sink=sink, show_progress=self.show_progress)
         m.meta.update(identity_key=key, frames=identity["frames"])
         m.save_csv(self.out_dir / f"{name}.csv")
@@ -153,10 +162,8 @@ class Run:
         key = run_key(identity)
         done = self._finished(name, key, Changes)
         if done is not None:
-            self.reused.append(name)
             return done
-        sink = StoreSink(self.out_dir / name, identity, overwrite=self.overwrite, lock=lock)
-        sink.refuse_another_run()
+        sink = self._open_sink(name, identity, lock)
         ch = sim.measure_changes(frames, background, solver, budget, sink=sink, show_progress=self.show_progress)
         ch.dp.meta["identity_key"] = ch.p.meta["identity_key"] = key
         ch.save_csv(self.out_dir / f"{name}.csv")
