@@ -775,6 +775,25 @@ def test_real_executable_exit_code(tmp_path):
     assert proc.stderr.count("\n") == 1 and proc.stderr.startswith("error: [screen] resolution")
 
 
+
+@pytest.mark.parametrize("delay_s", [0.05, 0.3])
+def test_ctrl_c_while_the_package_imports_is_one_line_and_130(delay_s, tmp_path):
+    """A Ctrl-C in the first second (Python still importing numpy, scipy, typer) ends like any interrupt: exit
+    code 130 and one line, no import traceback. The import takes >= 0.5 s here, so both delays land in it."""
+    import signal
+    import time
+
+    exe = Path(sys.executable).with_name("mincam-sim")
+    if not exe.exists():
+        pytest.skip("mincam-sim console script not installed beside this Python")
+    proc = subprocess.Popen([str(exe), "render", "--help"], cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    time.sleep(delay_s)
+    proc.send_signal(signal.SIGINT)
+    _, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 130, stderr
+    assert "Traceback" not in stderr and stderr.count("\n") == 1 and stderr.startswith("error: interrupted")
+
 @pytest.mark.slow
 @pytest.mark.parametrize("case", CASES, ids=lambda c: c.name)
 def test_every_case(case, tmp_path):
