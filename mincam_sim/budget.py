@@ -146,6 +146,15 @@ class Budget:
     def replicates_or(self, default: int) -> int:
         return int(self.replicates if self.replicates is not None else default)
 
+    def given_fields(self) -> list[str]:
+        """The fields set to other than their default (what a caller asked for)."""
+        return [name for name in BUDGET_FIELDS if getattr(self, name) != getattr(_DEFAULT_BUDGET, name)]
+
     def describe(self) -> dict:
         """JSON-friendly record of the budget."""
         return {k: v for k, v in asdict(self).items() if v is not None}
+
+
+#: Every field of a budget, in the order messages name them.
+BUDGET_FIELDS = ("spp", "samples_per_texel", "target_rel_stderr", "replicates", "seed", "max_spp")
+_DEFAULT_BUDGET = Budget()

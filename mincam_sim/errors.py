@@ -37,12 +37,19 @@ class BackendUnavailableError(MincamError, RuntimeError):
     """A Mitsuba variant was asked for that this machine cannot run (e.g. ``cuda_ad_mono`` without a GPU)."""
 
 
+class IgnoredSettingWarning(UserWarning):
+    """A setting (a TOML key, a CLI option, a :class:`~mincam_sim.budget.Budget` field) that the rest of the input
+    makes ineffective: it is ignored, and one warning says so."""
+
+
 __all__ = [
     "BackendUnavailableError",
     "ConfigError",
+    "IgnoredSettingWarning",
     "InputError",
     "MincamError",
     "OutDirLockedError",
     "StaleResultError",
     "StoreError",
 ]
+

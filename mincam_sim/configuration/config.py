@@ -165,15 +165,15 @@ def _display_solver(name: str, dot_product_table: dict) -> Solver:
         raise ConfigError("[run.dot_product] " + str(err).removeprefix("DotProduct ")) from None
 
 
-def make_budget(solver: Solver, spp: int, samples_per_texel: int | None, target_rel_stderr: float,
+def make_budget(solver: Solver, kind: str, spp: int, samples_per_texel: int | None, target_rel_stderr: float,
                 replicates: int, seed: int) -> Budget:
-    """The :class:`~mincam_sim.budget.Budget` of a ``[run]`` section: the count the solver uses (samples per
-    texel for response maps, rays per mixel per frame otherwise); the Budget's own checks, as one ``[run]``
-    line."""
-    maps = isinstance(solver, ResponseMap)
+    """The :class:`~mincam_sim.budget.Budget` of a ``[run]`` section with the fields the solver reads on ``kind``
+    scenes (the file's reader warns about the others); the Budget's own checks, as one ``[run]`` line."""
+    given = {"spp": spp, "samples_per_texel": samples_per_texel, "target_rel_stderr": target_rel_stderr,
+             "replicates": replicates, "seed": seed}
+    reads = solver.budget_fields(kind)
     try:
-        return Budget(spp=None if maps else spp, samples_per_texel=samples_per_texel if maps else None,
-                      target_rel_stderr=target_rel_stderr, replicates=replicates, seed=seed)
+        return Budget(**{name: value for name, value in given.items() if name in reads})
     except InputError as err:
         raise ConfigError("[run] " + str(err).removeprefix("Budget.")) from None
 
@@ -788,7 +788,8 @@ def load_config(source: str | Path | dict, base_dir: str | Path | None = None) -
     sections = {name: RENDER_SCHEMA.read(name, tables[name]) for name in _SECTIONS}
     run: RunSection = sections["run"]
     solver = _display_solver(run.solver, tables["run.dot_product"])
-    budget = make_budget(solver, run.spp, run.samples_per_texel, run.target_rel_stderr, run.replicates, run.seed)
+    budget = make_budget(solver, "display", run.spp, run.samples_per_texel, run.target_rel_stderr, run.replicates,
+                         run.seed)
     mincam = _build_mincam(sections["mincam"], tables["mixel"], base)
     wave = [mx.name for mx in mincam if mx.optics == "wave"]
     if wave and isinstance(solver, Reference):

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from mincam_sim.configuration.toml_files import read_document
-from mincam_sim.errors import ConfigError
+from mincam_sim.errors import ConfigError, IgnoredSettingWarning
 
 MAX_INT = 2**63 - 1
 EXAMPLE_WIDTH = 116  # characters per line of a generated example
@@ -73,10 +73,6 @@ def refuse_unknown(section: str, given: Iterable[Any], allowed: Sequence[str], w
     plural = "s" if len(unknown) > 1 else ""
     raise ConfigError(f"{bracket(section)}: unknown {what}{plural} {', '.join(hints)}; allowed {what}s are "
                       f"{', '.join(sorted(allowed))}")
-
-
-class IgnoredSettingWarning(UserWarning):
-    """A key (or an option) that the rest of the file (or the command) makes ineffective: it is ignored."""
 
 
 def warn_ignored(section: str, given: dict, keys: Sequence[str], why: str, cls: type | None = None) -> None:

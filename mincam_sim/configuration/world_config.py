@@ -371,7 +371,7 @@ def load_world_config(source: str | Path | dict, base_dir: str | Path | None = N
     refuse_old_solver_keys(tables["run"], "world")
     run: WorldRunSection = WORLD_SCHEMA.read("run", tables["run"])
     solver = make_solver(run.solver)
-    budget = make_budget(solver, run.spp, None, run.target_rel_stderr, run.replicates, run.seed)
+    budget = make_budget(solver, "world", run.spp, None, run.target_rel_stderr, run.replicates, run.seed)
     run_cfg = WorldRunConfig(solver, budget, run.max_depth or None, run.variant or None,
                              _path("run", "out_dir", run.out_dir, base))
     mincam = _world_mincam(WORLD_SCHEMA.read("mincam", tables["mincam"]), tables["mixel"], base)

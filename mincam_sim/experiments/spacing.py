@@ -101,7 +101,8 @@ def boundary_sweep_irradiance(setup: Setup, depth_m: float, positions: int, samp
     screen = Screen(side, side, (screen_texels, screen_texels), Pose((0.0, 0.0, -depth_m), (0.0, 0.0, 1.0)))
     budget = Budget(samples_per_texel=samples_per_texel, seed=setup.seed)
     if solver is not None:
-        measured = Simulation(cam, screen=screen).measure(sweep.frame_source(screen), solver, budget)
+        measured = Simulation(cam, screen=screen).measure(sweep.frame_source(screen), solver,
+                                                          budget if solver.budget_fields("display") else None)
         return measured.irradiance_w_m2, sweep.positions_m[:, 1]
     maps = Simulation(cam, screen=screen).response_maps(budget)
     return maps.measure(sweep.frame_stack(screen)).irradiance_w_m2, sweep.positions_m[:, 1]

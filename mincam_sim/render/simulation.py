@@ -29,6 +29,7 @@ from __future__ import annotations
 import difflib
 import functools
 import os
+import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from os import PathLike
 from pathlib import Path
@@ -37,7 +38,7 @@ import numpy as np
 
 from mincam_sim.budget import Budget
 from mincam_sim.changes import Changes
-from mincam_sim.errors import InputError
+from mincam_sim.errors import IgnoredSettingWarning, InputError
 from mincam_sim.frames import FrameSink, MemorySink, collect
 from mincam_sim.measurements import Measurements
 from mincam_sim.model.optics import Mincam
@@ -412,11 +413,21 @@ class Simulation:
                show_progress: bool):
         if self.kind == "world":
             require_light(self.scene)
+        self._warn_ignored_budget(solver, budget)
         sink = MemorySink() if sink is None else sink
         plan = solver.plan(self, frames, budget, background=background, cache=sink.cache,
                            show_progress=show_progress)
         table = sink.open(plan.n_rows, plan.columns)
         return plan.result(*collect(plan.rows(table.pending()), table))
+
+    def _warn_ignored_budget(self, solver: Solver, budget: Budget) -> None:
+        """One warning naming the budget fields ``solver`` does not read on this scene (nothing is refused)."""
+        reads = solver.budget_fields(self.kind)
+        ignored = [name for name in budget.given_fields() if name not in reads]
+        if ignored:
+            what = f"reads {', '.join(reads)}" if reads else "is exact and reads no budget"
+            warnings.warn(f"Budget.{', Budget.'.join(ignored)} {'is' if len(ignored) == 1 else 'are'} ignored: the "
+                          f"{solver.name} solver on {self.kind} scenes {what}", IgnoredSettingWarning, stacklevel=4)
 
     def measure(self, frames, solver: Solver | None = None, budget: Budget | None = None, *,
                 sink: FrameSink | None = None, show_progress: bool = False) -> Measurements:
@@ -456,7 +467,9 @@ class Simulation:
         """Each mixel's response map over the screen (display scenes), at the budget's samples per texel."""
         if self.kind != "display":
             raise InputError("response maps are maps over a screen's texels: display scenes only")
-        maps, _ = ResponseMap().maps(self, self._budget(budget), show_progress=show_progress)
+        solver, budget = ResponseMap(), self._budget(budget)
+        self._warn_ignored_budget(solver, budget)
+        maps, _ = solver.maps(self, budget, show_progress=show_progress)
         return maps
 
     def export_maps(self, out_dir: str | PathLike, budget: Budget | None = None, *, solver: Solver | None = None,

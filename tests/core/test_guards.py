@@ -46,6 +46,59 @@ PARITY = [
 ]
 
 
+#: (solver, scene kind, budget fields set) -> the fields it ignores (one warning names them), or none.
+UNREAD = [
+    (ms.Aperture(), "display", dict(spp=256, target_rel_stderr=0.1, max_spp=1024), []),
+    (ms.Aperture(), "display", dict(spp=256, samples_per_texel=16), ["samples_per_texel"]),
+    (ms.Aperture(), "world", dict(spp=256, target_rel_stderr=0.1, max_spp=1024), ["target_rel_stderr", "max_spp"]),
+    (ms.PlaneReplay(), "world", dict(spp=256, seed=3), []),
+    (ms.PlaneReplay(), "world", dict(spp=256, target_rel_stderr=0.1), ["target_rel_stderr"]),
+    (ms.ResponseMap(), "display", dict(samples_per_texel=16, target_rel_stderr=0.1), []),
+    (ms.ResponseMap(), "display", dict(spp=256, max_spp=512), ["spp", "max_spp"]),
+    (ms.DotProduct(), "display", dict(seed=2), ["seed"]),
+    (ms.DotProduct(), "display", dict(), []),
+    (ms.StratifiedChange(), "world", dict(spp=256, target_rel_stderr=0.1, max_spp=1024), []),
+    (ms.StratifiedChange(), "world", dict(spp=256, samples_per_texel=16), ["samples_per_texel"]),
+]
+
+
+@pytest.mark.parametrize("solver, kind, fields, ignored", UNREAD,
+                         ids=[f"{s.name}-{k}-{','.join(f) or 'none'}" for s, k, f, _ in UNREAD])
+def test_a_budget_field_the_solver_does_not_read_gets_one_warning(solver, kind, fields, ignored):
+    """A Budget field the solver never reads is not silently dropped: one warning, naming each such field."""
+    from mincam_sim.render.simulation import Simulation
+
+    sim = Simulation.__new__(Simulation)  # only the check: nothing is built or traced
+    sim.kind = kind
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        sim._warn_ignored_budget(solver, ms.Budget(**fields))
+    said = [str(w.message) for w in caught if w.category is IgnoredSettingWarning]
+    if not ignored:
+        assert said == []
+        return
+    assert len(said) == 1 and said[0].startswith("Budget." + ", Budget.".join(ignored) + " ")
+    assert f"the {solver.name} solver on {kind} scenes" in said[0]
+
+
+@pytest.mark.parametrize("solver, fields", [("dot_product", dict(spp=256, seed=3)),
+                                             ("aperture", dict(spp=256, samples_per_texel=16))])
+def test_a_run_key_the_solver_does_not_read_is_one_warning_through_toml_and_python(solver, fields):
+    """A ``[run]`` key the file's solver does not read: one warning from the file's reader, and the budget it
+    hands on leaves the field out, so the solver does not warn a second time."""
+    from mincam_sim.render.simulation import Simulation
+
+    with pytest.warns(IgnoredSettingWarning, match=r"\[run\] .* ignored") as caught:
+        cfg = load_config(_display(solver=solver, **fields))
+    assert len([w for w in caught if w.category is IgnoredSettingWarning]) == 1
+    sim = Simulation.__new__(Simulation)
+    sim.kind = "display"
+    with warnings.catch_warnings(record=True) as again:
+        warnings.simplefilter("always")
+        sim._warn_ignored_budget(cfg.run.solver, cfg.run.budget)
+    assert [w for w in again if w.category is IgnoredSettingWarning] == []
+
+
 @pytest.mark.parametrize("fields", PARITY, ids=lambda f: ",".join(f"{k}={v}" for k, v in f.items()))
 def test_budget_and_toml_refuse_the_same_values_with_the_same_words(fields):
     with pytest.raises(InputError) as python:

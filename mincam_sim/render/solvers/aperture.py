@@ -31,6 +31,10 @@ class Aperture(DisplayRaySolver):
     form: ClassVar[str] = "fast"
     estimator: ClassVar[str] = "mixel_sensor_path"
 
+    def budget_fields(self, kind: str) -> tuple[str, ...]:
+        # a world frame is traced once at the budget's rays: no target search, so no cap
+        return self.budget_reads if kind == "display" else ("spp", "replicates", "seed")
+
     def prepare(self, scene) -> None:
         backend.require_jit("The fast mixel sensor (a Python Mitsuba plugin)")
         _ = scene.fast_scene

@@ -73,6 +73,13 @@ class Solver:
     name: ClassVar[str] = "solver"
     scenes: ClassVar[tuple[str, ...]] = ()
     changes: ClassVar[bool] = False
+    #: The :class:`~mincam_sim.budget.Budget` fields this solver reads; one it does not read is ignored, with one
+    #: warning when set (``Simulation`` checks).
+    budget_reads: ClassVar[tuple[str, ...]] = ("spp", "target_rel_stderr", "replicates", "seed", "max_spp")
+
+    def budget_fields(self, kind: str) -> tuple[str, ...]:
+        """The budget fields this solver reads on ``kind`` scenes (``"display"`` or ``"world"``)."""
+        return self.budget_reads
 
     def identity(self) -> dict:
         """What of this solver determines the numbers: its name and every option (JSON-able)."""

@@ -75,6 +75,7 @@ class DotProduct(Solver):
     """
 
     name: ClassVar[str] = "dot_product"
+    budget_reads: ClassVar[tuple[str, ...]] = ()  # exact quadrature: no samples
     scenes: ClassVar[tuple[str, ...]] = ("display",)
 
     parallax: bool = False

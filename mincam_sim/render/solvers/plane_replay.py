@@ -198,6 +198,7 @@ class PlaneReplay(Solver):
 
     plane: str = "road"
     name: ClassVar[str] = "plane_replay"
+    budget_reads: ClassVar[tuple[str, ...]] = ("spp", "replicates", "seed")  # traced once: no target search
     scenes: ClassVar[tuple[str, ...]] = ("world",)
 
     def plan(self, sim, frames, budget: Budget, *, background=None, cache=None, show_progress: bool = False) -> Plan:

@@ -41,6 +41,7 @@ class ResponseMap(Solver):
     a dot product. Displays only; the budget's ``samples_per_texel`` or target sets the work."""
 
     name: ClassVar[str] = "response_map"
+    budget_reads: ClassVar[tuple[str, ...]] = ("samples_per_texel", "target_rel_stderr", "replicates", "seed")
     scenes: ClassVar[tuple[str, ...]] = ("display",)
 
     def maps(self, sim, budget: Budget, frames=None, cache=None, show_progress: bool = False):
