@@ -1,6 +1,8 @@
 """Scenes with rare light paths for the per-run honesty of the stratified estimator's standard error: two movers
-far apart and out of view (all of their change is light they throw onto the table), and a mover seen only in a
-mirror. Shared by tests/render/test_world_trust.py and the per-run tail measurement (``python tests/rare_paths.py``)."""
+far apart and out of view (all of their change is light they throw onto the table), a mover seen only in a
+mirror, a glass block, a small moving emitter (a lamp carried through the view), and a torus read from an OBJ
+file moving over a floor textured by a PNG file (the scene as a user writes it). Shared by
+tests/render/test_world_trust.py and the per-run tail measurement (``python tests/rare_paths.py``)."""
 
 from __future__ import annotations
 
@@ -15,6 +17,13 @@ from mincam_sim.render.scene.updates import vertex_update
 
 HEIGHT_M = 0.4  # mixels above the table; their view reaches ~0.2 m from the centre on the table
 PARK_M = np.array([5.0, 5.0, 0.0])  # where movers wait out of the scene
+
+
+def _ball(at_m) -> np.ndarray:
+    """to_world of a 2 cm ball centred at ``at_m`` (Mitsuba's sphere has radius 1 at the origin)."""
+    m = np.diag([0.01, 0.01, 0.01, 1.0])
+    m[:3, 3] = at_m
+    return m
 
 
 def _box(size_m, at_m):
@@ -37,8 +46,30 @@ def _glass_mesh(name: str, vertices, faces):
     return mesh
 
 
+def _user_files() -> tuple[str, str]:
+    """A torus (OBJ, 3 cm across) and a floor texture (PNG, 64 x 64 random gray tiles), written once per
+    machine into a temporary folder: paths of files, as a user's scene names them."""
+    import tempfile
+    from pathlib import Path
+
+    from mincam_sim.storage.imageio import write_png
+
+    folder = Path(tempfile.gettempdir()) / "mincam_rare_paths"
+    folder.mkdir(exist_ok=True)
+    obj, png = folder / "torus.obj", folder / "floor.png"
+    if not obj.exists():
+        torus = trimesh.creation.torus(major_radius=0.012, minor_radius=0.004, major_sections=24, minor_sections=12)
+        torus.export(obj.with_suffix(".tmp.obj"))
+        obj.with_suffix(".tmp.obj").replace(obj)
+    if not png.exists():
+        tiles = np.random.default_rng(5).uniform(0.1, 0.9, (16, 16))
+        write_png(png.with_suffix(".tmp.png"), np.kron(tiles, np.ones((4, 4))))
+        png.with_suffix(".tmp.png").replace(png)
+    return str(obj), str(png)
+
+
 def rare_scene(case: str):
-    """(world, frames, background) for ``case`` in {"far_movers", "mirror", "glass"}."""
+    """(world, frames, background) for ``case`` in {"far_movers", "mirror", "glass", "emitter", "textured"}."""
     cam = cross_layout(center=Pose((0.0, 0.0, HEIGHT_M), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)))
     elements = {
         "table": {"type": "rectangle", "to_world": sd._transform(np.diag([0.8, 0.8, 1.0, 1.0])),
@@ -66,6 +97,22 @@ def rare_scene(case: str):
         # through delta bounces, which are never guided
         places = {"lens": (0.05, 0.03, 0.0)}
         sizes = {"lens": (0.04, 0.04, 0.03)}
+    elif case == "emitter":
+        # a 2 cm glowing ball carried through the view at 5 cm height: seen directly, and lighting the table
+        elements["glow"] = {"type": "sphere", "to_world": sd._transform(_ball(PARK_M)),
+                            "emitter": {"type": "area", "radiance": {"type": "spectrum", "value": 40.0}}}
+        world = ms.Simulation(cam, world=elements, max_depth=3)
+        return world, [{"glow.to_world": _ball([0.04, -0.02, 0.05])}], {"glow.to_world": _ball(PARK_M)}
+    elif case == "textured":
+        obj, png = _user_files()
+        elements["table"]["bsdf"] = {"type": "diffuse", "reflectance": {"type": "bitmap", "filename": png}}
+        elements["torus"] = {"type": "obj", "filename": obj,
+                             "bsdf": {"type": "diffuse", "reflectance": {"type": "spectrum", "value": 0.8}}}
+        world = ms.Simulation(cam, world=elements, max_depth=3)
+        v0 = np.asarray(world.params["torus.vertex_positions"], dtype=np.float64).reshape(-1, 3)
+        lift = np.array([0.0, 0.0, 0.004 - v0[:, 2].min()])  # resting on the table
+        return (world, [vertex_update("torus", v0 + lift + [0.06, 0.02, 0.0])],
+                vertex_update("torus", v0 + lift + PARK_M))
     else:
         raise KeyError(case)
     parked, placed = {}, {}

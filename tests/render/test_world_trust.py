@@ -233,7 +233,9 @@ def _allowed_beyond(n_values: int) -> int:
 
 
 @pytest.mark.parametrize("case, n_seeds", [pytest.param("far_movers", 16, id="far movers"),
-                                           pytest.param("mirror", 16, id="mirror")])
+                                           pytest.param("mirror", 16, id="mirror"),
+                                           pytest.param("emitter", 16, id="moving emitter"),
+                                           pytest.param("textured", 16, id="OBJ torus on a PNG floor")])
 def test_per_run_sigma_is_honest_on_rare_light_paths(case, n_seeds):
     """Every run's dP against the mean of the other runs, in units of both standard errors: tails no heavier
     than honest Gaussian replicates allow, and never 0 +/- 0 for a change the others resolve. Far-apart movers
@@ -252,7 +254,7 @@ def test_per_run_sigma_is_honest_on_rare_light_paths(case, n_seeds):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("case", ["far_movers", "mirror"])
+@pytest.mark.parametrize("case", ["far_movers", "mirror", "emitter", "textured"])
 def test_per_run_sigma_is_honest_on_rare_light_paths_many_seeds(case):
     beyond, zero, z, _, _ = tail_counts(case, range(96), 1 << 14)
     assert zero == 0
