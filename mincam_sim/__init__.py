@@ -96,4 +96,4 @@ __all__ = [
     "single",
     "white_square",
 ]
-__version__ = "0.5.0"
+__version__ = "0.7.0.dev0"
