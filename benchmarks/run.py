@@ -205,6 +205,7 @@ def bench_moving_object() -> dict:
 
 
 MOVING_OBJECT_REPLICATES = 64  # see bench_moving_object
+RECHECK_SEED_SETS = 8  # independent 9-frame runs at the chosen budget, each one's worst sigma reported
 
 
 def _dp_with(solver, world, frames, background):
@@ -271,6 +272,12 @@ def _moving_object_stratified(world, frames, background, plain) -> dict:
         raised.append([spp, worst])
         spp = int(np.ceil(spp * (worst / 0.0097) ** (1.0 / beta)))
         fast_dp(frames[:2], spp, 21)  # warm-up
+    # the worst-sigma rule re-checked on independent seed sets: the worst of 36 reported sigmas is itself a noisy
+    # maximum, so one set of timed runs under 1 % says little about the next
+    recheck = []
+    for seed in range(RECHECK_SEED_SETS):
+        again = fast_dp(frames, spp, 100 + seed).dp
+        recheck.append(float(np.max(np.abs(again.stderr_w_m2 / again.irradiance_w_m2))))
     # the same runs traced every frame with full background passes (the estimator before frozen launches and
     # paired lanes): the same numbers bit for bit, timed in this run beside the frozen, paired ones
     _set_frozen_paired(world, False)
@@ -295,6 +302,7 @@ def _moving_object_stratified(world, frames, background, plain) -> dict:
         "fps_launches": run.info.launches,
         "fps_seconds_timed": seconds,
         "fps_worst_rel_stderr_dP": worst,
+        "fps_worst_rel_stderr_dP_independent_seed_sets": recheck,
         "fast_vs_plain_max_abs_z": z_max,
         "fast_vs_plain_comparisons": runs * plain.irradiance_w_m2.size,
         "fps_estimator": "stratified",
@@ -616,6 +624,42 @@ def _cpu() -> dict:
     return info
 
 
+def _goals(results: dict) -> dict:
+    """The performance targets, each with its measured value and whether it is met (None: not measured here)."""
+    goals: dict = {}
+
+    def goal(name: str, value, met: bool) -> None:
+        goals[name] = {"value": value, "met": bool(met)}
+
+    moving = results.get("moving_object")
+    if moving:
+        rays = moving["fps_rays_per_mixel_per_frame"]
+        goal("moving_object rays per mixel per frame <= 12000", rays, rays <= 12_000)
+        goal("moving_object worst sigma <= 1 % (timed runs)", moving["fps_worst_rel_stderr_dP"],
+             moving["fps_worst_rel_stderr_dP"] <= 0.01)
+        again = moving.get("fps_worst_rel_stderr_dP_independent_seed_sets", [])
+        if again:
+            goal("moving_object worst sigma <= 1.1 % on every independent seed set", max(again), max(again) <= 0.011)
+        goal("moving_object |z| vs plain <= 4.5", moving["fast_vs_plain_max_abs_z"],
+             moving["fast_vs_plain_max_abs_z"] <= 4.5)
+        goal("moving_object >= 125 frames/s (aim)", moving["frames_per_second"], moving["frames_per_second"] >= 125)
+    curves = results.get("cost_curves")
+    if curves:
+        def fps(axis: str, i: int) -> float:
+            return curves[axis][i]["stratified"]["frames_per_second_at_1pct"]
+
+        goal("1 M static triangles keep >= 0.5x the frames/s of 1 k", fps("triangles", -1) / fps("triangles", 0),
+             fps("triangles", -1) / fps("triangles", 0) >= 0.5)
+        over_plain = curves["movers"][-1]["stratified_over_plain_frames_per_second_at_1pct"]
+        goal("8 movers: stratified >= 100x plain frames/s at 1 %", over_plain, over_plain >= 100)
+        cost = fps("mixels", 0) / fps("mixels", -1)
+        goal("64 mixels cost <= 12x 4 mixels per frame at 1 %", cost, cost <= 12)
+    if "reproduce_all" in results:
+        seconds = results["reproduce_all"]["reproduce_all_seconds"]
+        goal("reproduce all (full) <= 30 s", seconds, seconds <= 30)
+    return goals
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--out", type=Path, default=HERE / "results.json")
@@ -662,6 +706,7 @@ def main() -> int:
         if name in results:
             summary[f"{name}_peak_gib"] = results[name]["peak_memory_mib"] / 1024
             summary[f"{name}_goal_met"] = summary[f"{name}_peak_gib"] <= results[name]["goal_peak_gib"]
+    summary["goals"] = _goals(results)
     results.update(summary)
     results["machine"] = {"cpus": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version(),
                           "date": time.strftime("%Y-%m-%d"), **_cpu()}
