@@ -30,7 +30,7 @@ class LoadedScenes:
     """What the loaded scenes among a world's elements bring beside their shapes: the scene files (for the
     identity), their integrator's ``max_depth`` (with where it came from) and the sensors that are ignored."""
 
-    files: list = field(default_factory=list)  # SceneFile
+    files: list = field(default_factory=list)  # SceneFile, GltfFile
     max_depth: tuple[int, str] | None = None
     ignored_sensors: list[str] = field(default_factory=list)
     static: set[str] = field(default_factory=set)  # shapes and lights without an id, and shape groups: not movers
@@ -44,13 +44,17 @@ class LoadedScenes:
 
 
 def expand_elements(elements) -> tuple[dict, LoadedScenes]:
-    """``elements`` (name -> Mitsuba dict, Mitsuba object, a loaded ``mi.Scene`` or a
-    :class:`~mincam_sim.render.scene.scene_files.SceneFile`) as a flat dict whose values are dicts or single
-    Mitsuba objects, and what the loaded scenes bring besides: a loaded scene contributes its shapes (those
-    without an id as static geometry, named ``<element>_shape<i>``) and its emitters that are not attached to a
-    shape, under their own ids, and its shape groups (``shapegroup``: the shapes its ``instance`` shapes draw,
-    which a scene rebuilt around the mincam needs beside them; static, an instance moves by its own
-    ``to_world``); its integrator's ``max_depth`` is offered to the caller, its sensors ignored."""
+    """``elements`` (name -> Mitsuba dict, Mitsuba object, a loaded ``mi.Scene``, a
+    :class:`~mincam_sim.render.scene.scene_files.SceneFile` or a
+    :class:`~mincam_sim.render.scene.gltf_files.GltfFile`, whose nodes come under their own names) as a flat
+    dict whose values are dicts or single Mitsuba objects, and what the loaded scenes bring besides.
+
+    A loaded scene contributes its shapes (those without an id as static geometry, named
+    ``<element>_shape<i>``), its emitters that are not attached to a shape, under their own ids, and its shape
+    groups (``shapegroup``: the shapes its ``instance`` shapes draw, which a scene rebuilt around the mincam
+    needs beside them; static: an instance moves by its own ``to_world``); its integrator's ``max_depth`` is
+    offered to the caller, its sensors ignored."""
+    from mincam_sim.render.scene.gltf_files import GltfFile
     from mincam_sim.render.scene.scene_files import SceneFile, file_max_depth
 
     if not isinstance(elements, Mapping):
@@ -68,6 +72,11 @@ def expand_elements(elements) -> tuple[dict, LoadedScenes]:
         if not isinstance(name, str) or not name or "." in name:
             raise InputError(f"element name {name!r} must be a non-empty string without '.' (parameters are "
                              "addressed as 'name.parameter'); rename it")
+        if isinstance(value, GltfFile):
+            loaded.files.append(value)
+            for node, mesh in value.elements().items():
+                add(node, mesh, f"a node of {value.path.name}")
+            continue
         if isinstance(value, SceneFile):
             loaded.files.append(value)
             value = value.load()
