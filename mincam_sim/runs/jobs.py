@@ -33,11 +33,12 @@ import numpy as np
 from mincam_sim.budget import Budget
 from mincam_sim.changes import Changes
 from mincam_sim.configuration.config import RenderConfig, solver_name, traced_samples
-from mincam_sim.configuration.world_config import CameraSpec, WorldConfig
+from mincam_sim.configuration.world_config import CameraSpec, WorldConfig, is_gltf
 from mincam_sim.errors import ConfigError
 from mincam_sim.measurements import Measurements
 from mincam_sim.render import backend
 from mincam_sim.render.scene import scene_dicts as sd
+from mincam_sim.render.scene.gltf_files import GltfFile
 from mincam_sim.render.scene.scene_files import SceneFile, read_mesh
 from mincam_sim.render.scene.world_checks import light_pixels
 from mincam_sim.render.simulation import Simulation
@@ -176,10 +177,12 @@ def rotation_deg(angles_deg) -> np.ndarray:
 
 
 def build_elements(cfg: WorldConfig) -> dict:
-    """The world's elements: the XML scene with its parameters (turned z-up if authored y-up) and the config's
-    objects and lights."""
+    """The world's elements: the XML scene with its parameters, or the glTF file (turned z-up if authored y-up, in
+    metres), and the config's objects and lights."""
     elements: dict = {}
-    if cfg.scene_file is not None:
+    if cfg.scene_file is not None and is_gltf(cfg.scene_file):  # its nodes come in under their own names
+        elements["scene"] = GltfFile(cfg.scene_file, cfg.up, cfg.unit_m, cfg.emission_w_m2_sr)
+    elif cfg.scene_file is not None:
         elements["scene"] = SceneFile(cfg.scene_file, cfg.parameters, cfg.up, cfg.unit_m)  # in metres once loaded
     for obj in cfg.objects:
         vertices, faces = read_mesh(obj.mesh)

@@ -175,3 +175,47 @@ def test_dropped_material_parts_are_said_once(tmp_path):
         ms.Simulation(CAM, world={"file": gltf, "sky": sd.sky(1.0)}, max_depth=2)
     said = [w for w in caught if issubclass(w.category, WorldWarning) and "metallic" in str(w.message)]
     assert len(said) == 1, [str(w.message) for w in caught]
+
+
+def test_a_gltf_scene_from_a_world_config_and_from_a_path(tmp_path):
+    """``[world] scene = "lamp_card.gltf"`` (y-up unless ``up`` is set, ``emission_w_m2_sr`` the emission's scale,
+    the buffers it names part of the run's files) with the node ``card_001`` as a mover, against the quadrature;
+    ``world="lamp_card.gltf"`` from Python builds the same nodes; parameters are refused for a glTF file."""
+    from mincam_sim.configuration.world_config import load_world_config
+    from mincam_sim.errors import ConfigError
+    from mincam_sim.runs.jobs import run_world_config
+
+    gltf = _write(tmp_path / "lamp_card.gltf", {"lamp": _lamp(), "card.001": _card()})
+    text = f"""[run]
+spp = 16384
+replicates = 16
+seed = 4
+max_depth = 2
+out_dir = "out"
+[mincam]
+layout = "custom"
+[[mixel]]
+name = "open"
+mask = "constant:1.0"
+position_m = [0.0, 0.0, 0.5]
+forward = [0.0, 0.0, -1.0]
+[world]
+scene = "lamp_card.gltf"
+emission_w_m2_sr = {gltf.emission_w_m2_sr!r}
+[[world.mover]]
+id = "card_001"
+offsets_m = [[0.0, 0.0, 0.0], [0.08, 0.0, 0.0]]
+"""
+    (tmp_path / "c.toml").write_text(text)
+    cfg = load_world_config(tmp_path / "c.toml")
+    assert cfg.up == "y" and any(f.suffix == ".bin" for f in cfg.files)
+    ch = run_world_config(cfg)
+    expected = np.array([_oracle(0.0), _oracle(0.08)]) - _oracle(None)
+    assert_close_mc(ch.dp.irradiance_w_m2[:, 0], expected, ch.dp.stderr_w_m2[:, 0], what="TOML glTF node mover")
+    sim = ms.Simulation(CAM, world=tmp_path / "lamp_card.gltf", max_depth=2)
+    assert sim.movable() == ["card_001", "lamp"]
+    with pytest.raises(InputError, match="glTF, which has no <default> parameters"):
+        ms.Simulation(CAM, world=tmp_path / "lamp_card.gltf", parameters={"lamp": 0})
+    (tmp_path / "c.toml").write_text(text + "[world.parameters]\nlamp = 0\n")
+    with pytest.raises(ConfigError, match="a glTF file has none"):
+        load_world_config(tmp_path / "c.toml")

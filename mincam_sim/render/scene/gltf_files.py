@@ -9,13 +9,13 @@ Its material (glTF's metallic-roughness PBR) is taken as far as a diffuse world 
 * ``emissiveFactor`` -> an area light of radiance ``emission_w_m2_sr`` x its luminance (glTF's emission has no
   physical unit: ``emission_w_m2_sr`` says what a white emissive factor of 1 is);
 * everything else (metallic, roughness, normal, occlusion and emissive maps, alpha, cameras, lights, animation)
-  is left out; one :class:`~mincam_sim.render.scene.world_input.WorldWarning` names what was dropped.
+  is left out, and :meth:`GltfFile.elements` says what (the world then says it in one
+  :class:`~mincam_sim.render.scene.world_input.WorldWarning`).
 """
 
 from __future__ import annotations
 
 import re
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,7 +23,6 @@ import numpy as np
 
 from mincam_sim.errors import InputError
 from mincam_sim.render import backend
-from mincam_sim.render.scene.world_input import WorldWarning
 
 GLTF_SUFFIXES = (".gltf", ".glb")
 LUMINANCE = np.array([0.212671, 0.715160, 0.072169])  # linear Rec. 709 RGB -> Y (Mitsuba's own weights)
@@ -73,8 +72,9 @@ class GltfFile:
         turn = Y_UP_TO_Z_UP if self.up == "y" else np.eye(4)
         return np.diag([self.unit_m] * 3 + [1.0]) @ turn
 
-    def elements(self) -> dict:
-        """Node name -> ``mi.Mesh`` (world coordinates [m]) of every node that holds a mesh.
+    def elements(self) -> tuple[dict, str | None]:
+        """(node name -> ``mi.Mesh`` (world coordinates [m]) of every node that holds a mesh, one line saying
+        which parts of the materials were left out, or None).
 
         Raises
         ------
@@ -91,11 +91,11 @@ class GltfFile:
             geometry = scene.geometry[geometry_name]
             out[name] = node_mesh(name, geometry, base @ np.asarray(transform, dtype=np.float64),
                                   self.emission_w_m2_sr, dropped)
+        note = None
         if dropped:
-            warnings.warn(f"{self.path.name}: {', '.join(sorted(dropped))} left out (a world takes a glTF "
-                          "material's base colour, its texture, double-sidedness and emissive factor)",
-                          WorldWarning, stacklevel=3)
-        return out
+            note = (f"{self.path.name}: {', '.join(sorted(dropped))} left out (a world takes a glTF material's base "
+                    "colour, its texture, double-sidedness and emissive factor)")
+        return out, note
 
 
 def read_gltf(path: Path):
@@ -234,3 +234,30 @@ def build_mesh(name: str, vertices_m: np.ndarray, faces: np.ndarray, uv: np.ndar
                                               .ravel())
     params.update()
     return mesh
+
+
+def gltf_referenced_files(path: Path) -> list[Path]:
+    """The files a glTF / GLB file names (``buffers`` and ``images`` by a relative ``uri``, not embedded
+    ``data:`` ones) that exist: their content determines the numbers too. An unreadable file gives none here
+    (the loader reports it)."""
+    import json
+    import struct
+    from urllib.parse import unquote
+
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+        if data[:4] == b"glTF":  # GLB: 12-byte header, then the JSON chunk (length, type, content)
+            length = struct.unpack_from("<I", data, 12)[0]
+            data = data[20:20 + length]
+        header = json.loads(data)
+    except (OSError, ValueError, struct.error):
+        return []
+    found = []
+    for entry in [*header.get("buffers", []), *header.get("images", [])]:
+        uri = entry.get("uri") if isinstance(entry, dict) else None
+        if isinstance(uri, str) and uri and not uri.startswith("data:"):
+            file = path.parent / unquote(uri)
+            if file.is_file() and file not in found:
+                found.append(file)
+    return found

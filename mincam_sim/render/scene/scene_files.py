@@ -117,9 +117,12 @@ def load_scene_file(path: str | Path, parameters: Mapping[str, str] | None = Non
     if not path.is_file():
         raise InputError(f"scene file {path} does not exist; check the path (relative paths are taken from the "
                          "config's folder)")
+    if path.suffix.lower() in (".gltf", ".glb"):
+        raise InputError(f"scene file {path} is glTF, which has no <default> parameters: give world={path.name!r} "
+                         "without parameters (or a GltfFile element)")
     if path.suffix.lower() != ".xml":
-        raise InputError(f"scene file {path} is not a Mitsuba XML scene (.xml); meshes go in [[world.object]] "
-                         "entries")
+        raise InputError(f"scene file {path} is not a Mitsuba XML scene (.xml) nor glTF (.gltf, .glb); meshes go in "
+                         "[[world.object]] entries")
     unknown = sorted(set(parameters) - declared_parameters(path))
     if unknown:
         known = sorted(declared_parameters(path))
@@ -209,10 +212,16 @@ def _placement_keys(mi, scene, params, parts: tuple[str, ...]) -> list[str]:
     """The parameters ``<name>.<part>`` that place an element as a whole, not the shapes inside a shape group
     (``group.shape.to_world``): the instances that draw a group are placed by their own ``to_world``, and moving
     both would move them twice."""
-    from mincam_sim.render.scene.world_input import shape_groups
-
     groups = tuple(f"{group.id()}." for group in shape_groups(mi, scene))
     return [key for key in params.keys() if key.rpartition(".")[2] in parts and not key.startswith(groups)]
+
+
+def shape_groups(mi, scene) -> list:
+    """The ``shapegroup`` shapes of a loaded scene (``scene.shapes()`` leaves them out: only the ``instance``
+    shapes that draw them are listed)."""
+    return [obj for obj, (parent, _) in mi.traverse(scene).hierarchy.items()
+            if parent is scene and isinstance(obj, mi.Shape) and obj.class_name() == "ShapeGroupPlugin"]
+
 
 
 def turn_scene(scene, matrix: np.ndarray) -> None:

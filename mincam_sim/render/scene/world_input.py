@@ -74,8 +74,11 @@ def expand_elements(elements) -> tuple[dict, LoadedScenes]:
                              "addressed as 'name.parameter'); rename it")
         if isinstance(value, GltfFile):
             loaded.files.append(value)
-            for node, mesh in value.elements().items():
+            nodes, note = value.elements()
+            for node, mesh in nodes.items():
                 add(node, mesh, f"a node of {value.path.name}")
+            if note:
+                warnings.warn(note, WorldWarning, stacklevel=3)
             continue
         if isinstance(value, SceneFile):
             loaded.files.append(value)
@@ -121,14 +124,9 @@ def _scene_items(mi, scene, element: str) -> list[tuple[str, object, bool]]:
     items = [(s.id() or f"{element}_shape{i}", s) for i, s in enumerate(shapes)]
     items += [(e.id() or f"{element}_light{i}", e) for i, e in enumerate(lights)]
     movable = [(name, item, bool(item.id()) and not generated.fullmatch(item.id())) for name, item in items]
+    from mincam_sim.render.scene.scene_files import shape_groups
+
     return [(group.id(), group, False) for group in shape_groups(mi, scene)] + movable
-
-
-def shape_groups(mi, scene) -> list:
-    """The ``shapegroup`` shapes of a loaded scene (``scene.shapes()`` leaves them out: only the ``instance``
-    shapes that draw them are listed)."""
-    return [obj for obj, (parent, _) in mi.traverse(scene).hierarchy.items()
-            if parent is scene and isinstance(obj, mi.Shape) and obj.class_name() == "ShapeGroupPlugin"]
 
 
 def check_radiant_params(params, keys: Sequence[str] | None = None) -> None:
