@@ -3,8 +3,10 @@
 A Mitsuba XML scene is loaded with ``optimize=False`` (every shape keeps its id and its own parameters, never
 merged into an anonymous mesh with others that share its material), its ``<default>`` values set by the caller's
 ``parameters`` through Mitsuba's own loader (:class:`SceneFile`). Its ``<integrator>``'s ``max_depth`` is read
-back (:func:`file_max_depth`); its sensors are the mincam's business. Meshes in formats Mitsuba cannot read
-(glTF / GLB, STL, and OBJ / PLY if asked) are read with trimesh and handed over as in-memory meshes.
+back (:func:`file_max_depth`); its sensors are the mincam's business; its shape groups (:func:`shape_groups`)
+travel with the instances that draw them and are never placed twice. Meshes in formats Mitsuba cannot read
+(glTF / GLB, STL, and OBJ / PLY if asked) are read with trimesh and handed over as in-memory meshes (a glTF file
+with its materials and nodes: :mod:`.gltf_files`).
 """
 
 from __future__ import annotations
