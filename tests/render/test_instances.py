@@ -12,6 +12,7 @@ from mincam_sim.render.scene import scene_dicts as sd
 from mincam_sim.render.scene.scene_files import SceneFile
 
 CAM = ms.pair_layout(center=ms.Pose((0.0, 0.0, 0.4), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)))
+SOLVER = ms.StratifiedChange
 BUDGET = ms.Budget(spp=1 << 16, seed=5, replicates=16)
 # the group's two cards (local frame [m]): a 10 x 5 cm lid 6 cm up and a 10 x 6 cm side standing at its edge
 LID = np.array([[0.05, 0, 0, 0], [0, 0.025, 0, 0], [0, 0, 1, 0.06], [0, 0, 0, 1.0]])
@@ -36,7 +37,7 @@ def _separate(placed: np.ndarray) -> dict:
 
 
 def _dP(sim: ms.Simulation, frame: dict, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    ch = sim.measure_changes([frame], background={}, solver=ms.PlainChange(),
+    ch = sim.measure_changes([frame], background={}, solver=SOLVER(),
                              budget=ms.Budget(spp=BUDGET.spp, seed=seed, replicates=BUDGET.replicates))
     return ch.dp.irradiance_w_m2[0], ch.dp.stderr_w_m2[0]
 
