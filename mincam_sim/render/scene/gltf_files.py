@@ -89,8 +89,13 @@ class GltfFile:
         for node, name in node_names(scene, self.path).items():
             transform, geometry_name = scene.graph[node]
             geometry = scene.geometry[geometry_name]
+            if not _has_triangles(geometry):
+                dropped.add(f"node {node!r} ({type(geometry).__name__}, no triangles)")
+                continue
             out[name] = node_mesh(name, geometry, base @ np.asarray(transform, dtype=np.float64),
                                   self.emission_w_m2_sr, dropped)
+        if not out:
+            raise InputError(f"glTF file {self.path} holds no triangle mesh; export the objects as meshes")
         note = None
         if dropped:
             note = (f"{self.path.name}: {', '.join(sorted(dropped))} left out (a world takes a glTF material's base "
@@ -132,12 +137,7 @@ def node_names(scene, path: Path) -> dict[str, str]:
 
 
 def node_mesh(name: str, geometry, matrix: np.ndarray, emission_w_m2_sr: float, dropped: set[str]):
-    """One node's geometry placed by ``matrix`` (file -> world [m]) as an ``mi.Mesh`` with its material."""
-    import trimesh
-
-    if not isinstance(geometry, trimesh.Trimesh) or len(geometry.faces) == 0:
-        raise InputError(f"glTF node {name!r} holds no triangles ({type(geometry).__name__}); export it as a "
-                         "triangle mesh")
+    """One node's triangles placed by ``matrix`` (file -> world [m]) as an ``mi.Mesh`` with its material."""
     vertices = np.asarray(geometry.vertices, dtype=np.float64)
     faces = np.asarray(geometry.faces, dtype=np.int64)
     if np.linalg.det(matrix[:3, :3]) < 0:  # a mirroring transform: keep the faces' front side where it was
@@ -145,11 +145,19 @@ def node_mesh(name: str, geometry, matrix: np.ndarray, emission_w_m2_sr: float, 
     placed = vertices @ matrix[:3, :3].T + matrix[:3, 3]
     if not np.all(np.isfinite(placed)):
         raise InputError(f"glTF node {name!r} has NaN or infinite vertex coordinates")
+    if getattr(geometry.visual, "kind", None) in ("vertex", "face"):
+        dropped.add("vertex and face colours")
     material = getattr(geometry.visual, "material", None)
     uv = getattr(geometry.visual, "uv", None)
     bsdf, texture = material_bsdf(name, material, uv is not None, dropped)
     emitter = material_emitter(material, emission_w_m2_sr)
     return build_mesh(name, placed, faces, uv if texture else None, bsdf, emitter)
+
+
+def _has_triangles(geometry) -> bool:
+    import trimesh
+
+    return isinstance(geometry, trimesh.Trimesh) and len(geometry.faces) > 0
 
 
 def srgb_to_linear(values: np.ndarray) -> np.ndarray:
