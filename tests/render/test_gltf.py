@@ -219,3 +219,15 @@ offsets_m = [[0.0, 0.0, 0.0], [0.08, 0.0, 0.0]]
     (tmp_path / "c.toml").write_text(text + "[world.parameters]\nlamp = 0\n")
     with pytest.raises(ConfigError, match="a glTF file has none"):
         load_world_config(tmp_path / "c.toml")
+
+
+def test_a_mirrored_node_keeps_its_front_side(tmp_path):
+    """glTF: a node whose transform mirrors (negative determinant) has its triangles' winding reversed. The lamp
+    mirrored in x (the same rectangle) still emits up: P as the quadrature says (0 had its front turned down)."""
+    scene = trimesh.Scene()
+    scene.add_geometry(_lamp(), node_name="lamp", geom_name="lamp_mesh", transform=np.diag([-1.0, 1.0, 1.0, 1.0]))
+    scene.export(tmp_path / "mirrored.glb")
+    gltf = GltfFile(tmp_path / "mirrored.glb", emission_w_m2_sr=RADIANCE / EMISSIVE_Y)
+    sim = ms.Simulation(CAM, world={"file": gltf}, max_depth=2)
+    m = sim.measure([{}], budget=ms.Budget(spp=1 << 14, seed=6, replicates=16))
+    assert_close_mc(m.irradiance_w_m2[0, 0], _oracle(None), m.stderr_w_m2[0, 0], what="a mirrored emissive node")
