@@ -50,6 +50,7 @@ from mincam_sim.configuration.toml_files import read_document
 from mincam_sim.errors import ConfigError
 from mincam_sim.model.geometry import Pose
 from mincam_sim.model.optics import Mincam
+from mincam_sim.render.scene.gltf_files import gltf_referenced_files
 from mincam_sim.render.solvers import Solver
 
 UP_AXES = ("z", "y")
@@ -166,15 +167,18 @@ class WorldMincamSection(MincamSection):
 class WorldSection:
     """``[world]``: the scene file, its orientation and timing."""
 
-    scene: str = setting("", "a Mitsuba 3 XML scene (relative to this file); shapes addressed by their id", Text())
-    up: str = setting("z", '"z", or "y" for a scene authored y-up (turned so that its +y is the world +z)',
-                      Choice(UP_AXES))
+    scene: str = setting("", "a Mitsuba 3 XML scene (shapes addressed by their id) or a glTF / GLB file (its nodes "
+                         "by their name); relative to this file", Text())
+    up: str = setting("z", '"z", or "y" for a scene authored y-up (turned so that its +y is the world +z); a glTF '
+                      'file is "y" unless set', Choice(UP_AXES))
     frame_rate_hz: float = setting(30.0, "frames per second: the time column, and keyframe sampling",
                                    Number(positive=True))
     background: str = setting("without_movers", '"without_movers" (movers removed), "as_built", or "first_frame"',
                               Choice(BACKGROUNDS))
     unit_m: float = setting(1.0, "the length of the scene file's unit in metres (0.01: modelled in cm; the mincam, "
                             "movers and lights here stay in metres)", Number(positive=True))
+    emission_w_m2_sr: float = setting(1.0, "a glTF file's emission: the radiance of an emissive factor (1, 1, 1)",
+                                      Number(minimum=0.0))
     parameters: Any = setting(None, "the scene file's <default> values, name = value as the XML writes them (or a "
                               "[world.parameters] table)", _parameters, example={"lamp": "0, 0, 0"})
 
@@ -346,6 +350,7 @@ class WorldConfig:
     files: list[Path] = field(default_factory=list)  # every file the numbers depend on (XML, meshes, CSVs)
     parameters: dict[str, str] = field(default_factory=dict)  # the scene file's <default> values
     unit_m: float = 1.0  # the scene file's unit [m]
+    emission_w_m2_sr: float = 1.0  # a glTF file's emission scale [W m^-2 sr^-1]
 
     @property
     def n_frames(self) -> int:
@@ -384,7 +389,10 @@ def load_world_config(source: str | Path | dict, base_dir: str | Path | None = N
             raise ConfigError(f"[world] scene: {scene_file} does not exist (relative paths are taken from the "
                               "config's folder)")
         files.append(scene_file)
-        files.extend(referenced_files(scene_file))
+        files.extend(gltf_referenced_files(scene_file) if is_gltf(scene_file) else referenced_files(scene_file))
+        if is_gltf(scene_file) and w.parameters:
+            raise ConfigError("[world] parameters set an XML scene file's <default> values; a glTF file has none: "
+                              "remove them")
     objects = [_object(i, t, base, files) for i, t in enumerate(tables["world.object"])]
     lights = [_light(i, t) for i, t in enumerate(tables["world.light"])]
     if scene_file is None and not objects:
@@ -411,8 +419,17 @@ def load_world_config(source: str | Path | dict, base_dir: str | Path | None = N
     if scene_file is None:
         warn_ignored("world", tables["world"], ("up",), "it turns the XML scene, and [world] names no scene",
                      WorldSection)
-    return WorldConfig(run_cfg, mincam, scene_file, w.up, w.frame_rate_hz, w.background, objects, lights, movers,
-                       camera, path, files, w.parameters or {}, w.unit_m)
+    if scene_file is None or not is_gltf(scene_file):
+        warn_ignored("world", tables["world"], ("emission_w_m2_sr",), "it scales a glTF file's emission, and "
+                     "[world] scene is no glTF file", WorldSection)
+    up = "y" if scene_file is not None and is_gltf(scene_file) and "up" not in tables["world"] else w.up
+    return WorldConfig(run_cfg, mincam, scene_file, up, w.frame_rate_hz, w.background, objects, lights, movers,
+                       camera, path, files, w.parameters or {}, w.unit_m, w.emission_w_m2_sr)
+
+
+def is_gltf(path: Path) -> bool:
+    """Whether a scene file is glTF / GLB (by its suffix)."""
+    return path.suffix.lower() in (".gltf", ".glb")
 
 
 def referenced_files(xml_path: Path) -> list[Path]:

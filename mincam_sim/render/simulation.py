@@ -48,6 +48,7 @@ from mincam_sim.render.kernels.change_region import ApertureRegions, mixel_regio
 from mincam_sim.render.kernels.guided_path import guide_spheres, spheres_of
 from mincam_sim.render.kernels.map_tracing import FRAME_CHUNK_BYTES, check_radiance
 from mincam_sim.render.kernels.stratified import buffers_key
+from mincam_sim.render.scene.gltf_files import GLTF_SUFFIXES, GltfFile
 from mincam_sim.render.scene.mincam_scene import CAMERA_KEY, SENSOR_KEY, MincamScene
 from mincam_sim.render.scene.scene_dicts import mincam_body_shapes
 from mincam_sim.render.scene.scene_files import SceneFile, check_parameters, in_metres
@@ -121,6 +122,8 @@ class Simulation:
         one element."""
         if isinstance(world, (str, PathLike)):
             self.source = Path(world)
+            if self.source.suffix.lower() in GLTF_SUFFIXES and not parameters:  # glTF has no <default> parameters
+                return {"scene": GltfFile(self.source)}
             return {"scene": SceneFile(self.source, check_parameters(parameters))}
         if parameters:
             raise InputError("parameters set a scene file's <default> values: give world='scene.xml' (or a SceneFile "

@@ -33,12 +33,14 @@ import numpy as np
 from mincam_sim.budget import Budget
 from mincam_sim.changes import Changes
 from mincam_sim.configuration.config import RenderConfig, solver_name, traced_samples
-from mincam_sim.configuration.world_config import CameraSpec, WorldConfig
+from mincam_sim.configuration.world_config import CameraSpec, WorldConfig, is_gltf
 from mincam_sim.errors import ConfigError
 from mincam_sim.measurements import Measurements
 from mincam_sim.render import backend
 from mincam_sim.render.scene import scene_dicts as sd
+from mincam_sim.render.scene.gltf_files import GltfFile
 from mincam_sim.render.scene.scene_files import SceneFile, read_mesh
+from mincam_sim.render.scene.world_checks import light_pixels
 from mincam_sim.render.simulation import Simulation
 from mincam_sim.render.solvers import (
     Aperture,
@@ -175,10 +177,12 @@ def rotation_deg(angles_deg) -> np.ndarray:
 
 
 def build_elements(cfg: WorldConfig) -> dict:
-    """The world's elements: the XML scene with its parameters (turned z-up if authored y-up) and the config's
-    objects and lights."""
+    """The world's elements: the XML scene with its parameters, or the glTF file (turned z-up if authored y-up, in
+    metres), and the config's objects and lights."""
     elements: dict = {}
-    if cfg.scene_file is not None:
+    if cfg.scene_file is not None and is_gltf(cfg.scene_file):  # its nodes come in under their own names
+        elements["scene"] = GltfFile(cfg.scene_file, cfg.up, cfg.unit_m, cfg.emission_w_m2_sr)
+    elif cfg.scene_file is not None:
         elements["scene"] = SceneFile(cfg.scene_file, cfg.parameters, cfg.up, cfg.unit_m)  # in metres once loaded
     for obj in cfg.objects:
         vertices, faces = read_mesh(obj.mesh)
@@ -273,35 +277,39 @@ def _camera_dict(camera: CameraSpec) -> dict:
 
 def _ground_truth(sim: Simulation, camera: CameraSpec, frames, background, out: Path):
     """Images of the background and every frame, and the centroid (row, col) [px] of each frame's change:
-    background subtraction, |change| > threshold x the background's maximum (the experiments' rule)."""
+    background subtraction, |change| > threshold x the background's brightest pixel that is no light seen
+    directly (:func:`~mincam_sim.render.scene.world_checks.light_pixels`: a lamp or a sky in view would set the
+    threshold above every change it lights)."""
     sim.update(background)
     bg = sim.camera_image(camera.spp, seed=0)
+    lit = ~light_pixels(sim.scene, sim.camera)
+    scale = float(bg[lit].max()) if lit.any() else float(bg.max())
     images, rows, cols = [], [], []
     for frame in frames:
         sim.update(background)
         sim.update(frame)
         image = sim.camera_image(camera.spp, seed=0)
         images.append(image)
-        hit = np.abs(image - bg) > camera.threshold * float(bg.max())
+        hit = np.abs(image - bg) > camera.threshold * scale
         r, c = np.nonzero(hit)
         rows.append(r.mean() if r.size else np.nan)
         cols.append(c.mean() if c.size else np.nan)
     sim.update(background)
     atomic_save_npz(out / "camera.npz", background=bg, frames=np.array(images))
     rows, cols = np.array(rows), np.array(cols)
-    _warn_undefined_centroids(images, bg, rows, camera.threshold)
+    _warn_undefined_centroids(images, bg, rows, camera.threshold, scale)
     return rows, cols
 
 
-def _warn_undefined_centroids(images: list, bg: np.ndarray, rows: np.ndarray, threshold: float) -> None:
-    """One warning when frames that change the image have no pixel above the threshold (their centroid NaN):
-    the background's brightest pixel, often a light in view, sets the threshold."""
+def _warn_undefined_centroids(images: list, bg: np.ndarray, rows: np.ndarray, threshold: float,
+                              scale: float) -> None:
+    """One warning when frames that change the image have no pixel above the threshold (their centroid NaN)."""
     changed = np.array([float(np.abs(image - bg).max()) > 0 for image in images], dtype=bool)
     undefined = np.isnan(rows) & changed
     if undefined.any():
         warnings.warn(f"the camera's change centroid is undefined (NaN) in {int(undefined.sum())} of {len(rows)} "
                       f"frames that change the image: no pixel changed by more than threshold {threshold:g} x the "
-                      f"background's brightest pixel ({float(bg.max()):.4g} W m^-2 sr^-1, a light in view?); lower "
+                      f"background's brightest pixel that is no light in view ({scale:.4g} W m^-2 sr^-1); lower "
                       "[world.camera] threshold", UserWarning, stacklevel=3)
 
 

@@ -363,8 +363,9 @@ CASES: list[Case] = [
          keywords=("max_depth",)),
     Case("world_instances", R, {"s.xml": _CARD_XML.replace(
         "</scene>", '<shape type="shapegroup" id="g"><shape type="sphere"/></shape><shape type="instance" id="i">'
-        '<ref id="g"/></shape></scene>'), "c.toml": _CARD_TOML + '[[world.mover]]\nid = "card"\n'
-                                                                 'offsets_m = [[0, 0, 0]]\n'}, keywords=("instance",)),
+        '<ref id="g"/><transform name="to_world"><translate z="10"/></transform></shape></scene>'),
+        "c.toml": _CARD_TOML + '[[world.mover]]\nid = "i"\noffsets_m = [[0, 0, 0], [0.02, 0, 0]]\n'},
+        expect="ok", outputs=("out/measurements.csv",)),  # an instance moves (they were refused)
     Case("world_without_light", R, {"c.toml": '[run]\nspp = 1024\nreplicates = 4\n[world]\n[[world.object]]\n'
                                               'id = "toy"\nmesh = "m.obj"\n[[world.mover]]\nid = "toy"\n'
                                               'offsets_m = [[0, 0, 0]]\n',

@@ -406,16 +406,51 @@ offsets_m = [[0.0, 0.0, 0.0], [0.0, 0.01, 0.0]]
 
 
 def test_an_undefined_change_centroid_is_said():
-    """A lamp in the camera's view sets the threshold of the change; a dim change then has no pixel above it and
-    its centroid is NaN: one warning says why and what to lower (it was NaN without a word)."""
+    """A change below the threshold has no pixel above it and its centroid is NaN: one warning says why and what
+    to lower (it was NaN without a word)."""
     from mincam_sim.runs.jobs import _warn_undefined_centroids
 
     bg = np.zeros((4, 6))
-    bg[0, 0] = 100.0  # the lamp
+    bg[0, 0] = 100.0
     dim, unchanged = bg.copy(), bg.copy()
     dim[2, 3] += 1.0  # below 0.05 x 100
-    with pytest.warns(UserWarning, match=r"undefined \(NaN\) in 1 of 2 frames .*\(100 W m\^-2 sr\^-1, a light in view"):
-        _warn_undefined_centroids([dim, unchanged], bg, np.array([np.nan, np.nan]), 0.05)
+    with pytest.warns(UserWarning, match=r"undefined \(NaN\) in 1 of 2 frames .*no light in view \(100 W m\^-2 sr"):
+        _warn_undefined_centroids([dim, unchanged], bg, np.array([np.nan, np.nan]), 0.05, 100.0)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        _warn_undefined_centroids([dim], bg, np.array([2.0]), 0.05)
+        _warn_undefined_centroids([dim], bg, np.array([2.0]), 0.05, 100.0)
+
+
+def test_the_change_centroid_is_defined_with_a_lamp_in_view(tmp_path):
+    """A lamp in the camera's view (20 W m^-2 sr^-1, 400 times the lit floor) no longer sets the threshold: the
+    pixels whose centre ray meets a light are left out of the brightest pixel, so a card moving over the floor
+    has a centroid (it was NaN: every change lay below 0.05 x the lamp), on the card's side of the image."""
+    from mincam_sim.configuration.world_config import CameraSpec
+    from mincam_sim.render.scene.world_checks import light_pixels
+    from mincam_sim.runs.jobs import _camera_dict, _ground_truth
+
+    grey = {"type": "diffuse", "reflectance": {"type": "spectrum", "value": 0.5}}
+    card = ms.Pose((0.15, 0.0, 0.3), (0.0, 0.0, 1.0)).matrix() @ np.diag([0.05, 0.05, 1.0, 1.0])
+    world = {"floor": {"type": "rectangle", "to_world": sd._transform(np.diag([0.6, 0.6, 1.0, 1.0])), "bsdf": grey},
+             "overhead": sd.area_light(0.3, 0.3, ms.Pose((0.0, 0.0, 1.2), (0.0, 0.0, -1.0)).matrix(), 5.0),
+             "bulb": sd.area_light(0.1, 0.1, ms.Pose((-0.2, 0.0, 0.001), (0.0, 0.0, 1.0)).matrix(), 20.0),
+             "card": {"type": "rectangle", "to_world": sd._transform(card), "bsdf": grey}}
+    spec = CameraSpec((0.0, 0.0, 1.0), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), 60.0, 32, 32, 16, 0.05)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", WorldWarning)
+        sim = ms.Simulation(CAM, world=world, camera=_camera_dict(spec))
+    lights = light_pixels(sim.scene, sim.camera)
+    bulb_col = np.nonzero(lights)[1].mean() - 15.5  # the bulb's side of the image (x = -0.2 m)
+    assert 1 <= lights.sum() <= 40 and abs(bulb_col) > 5
+    moved = np.array(sim.params["card.to_world"])
+    moved[1, 3] += 0.05
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        rows, cols = _ground_truth(sim, spec, [{"card.to_world": moved}], sim.without("card"), tmp_path)
+    bg = np.load(tmp_path / "camera.npz")["background"]
+    frame = np.load(tmp_path / "camera.npz")["frames"][0]
+    assert np.abs(frame - bg).max() < 0.05 * bg.max(), "the old rule (x the lamp) detected nothing"
+    assert np.all(np.isfinite(rows)) and np.all(np.isfinite(cols))
+    # the card (x = 0.15 m, 0.7 m from the camera) and its shadow (x = 0.2 m on the floor) are ~6 px from the
+    # centre, on the other side from the bulb
+    assert 3 < -np.sign(bulb_col) * (cols[0] - 15.5) < 9 and abs(rows[0] - 15.5) < 5, (rows, cols)

@@ -3,8 +3,10 @@
 A Mitsuba XML scene is loaded with ``optimize=False`` (every shape keeps its id and its own parameters, never
 merged into an anonymous mesh with others that share its material), its ``<default>`` values set by the caller's
 ``parameters`` through Mitsuba's own loader (:class:`SceneFile`). Its ``<integrator>``'s ``max_depth`` is read
-back (:func:`file_max_depth`); its sensors are the mincam's business. Meshes in formats Mitsuba cannot read
-(glTF / GLB, STL, and OBJ / PLY if asked) are read with trimesh and handed over as in-memory meshes.
+back (:func:`file_max_depth`); its sensors are the mincam's business; its shape groups (:func:`shape_groups`)
+travel with the instances that draw them and are never placed twice. Meshes in formats Mitsuba cannot read
+(glTF / GLB, STL, and OBJ / PLY if asked) are read with trimesh and handed over as in-memory meshes (a glTF file
+with its materials and nodes: :mod:`.gltf_files`).
 """
 
 from __future__ import annotations
@@ -117,32 +119,22 @@ def load_scene_file(path: str | Path, parameters: Mapping[str, str] | None = Non
     if not path.is_file():
         raise InputError(f"scene file {path} does not exist; check the path (relative paths are taken from the "
                          "config's folder)")
+    if path.suffix.lower() in (".gltf", ".glb"):
+        raise InputError(f"scene file {path} is glTF, which has no <default> parameters: give world={path.name!r} "
+                         "without parameters (or a GltfFile element)")
     if path.suffix.lower() != ".xml":
-        raise InputError(f"scene file {path} is not a Mitsuba XML scene (.xml); meshes go in [[world.object]] "
-                         "entries")
+        raise InputError(f"scene file {path} is not a Mitsuba XML scene (.xml) nor glTF (.gltf, .glb); meshes go in "
+                         "[[world.object]] entries")
     unknown = sorted(set(parameters) - declared_parameters(path))
     if unknown:
         known = sorted(declared_parameters(path))
         raise InputError(f"parameters {unknown} are not parameters of {path.name} (its <default> / $names: "
                          f"{', '.join(known) or 'none'}); fix the name")
-    if _has_instances(path):
-        raise InputError(f"{path}: shapegroup / instance shapes are not supported in world scenes yet; give each "
-                         "instance as its own shape")
     mi = backend.mitsuba()
     try:
         return mi.load_file(str(path), optimize=False, **parameters)
     except Exception as exc:  # Mitsuba raises RuntimeError with the file, line and column in its text
         raise InputError(f"{path}: Mitsuba could not load the scene: {_mitsuba_message(exc)}") from None
-
-
-def _has_instances(path: Path) -> bool:
-    from mincam_sim.storage.identity import scene_file_digests
-
-    for file in scene_file_digests(path):
-        if file.lower().endswith(".xml") and Path(file).is_file():
-            if re.search(r"type=\"(shapegroup|instance)\"", Path(file).read_text(errors="replace")):
-                return True
-    return False
 
 
 def file_max_depth(scene) -> int | None:
@@ -210,12 +202,28 @@ def scale_scene(scene, unit_m: float) -> None:
     shape_ids = {s.id() for s in scene.shapes()}
     directional = {e.id() for e in scene.emitters() if e.is_environment() or
                    int(e.flags()) & int(mi.EmitterFlags.Infinite)}
-    for key in list(params.keys()):
+    for key in _placement_keys(mi, scene, params, ("to_world", "vertex_positions", "position")):
         name, _, rest = key.rpartition(".")
-        if rest in ("to_world", "vertex_positions", "position") and name not in directional and (
+        if name not in directional and (
                 rest != "to_world" or "Transform4" in type(params[key]).__name__):
             params[key] = as_param(mi, params[key], in_metres(key, params[key], unit_m, shape_ids), key)
     params.update()
+
+
+def _placement_keys(mi, scene, params, parts: tuple[str, ...]) -> list[str]:
+    """The parameters ``<name>.<part>`` that place an element as a whole, not the shapes inside a shape group
+    (``group.shape.to_world``): the instances that draw a group are placed by their own ``to_world``, and moving
+    both would move them twice."""
+    groups = tuple(f"{group.id()}." for group in shape_groups(mi, scene))
+    return [key for key in params.keys() if key.rpartition(".")[2] in parts and not key.startswith(groups)]
+
+
+def shape_groups(mi, scene) -> list:
+    """The ``shapegroup`` shapes of a loaded scene (``scene.shapes()`` leaves them out: only the ``instance``
+    shapes that draw them are listed)."""
+    return [obj for obj, (parent, _) in mi.traverse(scene).hierarchy.items()
+            if parent is scene and isinstance(obj, mi.Shape) and obj.class_name() == "ShapeGroupPlugin"]
+
 
 
 def turn_scene(scene, matrix: np.ndarray) -> None:
@@ -224,7 +232,7 @@ def turn_scene(scene, matrix: np.ndarray) -> None:
     mi = backend.mitsuba()
     params = mi.traverse(scene)
     rot = matrix[:3, :3]
-    for key in list(params.keys()):
+    for key in _placement_keys(mi, scene, params, ("to_world", "vertex_positions", "vertex_normals", "position")):
         rest = key.rpartition(".")[2]
         value = params[key]
         if rest == "to_world" and "Transform4" in type(value).__name__:

@@ -129,3 +129,27 @@ def check_unit(unit_m) -> float:
         raise InputError(f"unit_m must be the length of the scene's unit in metres (0.01 for a scene modelled in "
                          f"cm), a positive number; got {unit_m!r}")
     return float(unit_m)
+
+
+def light_pixels(scene, camera, per_side: int = 4) -> np.ndarray:
+    """(rows, cols) booleans: the pixels of ``camera`` (a sensor of ``scene``) that see a light directly (an
+    emitting shape, or nothing at all under an environment light such as a sky) at any of ``per_side`` x
+    ``per_side`` points across them, and their 8 neighbours (a pixel's filter reaches past its edge). A lamp in
+    view is far brighter than anything it lights, so a threshold relative to the brightest pixel leaves these
+    out."""
+    import drjit as dr
+
+    mi = backend.mitsuba()
+    cols, rows = (int(v) for v in camera.film().crop_size())
+    sub = (np.arange(per_side) + 0.5) / per_side
+    r, c, dr_, dc = np.meshgrid(np.arange(rows), np.arange(cols), sub, sub, indexing="ij")
+    position = mi.Point2f(mi.Float(((c + dc).ravel() / cols).astype(np.float32)),
+                          mi.Float(((r + dr_).ravel() / rows).astype(np.float32)))
+    ray, _ = camera.sample_ray(0.0, 0.5, position, mi.Point2f(0.5, 0.5))
+    si = scene.ray_intersect(ray)
+    hit_light = si.is_valid() & si.shape.is_emitter()
+    if scene.environment() is not None:
+        hit_light |= ~si.is_valid()
+    seen = np.array(dr.select(hit_light, 1, 0), dtype=bool).reshape(rows, cols, -1).any(axis=2)
+    grown = np.pad(seen, 1)
+    return np.any([grown[1 + i:1 + i + rows, 1 + j:1 + j + cols] for i in (-1, 0, 1) for j in (-1, 0, 1)], axis=0)

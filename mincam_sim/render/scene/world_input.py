@@ -30,10 +30,10 @@ class LoadedScenes:
     """What the loaded scenes among a world's elements bring beside their shapes: the scene files (for the
     identity), their integrator's ``max_depth`` (with where it came from) and the sensors that are ignored."""
 
-    files: list = field(default_factory=list)  # SceneFile
+    files: list = field(default_factory=list)  # SceneFile, GltfFile
     max_depth: tuple[int, str] | None = None
     ignored_sensors: list[str] = field(default_factory=list)
-    static: set[str] = field(default_factory=set)  # names given to shapes and lights without an id
+    static: set[str] = field(default_factory=set)  # shapes and lights without an id, and shape groups: not movers
 
     def note(self) -> None:
         """One :class:`WorldWarning` if a loaded scene brought sensors (the mincam is the world's sensor)."""
@@ -44,11 +44,17 @@ class LoadedScenes:
 
 
 def expand_elements(elements) -> tuple[dict, LoadedScenes]:
-    """``elements`` (name -> Mitsuba dict, Mitsuba object, a loaded ``mi.Scene`` or a
-    :class:`~mincam_sim.render.scene.scene_files.SceneFile`) as a flat dict whose values are dicts or single
-    Mitsuba objects, and what the loaded scenes bring besides: a loaded scene contributes its shapes (those
-    without an id as static geometry, named ``<element>_shape<i>``) and its emitters that are not attached to a
-    shape, under their own ids; its integrator's ``max_depth`` is offered to the caller, its sensors ignored."""
+    """``elements`` (name -> Mitsuba dict, Mitsuba object, a loaded ``mi.Scene``, a
+    :class:`~mincam_sim.render.scene.scene_files.SceneFile` or a
+    :class:`~mincam_sim.render.scene.gltf_files.GltfFile`, whose nodes come under their own names) as a flat
+    dict whose values are dicts or single Mitsuba objects, and what the loaded scenes bring besides.
+
+    A loaded scene contributes its shapes (those without an id as static geometry, named
+    ``<element>_shape<i>``), its emitters that are not attached to a shape, under their own ids, and its shape
+    groups (``shapegroup``: the shapes its ``instance`` shapes draw, which a scene rebuilt around the mincam
+    needs beside them; static: an instance moves by its own ``to_world``); its integrator's ``max_depth`` is
+    offered to the caller, its sensors ignored."""
+    from mincam_sim.render.scene.gltf_files import GltfFile
     from mincam_sim.render.scene.scene_files import SceneFile, file_max_depth
 
     if not isinstance(elements, Mapping):
@@ -66,6 +72,14 @@ def expand_elements(elements) -> tuple[dict, LoadedScenes]:
         if not isinstance(name, str) or not name or "." in name:
             raise InputError(f"element name {name!r} must be a non-empty string without '.' (parameters are "
                              "addressed as 'name.parameter'); rename it")
+        if isinstance(value, GltfFile):
+            loaded.files.append(value)
+            nodes, note = value.elements()
+            for node, mesh in nodes.items():
+                add(node, mesh, f"a node of {value.path.name}")
+            if note:
+                warnings.warn(note, WorldWarning, stacklevel=3)
+            continue
         if isinstance(value, SceneFile):
             loaded.files.append(value)
             value = value.load()
@@ -87,6 +101,8 @@ def expand_elements(elements) -> tuple[dict, LoadedScenes]:
             if not isinstance(kind, str) or not kind:
                 raise InputError(f"element {name!r} has no plugin 'type' (e.g. 'obj', 'rectangle', 'area'); "
                                  "give one")
+            if kind == "shapegroup":
+                loaded.static.add(name)  # its shapes are drawn by instances: an instance moves, never the group
             if kind == "scene":
                 raise InputError(f"element {name!r} is a whole scene dict; pass its shapes and emitters as "
                                  "elements, or load it with mi.load_dict(..., optimize=False) and pass the scene")
@@ -97,9 +113,9 @@ def expand_elements(elements) -> tuple[dict, LoadedScenes]:
 
 
 def _scene_items(mi, scene, element: str) -> list[tuple[str, object, bool]]:
-    """(name, object, whether it has an id of its own) of a loaded scene's shapes and its emitters that are no
+    """(name, object, whether it can move) of a loaded scene's shape groups, shapes and its emitters that are no
     shape's: by their id, those without one (static geometry: nothing addresses them) as ``<element>_shape<i>``
-    / ``<element>_light<i>``."""
+    / ``<element>_light<i>``; shape groups (by their id, never movers) first."""
     shapes = list(scene.shapes())
     lights = [e for e in scene.emitters() if not int(e.flags()) & int(mi.EmitterFlags.Surface)]
     if not shapes and not lights:
@@ -107,7 +123,10 @@ def _scene_items(mi, scene, element: str) -> list[tuple[str, object, bool]]:
     generated = re.compile(rf"{re.escape(element)}_(shape|light)\d+")  # named by an earlier load of this scene
     items = [(s.id() or f"{element}_shape{i}", s) for i, s in enumerate(shapes)]
     items += [(e.id() or f"{element}_light{i}", e) for i, e in enumerate(lights)]
-    return [(name, item, bool(item.id()) and not generated.fullmatch(item.id())) for name, item in items]
+    movable = [(name, item, bool(item.id()) and not generated.fullmatch(item.id())) for name, item in items]
+    from mincam_sim.render.scene.scene_files import shape_groups
+
+    return [(group.id(), group, False) for group in shape_groups(mi, scene)] + movable
 
 
 def check_radiant_params(params, keys: Sequence[str] | None = None) -> None:
