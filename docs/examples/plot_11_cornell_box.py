@@ -7,8 +7,10 @@ a camera of their own. This box is modelled in cm (55.5 cm on a side, red and gr
 lamp), its lamp's radiance and a card's albedo are ``<default>`` parameters, and its ``<integrator>`` asks for
 direct light only. :class:`mincam_sim.render.simulation.Simulation` reads it with ``unit_m=0.01``, sets the
 parameters through Mitsuba's loader, takes the file's ``max_depth`` and ignores its camera (with one warning).
-Two mixels hang 15 cm under the ceiling looking down; a 10 x 5 cm card (a rectangle, moved by its
-``to_world``) slides across the box, and then the lamp itself moves.
+A small point light (a bulb) hangs in a corner, and two 6 cm blocks are instances of one ``shapegroup``. Two
+mixels hang 15 cm under the ceiling looking down; a 10 x 5 cm card (a rectangle, moved by its ``to_world``)
+slides across the box, then the lamp itself moves, then one block (an instance, moved by its ``to_world``:
+its mesh is never rewritten) slides along the floor.
 """
 
 # %%
@@ -51,6 +53,16 @@ CBOX_CM = """<scene version="3.0.0">
             <translate x="27.75" y="27.75" z="55.4"/></transform>
         <bsdf type="diffuse"><spectrum name="reflectance" value="0.0"/></bsdf>
         <emitter type="area"><spectrum name="radiance" value="$lamp"/></emitter></shape>
+    <emitter type="point" id="bulb"><point name="position" x="8" y="47" z="40"/>
+        <spectrum name="intensity" value="0.05"/></emitter>
+    <shape type="shapegroup" id="block">
+        <shape type="cube"><transform name="to_world"><scale value="3"/><translate z="3"/></transform>
+            <bsdf type="diffuse"><spectrum name="reflectance" value="0.6"/></bsdf></shape>
+    </shape>
+    <shape type="instance" id="block_a"><ref id="block"/>
+        <transform name="to_world"><translate x="42" y="42"/></transform></shape>
+    <shape type="instance" id="block_b"><ref id="block"/>
+        <transform name="to_world"><translate x="14" y="14"/></transform></shape>
     <shape type="rectangle" id="card">
         <transform name="to_world"><scale x="5" y="2.5"/><translate x="10" y="27.75" z="12"/></transform>
         <bsdf type="diffuse"><spectrum name="reflectance" value="$card_albedo"/></bsdf></shape>
@@ -77,7 +89,8 @@ print(f"max_depth {sim.mincam_scene.max_depth} from {sim.max_depth_source}; mova
 budget = ms.Budget(spp=1 << 14, seed=1)
 p_on = sim.measure([{}], budget=budget).irradiance_w_m2[0]
 p_off = dark.measure([{}], budget=budget).irradiance_w_m2[0]
-print(f"P with the lamp on {np.round(p_on, 4)} W/m^2; with parameters={{'lamp': 0}}: {p_off}")
+print(f"P with the lamp on {np.round(p_on, 4)} W/m^2; with parameters={{'lamp': 0}} (the bulb only): "
+      f"{np.round(p_off, 4)}")
 
 # %%
 # The card slides, then the lamp moves
@@ -103,7 +116,17 @@ with warnings.catch_warnings():
     warnings.simplefilter("ignore", UserWarning)  # a moving emitter is sampled over the whole aperture (said)
     lamp_ch = sim.measure_changes(lamp_frames, {}, solver=ms.PlainChange(), budget=ms.Budget(spp=8192, seed=3))
 
-fig, axes = plt.subplots(1, 3, figsize=(11, 3.4), constrained_layout=True)
+block0 = sim.params["block_b.to_world"]  # in metres, with the file's 0.01 scale on its own shapes
+block_xs_m = np.linspace(0.10, 0.40, 7)
+block_frames = []
+for x in block_xs_m:
+    m = block0.copy()
+    m[0, 3] = x
+    block_frames.append({"block_b.to_world": m})
+block_ch = sim.measure_changes(block_frames, sim.without("block_b"), budget=ms.Budget(spp=8192, seed=4))
+print("the block's dP [W/m^2], first mixel:", np.round(block_ch.dp.irradiance_w_m2[:, 0], 4))
+
+fig, axes = plt.subplots(1, 4, figsize=(14, 3.4), constrained_layout=True)
 axes[0].bar(["lamp on", "lamp = 0"], [p_on.mean(), p_off.mean()], color=["0.3", "0.7"])
 axes[0].set_ylabel("P, mean of the mixels [W/m²]")
 axes[0].set_title("parameters={'lamp': ...}")
@@ -112,12 +135,17 @@ for k, name in enumerate(ch.mixel_names):
                      capsize=2, label=name)
     axes[2].errorbar(100 * shifts_m, lamp_ch.dp.irradiance_w_m2[:, k], yerr=lamp_ch.dp.stderr_w_m2[:, k],
                      marker="o", ms=3, capsize=2, label=name)
+    axes[3].errorbar(100 * block_xs_m, block_ch.dp.irradiance_w_m2[:, k], yerr=block_ch.dp.stderr_w_m2[:, k],
+                     marker="o", ms=3, capsize=2, label=name)
 axes[1].set_xlabel("card centre x [cm]")
 axes[1].set_ylabel("ΔP against the box without it [W/m²]")
 axes[1].set_title("a 10 x 5 cm card slides")
 axes[2].set_xlabel("lamp shift along y [cm]")
 axes[2].set_ylabel("ΔP against the box as built [W/m²]")
 axes[2].set_title("the lamp moves")
+axes[3].set_xlabel("block x [cm]")
+axes[3].set_ylabel("ΔP against the box without it [W/m²]")
+axes[3].set_title("an instance slides")
 for ax in axes[1:]:
     ax.axhline(0.0, color="0.6", lw=0.8)
     ax.legend(fontsize=8)
