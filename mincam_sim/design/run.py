@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from mincam_sim.design import tracking as tr
+from mincam_sim.design.scene_run import refuse_another_design as _refuse_another_design
 from mincam_sim.design.tasks import TASK_NAMES
-from mincam_sim.errors import StaleResultError
 from mincam_sim.masks import export_print_png
 from mincam_sim.masks.sheet import check_print_sheet, write_print_sheet
 from mincam_sim.storage.atomic import atomic_path, atomic_save_npz, atomic_write_json
@@ -216,15 +216,6 @@ def _check_request(task_name: str, dpi: float | None, overrides: dict) -> None:
         if not (np.isfinite(dpi) and dpi > 0):
             raise ValueError(f"dpi must be a positive number of dots per inch, got {dpi!r}")
         overrides["dpi"] = float(dpi)
-
-
-def _refuse_another_design(out: Path, identity: dict, overwrite: bool) -> None:
-    """A finished design in ``out`` of another identity (or of none recorded) is refused unless ``overwrite``."""
-    if (out / "design.json").exists() and not overwrite:
-        if not (out / IDENTITY_FILE).exists():
-            raise StaleResultError(f"{out} holds a finished design without a record of what it was computed from "
-                                   "(an older version); choose another output directory or rerun with --overwrite")
-        check_identity(out, identity, name=IDENTITY_FILE)
 
 
 @dataclass

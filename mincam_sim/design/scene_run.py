@@ -13,7 +13,7 @@ import numpy as np
 from mincam_sim.design import scene_design as sd
 from mincam_sim.design import scene_tasks as st
 from mincam_sim.design import tracking as tr
-from mincam_sim.errors import ConfigError
+from mincam_sim.errors import ConfigError, StaleResultError
 from mincam_sim.masks import export_print_png
 from mincam_sim.storage.atomic import atomic_path, atomic_write_json
 from mincam_sim.storage.identity import build_identity
@@ -36,6 +36,16 @@ def make_sizes(spec: st.TaskSpec, quick: bool = False, seed: int = 0, **override
     return replace(base, **overrides)
 
 
+def refuse_another_design(out: Path, identity: dict, overwrite: bool) -> None:
+    """A finished design in ``out`` of another identity (or of none recorded) is refused unless ``overwrite``
+    (every design task's rule)."""
+    if (out / "design.json").exists() and not overwrite:
+        if not (out / IDENTITY_FILE).exists():
+            raise StaleResultError(f"{out} holds a finished design without a record of what it was computed from "
+                                   "(an older version); choose another output directory or rerun with --overwrite")
+        check_identity(out, identity, name=IDENTITY_FILE)
+
+
 def run_scene_task(spec: st.TaskSpec, out_dir: str | Path, quick: bool = False, seed: int = 0,
                    show_progress: bool = False, overwrite: bool = False, baselines: bool = True,
                    **overrides) -> dict:
@@ -44,8 +54,6 @@ def run_scene_task(spec: st.TaskSpec, out_dir: str | Path, quick: bool = False, 
     ``baselines=False`` measures the designed masks (and the hand design where there is one) only.
     ``overrides``: fields of :class:`~mincam_sim.design.scene_tasks.Sizes` (``dpi`` among them).
     """
-    from mincam_sim.design.run import _refuse_another_design
-
     start = time.perf_counter()
     sizes = make_sizes(spec, quick, seed, **overrides)
     identity = build_identity("design", {"task": spec.name, "quick": bool(quick), "seed": int(seed),
@@ -53,7 +61,7 @@ def run_scene_task(spec: st.TaskSpec, out_dir: str | Path, quick: bool = False, 
                                                    "field_baselines": bool(baselines)}})
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    _refuse_another_design(out, identity, overwrite)
+    refuse_another_design(out, identity, overwrite)
     frames = st.draw_frames(spec.train, sizes.frames_per_depth * len(spec.train.depths_m), [seed, 11])
     camera = sd.build_problem(spec, sizes, frames, st.traced_rows(sizes, frames, seed))
     grad = sd.check_loss_gradient(camera.problem, sd.initial_logits(spec.starts[0], sizes), seed=seed)
@@ -130,4 +138,4 @@ def _write_outputs(out: Path, spec: st.TaskSpec, sizes: st.Sizes, camera: sd.Cam
                               "(traced physics, fixed exposure); add the sensor's noise for a noisy read-out"})
 
 
-__all__ = ["make_sizes", "run_scene_task"]
+__all__ = ["make_sizes", "refuse_another_design", "run_scene_task"]
