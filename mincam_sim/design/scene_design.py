@@ -192,7 +192,7 @@ def evaluate_suite(spec: st.TaskSpec, sizes: st.Sizes, camera: Camera, mask_sets
     cases, per_frame = [], {}
     for i, case in enumerate(progress(spec.suite, desc="held-out suite", disable=not show_progress, unit="case")):
         frames = st.draw_frames(case.scenes, sizes.suite_frames, [sizes.seed, 90, i])
-        matrices = st.traced_rows(sizes, frames, 10_000 + 100 * sizes.seed + i, texture=case.scenes.shape == "texture")
+        matrices = st.traced_rows(sizes, frames, 10_000 + 100 * sizes.seed + i)
         rows = {}
         for label, transmissions in mask_sets.items():
             dn = read_out(matrices, transmissions, camera, np.random.default_rng([sizes.seed, 97, i]))

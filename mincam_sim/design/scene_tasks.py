@@ -49,6 +49,8 @@ class Distribution:
         mixel's field of view, tiled with square patches of side ``texture_patch_m`` of random radiance.
     bar_width_m, texture_patch_m : float
         [m].
+    texture_fraction : float
+        Share of frames (of a ``square`` or ``bar`` distribution) that are a textured plane instead of objects.
     """
 
     depths_m: tuple[float, ...]
@@ -59,6 +61,7 @@ class Distribution:
     shape: str = "square"
     bar_width_m: float = 0.01
     texture_patch_m: float = 0.05
+    texture_fraction: float = 0.0
 
     def __post_init__(self) -> None:
         def bad(field: str, what: str) -> None:
@@ -78,6 +81,8 @@ class Distribution:
             bad("radius", "must be a field radius in (0, 0.5]")
         if self.shape not in SHAPES:
             bad("shape", f"must be one of {', '.join(SHAPES)}")
+        if not 0 <= self.texture_fraction <= 1:
+            bad("texture_fraction", "must be a fraction in [0, 1]")
         if not (0 < self.bar_width_m <= 0.1 and 0 < self.texture_patch_m <= 0.2):
             bad("bar_width_m", "and texture_patch_m must be 0-0.1 m and 0-0.2 m")
 
@@ -252,6 +257,7 @@ class Frames:
     planes: TrainingFrames
     count: np.ndarray  # (n,) objects per frame (textured planes: 0)
     depth_m: np.ndarray  # (n,) the frame's plane depth [m]
+    patch: list | None = None  # per plane, (n_atoms,) bool: the atom is a texture patch (traced with fewer samples)
 
     def targets(self, target: str) -> np.ndarray:
         """(n, 1) regression targets."""
@@ -301,9 +307,11 @@ def draw_frames(dist: Distribution, n_frames: int, seed) -> Frames:
     depths = np.asarray(dist.depths_m, dtype=np.float64)
     per_plane: list[list] = [[] for _ in depths]
     frame_atoms, counts, depth_index = [], [], []
+    patch: list[list] = [[] for _ in depths]
     for i in range(n_frames):
         di = i % len(depths)
-        if dist.shape == "texture":
+        textured = dist.shape == "texture" or (dist.texture_fraction > 0 and rng.random() < dist.texture_fraction)
+        if textured:
             objs, count = _texture(dist, depths[di], rng), 0
         else:
             count = int(rng.choice(dist.counts))
@@ -311,6 +319,7 @@ def draw_frames(dist: Distribution, n_frames: int, seed) -> Frames:
         atoms = []
         for cx, cy, w, h, radiance in objs:
             per_plane[di].append((cx, cy, w, h))
+            patch[di].append(textured)
             atoms.append((di, len(per_plane[di]) - 1, radiance))
         frame_atoms.append(atoms)
         counts.append(count)
@@ -318,35 +327,66 @@ def draw_frames(dist: Distribution, n_frames: int, seed) -> Frames:
     planes = [SquareScenes(float(d), np.array(a)[:, :2], np.array(a)[:, 2], 1.0, np.array(a)[:, 3]) if a else None
               for d, a in zip(depths, per_plane, strict=True)]
     frames = TrainingFrames(planes, frame_atoms, np.zeros(n_frames), np.array(depth_index))
-    return Frames(frames, np.array(counts), depths[np.array(depth_index)])
+    return Frames(frames, np.array(counts), depths[np.array(depth_index)], [np.array(p, dtype=bool) for p in patch])
 
 
-def combine(rows_per_plane: list, frames: TrainingFrames, n_dots: int) -> np.ndarray:
-    """Frame rows (n_frames, D): the sum of each frame's atoms' rows times their radiance."""
-    out = np.zeros((len(frames.frame_atoms), n_dots))
-    for f, atoms in enumerate(frames.frame_atoms):
-        for di, ai, radiance in atoms:
-            out[f] += radiance * rows_per_plane[di][ai]
-    return out
+def frame_rows(samples, atom_frame: np.ndarray, atom_radiance: np.ndarray, n_frames: int,
+               dot_shape: tuple[int, int]) -> np.ndarray:
+    """Per-frame rows (n_frames, D) [W/m^2 per unit transmission] from the traced samples of unit-radiance
+    atoms: each atom's samples binned per printer dot (as
+    :func:`~mincam_sim.render.gradients.differentiable.design_matrix`), times its radiance, into its frame's row
+    (no per-atom matrix: a textured plane holds hundreds of atoms)."""
+    import drjit as dr
+
+    h, w = dot_shape
+    u = np.asarray(dr.detach(samples.u), dtype=np.float64)
+    v = np.asarray(dr.detach(samples.v), dtype=np.float64)
+    g = np.asarray(dr.detach(samples.weight), dtype=np.float64)
+    col = np.clip(np.floor(u * w).astype(np.int64), 0, w - 1)
+    row = np.clip(np.floor(v * h).astype(np.int64), 0, h - 1)
+    atom = np.arange(len(g)) // samples.per_frame
+    flat = atom_frame[atom] * (h * w) + row * w + col
+    a = np.bincount(flat, weights=g * atom_radiance[atom], minlength=n_frames * h * w) / samples.per_frame
+    return a.reshape(n_frames, h * w)
 
 
-def traced_rows(sizes: Sizes, frames: Frames, seed: int, texture: bool = False) -> list[np.ndarray]:
+def traced_rows(sizes: Sizes, frames: Frames, seed: int) -> list[np.ndarray]:
     """The physical linear model: per mixel the frames' rows (n_frames, D) [W/m^2 per unit transmission],
-    traced through the mincam's geometry (Monte Carlo, ``seed``), binned per printer dot."""
+    traced through the mincam's geometry (Monte Carlo, ``seed``), binned per printer dot. Objects get
+    ``strata``^2 samples, texture patches ``max(3, strata // 3)``^2."""
     from mincam_sim.render.gradients import differentiable as dz
 
     dots = sizes.dot_shape()
-    n_dots = int(np.prod(dots))
+    n_frames = len(frames)
     cam = sizes.mincam(tr.paper_masks(8))  # the geometry; masks are the design variables
     bodies = dz.bodies_scene(cam)
-    strata = max(3, sizes.strata // 3) if texture else sizes.strata
-    out = []
-    for k in range(len(cam)):
-        rows = [dz.design_matrix(dz.mixel_samples(cam, k, sc, strata=strata, seed=seed * 1000 + i, bodies=bodies),
-                                 dots) if sc is not None else None
-                for i, sc in enumerate(frames.planes.atoms)]
-        out.append(combine(rows, frames.planes, n_dots))
+    owners = _atom_owners(frames)
+    out = [np.zeros((n_frames, int(np.prod(dots)))) for _ in cam]
+    for i, sc in enumerate(frames.planes.atoms):
+        if sc is None:
+            continue
+        is_patch = frames.patch[i] if frames.patch is not None else np.zeros(len(sc), dtype=bool)
+        for part, strata in ((~is_patch, sizes.strata), (is_patch, max(3, sizes.strata // 3))):
+            if not part.any():
+                continue
+            sub = dz.SquareScenes(sc.depth_m, sc.centers_m[part], sc.sizes_m[part], 1.0, sc.heights_m[part])
+            frame_of, radiance = owners[i][0][part], owners[i][1][part]
+            part_seed = seed * 1000 + 2 * i + int(part is is_patch)
+            for k in range(len(cam)):
+                smp = dz.mixel_samples(cam, k, sub, strata=strata, seed=part_seed, bodies=bodies)
+                out[k] += frame_rows(smp, frame_of, radiance, n_frames, dots)
     return out
+
+
+def _atom_owners(frames: Frames) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per plane, each atom's frame and radiance."""
+    owners = [(np.zeros(len(sc) if sc is not None else 0, dtype=np.int64),
+               np.zeros(len(sc) if sc is not None else 0)) for sc in frames.planes.atoms]
+    for f, atoms in enumerate(frames.planes.frame_atoms):
+        for di, ai, radiance in atoms:
+            owners[di][0][ai] = f
+            owners[di][1][ai] = radiance
+    return owners
 
 
 @dataclass
@@ -417,4 +457,4 @@ def metric(spec: TaskSpec, per_frame: np.ndarray) -> float:
 
 
 __all__ = ["FEATURES", "METRICS", "SHAPES", "Case", "Distribution", "Frames", "SceneDecoder", "Sizes", "TaskSpec",
-           "combine", "draw_frames", "features_raw", "fit_decoder", "metric", "score", "traced_rows"]
+           "draw_frames", "features_raw", "fit_decoder", "frame_rows", "metric", "score", "traced_rows"]
