@@ -51,6 +51,7 @@ DEPTH = TaskSpec(
     starts=("ramps", "random"),
     decoder_family="cubic polynomial of the four changes normalised by their sum (gain-free), regressing "
                    "ln(depth); depth = exp(.)",
+    learning_rate=0.02,
 )
 
 __all__ = ["DEPTH", "HELD_OUT_DEPTHS_M", "TRAIN_DEPTHS_M"]

@@ -24,7 +24,7 @@ IDENTITY_FILE = "design_identity.json"
 
 def make_sizes(spec: st.TaskSpec, quick: bool = False, seed: int = 0, **overrides) -> st.Sizes:
     """The sizes of a run (:meth:`Sizes.quick` or the full ones, training frames per plane and grid from the
-    task's ``frames_per_depth`` and ``grid``), with ``overrides`` (fields of ``Sizes``)."""
+    task's ``frames_per_depth``, ``grid`` and ``learning_rate``), with ``overrides`` (fields of ``Sizes``)."""
     known = {f.name for f in fields(st.Sizes)}
     unknown = sorted(set(overrides) - known)
     if unknown:
@@ -33,6 +33,7 @@ def make_sizes(spec: st.TaskSpec, quick: bool = False, seed: int = 0, **override
     base = st.Sizes.quick(seed) if quick else st.Sizes(seed=seed)
     overrides.setdefault("frames_per_depth", spec.frames_per_depth[0 if quick else 1])
     overrides.setdefault("grid", spec.grid)
+    overrides.setdefault("learning_rate", spec.learning_rate)
     return replace(base, **overrides)
 
 

@@ -145,6 +145,8 @@ class TaskSpec:
     grid : int
         Logit nodes per mask side (fewer nodes: smoother masks, less room to fit the training frames' own
         samples).
+    learning_rate : float
+        Adam's step on the logits.
     """
 
     name: str
@@ -161,6 +163,7 @@ class TaskSpec:
     decoder_family: str
     frames_per_depth: tuple[int, int] = (96, 192)
     grid: int = 8
+    learning_rate: float = 0.08
 
     def __post_init__(self) -> None:
         if self.target not in TARGETS or self.output not in OUTPUTS or self.metric not in METRICS:

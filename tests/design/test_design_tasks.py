@@ -204,3 +204,31 @@ def test_cli_design_quick(tmp_path, task):
     d = json.loads((out / "design.json").read_text())
     assert set(d["suite"]["summary"]["baselines"]) >= {"random", "pca", "ideal_trained"}
     assert "suite mean" in r.output and (out / "suite.png").stat().st_size > 0 and (out / "training.zarr").is_dir()
+
+
+def test_frame_rows_equal_the_per_atom_design_matrix():
+    """Binning the samples per frame (textured planes) gives each frame's sum of its atoms' design-matrix rows
+    times their radiance, with the same samples."""
+    _needs_jit()
+    from mincam_sim.design.tracking import paper_masks
+    from mincam_sim.render.gradients import differentiable as dz
+
+    sizes = st.Sizes.quick(strata=4)
+    frames = st.draw_frames(replace(COUNTING.train, depths_m=(0.5,)), 6, [1, 2])
+    rows = st.traced_rows(sizes, frames, 0)
+    cam = sizes.mincam(paper_masks(8))
+    sc = frames.planes.atoms[0]
+    per_atom = dz.design_matrix(dz.mixel_samples(cam, 1, sc, strata=4, seed=0), sizes.dot_shape())
+    expect = np.zeros_like(rows[1])
+    for f, atoms in enumerate(frames.planes.frame_atoms):
+        for _, ai, radiance in atoms:
+            expect[f] += radiance * per_atom[ai]
+    assert np.allclose(rows[1], expect, rtol=1e-12, atol=1e-15) and rows[1].sum() > 0
+
+
+def test_texture_fraction_mixes_textured_planes_in():
+    _needs_jit()
+    f = st.draw_frames(replace(DEPTH.train, texture_fraction=0.5), 40, [0, 11])
+    textured = [all(f.patch[di][ai] for di, ai, _ in atoms) and len(atoms) > 20 for atoms in f.planes.frame_atoms]
+    assert 5 < sum(textured) < 35
+    assert all(c == 0 for c, t in zip(f.count, textured, strict=True) if t)
