@@ -99,7 +99,8 @@ def run_scene_task(spec: st.TaskSpec, out_dir: str | Path, quick: bool = False, 
                   sd.PCA: "principal components 1-4 of the training images (idealised mapping), single rail",
                   sd.IDEAL: "the same optimiser and starts on the DotProduct (idealised) linear model"
                             + (f", kept: {ideal.start}" if ideal is not None else ""),
-                  "ramps_current_layout": "references only: the ramps of the package's cross layout"},
+                  **({"ramps_current_layout": "a reference row outside the summary: the ramps of the package's "
+                                              "cross layout"} if "ramps_current_layout" in mask_sets else {})},
         "decoder": spec.decoder_family,
         "training": {"frames": len(frames), "kept": trained.start,
                      f"{spec.metric}_by_candidate": trained.training_metric,

@@ -339,12 +339,13 @@ def frame_rows(samples, atom_frame: np.ndarray, atom_radiance: np.ndarray, n_fra
     atoms: each atom's samples binned per printer dot (as
     :func:`~mincam_sim.render.gradients.differentiable.design_matrix`), times its radiance, into its frame's row
     (no per-atom matrix: a textured plane holds hundreds of atoms)."""
-    import drjit as dr
+    from mincam_sim.render.gradients import autodiff
 
+    detach = autodiff.namespace().detach
     h, w = dot_shape
-    u = np.asarray(dr.detach(samples.u), dtype=np.float64)
-    v = np.asarray(dr.detach(samples.v), dtype=np.float64)
-    g = np.asarray(dr.detach(samples.weight), dtype=np.float64)
+    u = np.asarray(detach(samples.u), dtype=np.float64)
+    v = np.asarray(detach(samples.v), dtype=np.float64)
+    g = np.asarray(detach(samples.weight), dtype=np.float64)
     col = np.clip(np.floor(u * w).astype(np.int64), 0, w - 1)
     row = np.clip(np.floor(v * h).astype(np.int64), 0, h - 1)
     atom = np.arange(len(g)) // samples.per_frame
