@@ -900,9 +900,43 @@ def _design_overrides(config: Path | None, **options) -> dict:
     return overrides
 
 
+def _design_scene_task(task: str, out_dir: Path, quick: bool, seed: int, overwrite: bool, tracking_only: dict,
+                       **options) -> None:
+    """``mincam-sim design counting|depth``: the scene tasks (:mod:`mincam_sim.design.scene_run`)."""
+    from mincam_sim.design.scene_run import make_sizes
+    from mincam_sim.design.tasks import get_task
+    from mincam_sim.storage.store import lock_out_dir
+
+    given = [k for k, v in tracking_only.items() if v is not None]
+    if given:
+        raise ConfigError(f"{', '.join(given)} only apply to the tracking task; design {task} takes --quick, "
+                          "--seed, --dpi, --spacing-m, --d-f-m, --film-t-min, --film-t-max")
+    spec_task = get_task(task)
+    overrides = {k: v for k, v in options.items() if v is not None}
+    make_sizes(spec_task.spec, quick, seed, **overrides)  # one clear error for a bad field before anything runs
+    check_variant()
+    check_out_dir(out_dir)
+    _announce_variant()
+    with lock_out_dir(out_dir):
+        r = spec_task.run(out_dir, quick=quick, seed=seed, show_progress=_show_progress(), overwrite=overwrite,
+                          **overrides)
+    sm = r["suite"]["summary"]
+    typer.echo(f"gradient check of the {task} decoder's loss: relative error {r['gradient_check']['max_rel_error']:.2e}"
+               f" over {r['gradient_check']['n_checked']} logits")
+    typer.echo(f"held-out suite: {sm['metric']} per case ({'lower' if sm['lower_is_better'] else 'higher'} is better)")
+    labels = list(r["suite"]["cases"][0][sm["metric"]])
+    typer.echo(f"{'case':<18}" + "".join(f"{lab:>22}" for lab in labels))
+    for c in r["suite"]["cases"]:
+        typer.echo(f"{c['name']:<18}" + "".join(f"{c[sm['metric']][lab]:>22.1f}" for lab in labels))
+    typer.echo(f"# suite mean {sm['metric']}: designed {sm['designed']:.1f}; "
+               + ", ".join(f"{k} {v:.1f} (designed better in {sm['n_cases_designed_better'][k]}/{sm['n_cases']}, "
+                           f"worse in {sm['n_cases_designed_worse'][k]})" for k, v in sm["baselines"].items())
+               + f"; design.json, masks, suite.png, training.zarr in {out_dir}")
+
+
 @app.command()
 def design(
-    task: Annotated[str, typer.Argument(help="design task: tracking")],
+    task: Annotated[str, typer.Argument(help="design task: tracking, counting or depth")],
     out_dir: Annotated[Path, typer.Option("--out", help="output folder (design.json, PNG masks, plots)")] = Path(
         "out/design"),
     quick: Annotated[bool, typer.Option("--quick", help="smaller training and held-out sets (minutes)")] = False,
@@ -929,8 +963,9 @@ def design(
     overwrite: Annotated[bool, typer.Option("--overwrite", help="replace a finished design of another set-up in "
                                                                 "the output folder")] = False,
 ) -> None:
-    """Design masks by differentiable rendering through the real geometry; compare with the ramps of the layout
-    the package builds, on the old held-out draw and on the held-out suite."""
+    """Design masks by differentiable rendering through the real geometry for a registered task (tracking,
+    counting, depth); compare with the baselines (hand where one exists, random, PCA, ideal-trained) on the
+    task's held-out suite."""
     from mincam_sim.design import TASKS, run_design
     from mincam_sim.design.suite import table
     from mincam_sim.storage.store import lock_out_dir
@@ -948,6 +983,12 @@ def design(
         except ValueError:
             raise ConfigError(f"--backgrounds must be comma-separated radiances (e.g. 0,0.2), got {backgrounds!r}") \
                 from None
+    if task != "tracking":
+        _design_scene_task(task, out_dir, quick, seed, overwrite, dpi=dpi, spacing_m=spacing_m, d_f_m=d_f_m,
+                           film_t_min=film_t_min, film_t_max=film_t_max,
+                           tracking_only={"--config": config, "--object-size-cm": object_size_cm,
+                                          "--backgrounds": backgrounds, "--depth-range-m": depth_range_m})
+        return
     overrides = _design_overrides(config, object_size_range_m=_pair(object_size_cm, "--object-size-cm", 0.01),
                                   background_radiances=bg, depth_range_m=_pair(depth_range_m, "--depth-range-m"),
                                   spacing_m=spacing_m, d_f_m=d_f_m, film_t_min=film_t_min, film_t_max=film_t_max,

@@ -18,6 +18,9 @@ renderer itself).
   model), measured on the same suite, each decoder refitted on the physics.
 * :mod:`.gradcheck`: AD against central finite differences.
 * :mod:`.run`: one run and its outputs (``mincam-sim design TASK``).
+* :mod:`.tasks`: the registry: every task as data (scenes, target, metric and direction, decoder, suite, hand).
+* :mod:`.scene_tasks`, :mod:`.counting`, :mod:`.depth`, :mod:`.scene_design`, :mod:`.scene_run`: the tasks whose
+  scenes are flat objects or textured planes (counting, depth) and the machinery that designs and measures them.
 
 Files:
 
@@ -33,6 +36,13 @@ Files:
 * ``suite.py``: the held-out suite of a design report, designed masks beside the paper's ramps.
 * ``report.py``: figures of a design run.
 * ``run.py``: one design run: gradient check, optimisation, held-out evaluation and the outputs.
+* ``tasks.py``: the registry of design tasks (``Task`` records; ``get_task``).
+* ``scene_tasks.py``: a task as data (``TaskSpec``: scene ``Distribution``, target, metric, decoder, suite ``Case``s),
+  frames and labels, traced rows, the polynomial ``SceneDecoder``.
+* ``counting.py``: the task ``counting`` (0-3 objects on a tabletop at 0.5 m, accuracy).
+* ``depth.py``: the task ``depth`` (distance 0.3-1.0 m to an object, error in % of the depth).
+* ``scene_design.py``: training, baselines, the held-out suite, the decoders' loss-gradient check, the Zarr dataset.
+* ``scene_run.py``: one run of a scene task and its outputs.
 """
 
 from mincam_sim.design.run import TASKS, run_design

@@ -65,7 +65,7 @@ def optimise_masks(
     keys = [f"theta{k}" for k in range(len(initial_logits))]
     for key, theta in zip(keys, initial_logits, strict=True):
         opt[key] = ad.Float(np.asarray(theta, dtype=np.float32))
-    targets = tuple(ad.Float(problem.targets[:, i]) for i in range(2))
+    targets = tuple(ad.Float(problem.targets[:, i]) for i in range(problem.targets.shape[1]))
     history = []
     coef = None
     with ad.single_threaded():  # reverse passes scatter-add: one thread keeps their order (same seed, same numbers)
@@ -74,7 +74,8 @@ def optimise_masks(
                 masks = masks_from_logits(problem, [opt[key] for key in keys], ad=ad)
                 irr = [_matvec(ad, a_flat[k], masks[k], n_frames, d) for k in range(len(masks))]
                 irr_np = np.array([np.asarray(ad.detach(e)) for e in irr], dtype=np.float64)
-                terms = poly_terms(*problem.features(_noisy_dn(problem, ad, irr, irr_np, masks, seed, it), ad.xp))
+                terms = poly_terms(*problem.features(_noisy_dn(problem, ad, irr, irr_np, masks, seed, it), ad.xp),
+                                   degree=problem.degree)
                 coef = _fit_decoder(problem, ad, terms, irr_np)
                 loss = _loss(problem, ad, terms, coef, targets)
                 ad.backward(loss)
@@ -102,25 +103,28 @@ def _noisy_dn(problem: DesignProblem, ad, irr: list, irr_np: np.ndarray, masks: 
 
 
 def _fit_decoder(problem: DesignProblem, ad, terms: list, irr_np: np.ndarray) -> np.ndarray:
-    """Least-squares coefficients (2, n_terms) of the polynomial on this batch's read-out, or on its noiseless
+    """Least-squares coefficients (n_outputs, n_terms) of the polynomial on this batch's read-out, or on its noiseless
     read-out with ``problem.fit_noiseless``; frames with a non-finite feature are left out."""
     if problem.fit_noiseless:  # coefficients of the noiseless read-out, scored on the noisy one
         clean = [problem.dn_per_w_m2 * e for e in irr_np]
         with np.errstate(divide="ignore", invalid="ignore"):
-            design = np.stack(poly_terms(*problem.features(clean, np)), axis=1)
+            design = np.stack(poly_terms(*problem.features(clean, np), degree=problem.degree), axis=1)
     else:
         design = np.stack([np.asarray(ad.detach(t), dtype=np.float64) for t in terms], axis=1)
     ok = np.all(np.isfinite(design), axis=1)
-    return np.stack([np.linalg.lstsq(design[ok], problem.targets[ok, i], rcond=None)[0] for i in range(2)])
+    return np.stack([np.linalg.lstsq(design[ok], problem.targets[ok, i], rcond=None)[0]
+                     for i in range(problem.targets.shape[1])])
 
 
 def _loss(problem: DesignProblem, ad, terms: list, coef: np.ndarray, targets: tuple):
-    """Mean squared position error of the decoder ``coef`` (held fixed) on the noisy terms, each frame's error
-    capped at ``problem.error_cap`` (a lost frame counts as that error and carries no gradient)."""
-    c_x, c_y = (ad.Float(c) for c in coef.astype(np.float32))  # arrays, not literals: one kernel
-    px = sum(ad.gather(ad.Float, c_x, i) * t for i, t in enumerate(terms))
-    py = sum(ad.gather(ad.Float, c_y, i) * t for i, t in enumerate(terms))
-    err2 = ad.square(px - targets[0]) + ad.square(py - targets[1])
+    """Mean squared error of the decoder ``coef`` (held fixed) on the noisy terms, summed over its outputs (the
+    two position coordinates for tracking), each frame's error capped at ``problem.error_cap`` (a lost frame
+    counts as that error and carries no gradient)."""
+    err2 = None
+    for c, target in zip(coef.astype(np.float32), targets, strict=True):
+        c_ad = ad.Float(c)  # an array, not literals: one kernel
+        pred = sum(ad.gather(ad.Float, c_ad, i) * t for i, t in enumerate(terms))
+        err2 = ad.square(pred - target) if err2 is None else err2 + ad.square(pred - target)
     if problem.error_cap is not None:
         cap2 = float(problem.error_cap) ** 2
         err2 = ad.select(ad.isfinite(err2), ad.minimum(err2, cap2), cap2)

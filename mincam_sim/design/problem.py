@@ -19,8 +19,9 @@ class DesignProblem:
         Per mixel, the linear model ``E = A @ T`` on the printer-dot grid [W/m^2].
     upsample_index, upsample_weight : (D, 4) ndarray
         Bilinear interpolation of the (G, G) parameter grid onto the D printer dots (indices into G*G).
-    targets : (n_frames, 2) ndarray
-        True positions (normalised field coordinates, :mod:`mincam_sim.design.tracking`).
+    targets : (n_frames, n_outputs) ndarray
+        What the decoder predicts per frame: true positions (normalised field coordinates,
+        :mod:`mincam_sim.design.tracking`), a count, a log depth ... (one column per decoder output).
     features : callable
         ``features(dn, xp)`` -> tuple of decoder inputs from the (n_mixels,) list of DN arrays, written with
         the array namespace ``xp`` (``drjit`` inside the optimiser, ``numpy`` at inference).
@@ -45,6 +46,8 @@ class DesignProblem:
         noise cancels, weighs as one error of ``error_cap`` and carries no gradient) [fraction of the field].
     model : {"physical", "ideal"}
         What built the linear model: the traced physics, or the idealised dot-product model.
+    degree : int
+        Total degree of the decoder's polynomial of the features (3: the tracking cubic).
     """
 
     matrices: list
@@ -64,6 +67,7 @@ class DesignProblem:
     fit_noiseless: bool = False
     error_cap: float | None = None
     model: str = "physical"
+    degree: int = 3
 
     def background_irradiance(self, transmissions: list) -> np.ndarray | None:
         """Irradiance (n_mixels, n_frames) [W/m^2] of each frame's background through the masks ``T_k``."""
@@ -85,8 +89,8 @@ class DesignResult:
 
     logits: list  # per mixel (G*G,) ndarray
     transmission: list  # per mixel (D,) ndarray: the printed transmission on the dot grid
-    loss_history: np.ndarray  # (iterations,) training RMS error [fraction of the field]
-    coefficients: np.ndarray  # (2, n_terms) decoder polynomial at the end
+    loss_history: np.ndarray  # (iterations,) training RMS error [target units, tracking: fraction of the field]
+    coefficients: np.ndarray  # (n_outputs, n_terms) decoder polynomial at the end
 
 
 __all__ = ["DesignProblem", "DesignResult"]

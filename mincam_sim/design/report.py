@@ -128,4 +128,34 @@ def plot_summary(summary: dict, path: Path) -> Path:
     return _save(fig, path)
 
 
-__all__ = ["SUITE_COLOURS", "plot_error_vs_depth", "plot_loss", "plot_masks", "plot_suite", "plot_summary"]
+def plot_scene_task(task: str, metric: str, lower_is_better: bool, cases: list[dict], masks: dict[str, Mask],
+                    path: Path) -> Path:
+    """A scene task's figure: the masks of every set as printed (top rows) and the suite's metric per case for
+    every set (bars)."""
+    labels = list(masks)
+    fig = plt.figure(figsize=(max(8.0, 1.3 * len(cases) + 3), 5.6), layout="constrained")
+    top, bottom = fig.subfigures(2, 1, height_ratios=[0.35, 1.0])
+    axes = top.subplots(1, len(labels) * 4, squeeze=False)[0]
+    for j, label in enumerate(labels):
+        for c, mask in enumerate(masks[label]):
+            ax = axes[4 * j + c]
+            ax.imshow(mask.transmission, cmap="gray", vmin=0.0, vmax=1.0, interpolation="nearest")
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if c == 0:
+                ax.set_title(label, fontsize=8, loc="left")
+    ax = bottom.subplots()
+    x = np.arange(len(cases))
+    width = 0.8 / len(labels)
+    for j, label in enumerate(labels):
+        ax.bar(x + (j - (len(labels) - 1) / 2) * width, [c[metric][label] for c in cases], width, label=label)
+    ax.set_xticks(x, [c["name"] for c in cases], rotation=20, fontsize=8)
+    ax.set_ylabel(f"{metric.replace('_pct', '')} [%] ({'lower' if lower_is_better else 'higher'} is better)")
+    ax.set_title(f"{task}: held-out suite, traced physics, 12-bit read-out; masks as printed above", fontsize=9)
+    ax.legend(fontsize=7, ncols=3)
+    ax.grid(alpha=0.3, axis="y")
+    return _save(fig, path)
+
+
+__all__ = ["SUITE_COLOURS", "plot_error_vs_depth", "plot_loss", "plot_masks", "plot_scene_task", "plot_suite",
+           "plot_summary"]

@@ -11,14 +11,15 @@ from pathlib import Path
 import numpy as np
 
 from mincam_sim.design import tracking as tr
-from mincam_sim.errors import StaleResultError
+from mincam_sim.design.scene_run import refuse_another_design as _refuse_another_design
+from mincam_sim.design.tasks import TASK_NAMES
 from mincam_sim.masks import export_print_png
 from mincam_sim.masks.sheet import check_print_sheet, write_print_sheet
 from mincam_sim.storage.atomic import atomic_path, atomic_save_npz, atomic_write_json
 from mincam_sim.storage.identity import build_identity
 from mincam_sim.storage.store import check_identity
 
-TASKS = ("tracking",)
+TASKS = TASK_NAMES  # every registered task
 
 
 def _summary(res: dict) -> dict:
@@ -138,8 +139,9 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
 
     Parameters
     ----------
-    task_name : {"tracking"}
-        The task (see :mod:`mincam_sim.design.tracking`).
+    task_name : str
+        A registered task (:data:`mincam_sim.design.tasks.REGISTRY`): ``tracking`` (:mod:`.tracking`) runs
+        here; ``counting`` and ``depth`` run through :func:`mincam_sim.design.scene_run.run_scene_task`.
     out_dir : path
         Output directory (created).
     quick : bool
@@ -155,12 +157,18 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
         Also make and measure the random, PCA and ideal-trained baselines (``field_baselines``; the
         ideal-trained one doubles the optimisation time); without them ``suite.summary`` has ``hand`` only.
     overrides
-        Fields of ``TrackingTask`` (training distribution, geometry, film; ``make_task``).
+        Fields of ``TrackingTask`` (training distribution, geometry, film; ``make_task``), or of
+        :class:`~mincam_sim.design.scene_tasks.Sizes` for the scene tasks.
     """
     from mincam_sim.design.gradcheck import check_gradients
     from mincam_sim.design.optimise import design
 
     _check_request(task_name, dpi, overrides)
+    if task_name != "tracking":
+        from mincam_sim.design.tasks import get_task
+
+        return get_task(task_name).run(out_dir, quick=quick, seed=seed, show_progress=show_progress,
+                                       overwrite=overwrite, baselines=baselines, **overrides)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
@@ -208,15 +216,6 @@ def _check_request(task_name: str, dpi: float | None, overrides: dict) -> None:
         if not (np.isfinite(dpi) and dpi > 0):
             raise ValueError(f"dpi must be a positive number of dots per inch, got {dpi!r}")
         overrides["dpi"] = float(dpi)
-
-
-def _refuse_another_design(out: Path, identity: dict, overwrite: bool) -> None:
-    """A finished design in ``out`` of another identity (or of none recorded) is refused unless ``overwrite``."""
-    if (out / "design.json").exists() and not overwrite:
-        if not (out / IDENTITY_FILE).exists():
-            raise StaleResultError(f"{out} holds a finished design without a record of what it was computed from "
-                                   "(an older version); choose another output directory or rerun with --overwrite")
-        check_identity(out, identity, name=IDENTITY_FILE)
 
 
 @dataclass
