@@ -14,8 +14,10 @@ per-replicate differences, so it includes that correlation.
   traced with the same seed, counts and regions, so their rays pair up lane by lane; inter-reflection bounces
   are guided toward the moving shapes (``mincam_sim.render.kernels.guided_path``); the background's whole-aperture
   value (for ``P``) is traced once per run, on a jittered aperture grid with at least
-  ``BACKGROUND_MIN_SPP`` rays. Kernels are compiled once and reused; each frame costs one parameter update
-  for the frame and one back to the background.
+  ``BACKGROUND_MIN_SPP`` rays. Kernels are compiled once and reused. Where the moving shapes are meshes moved
+  by their vertices (``mincam_sim.render.scene.static_split``), the static geometry is a scene of its own, built
+  once, and a frame rebuilds only a scene of its moving shapes; otherwise each frame costs one parameter update
+  of the world for the frame and one back to the background (the run's meta ``static_geometry`` says which).
 
 A target noise is reached by pilots: the solver's own plan on up to 4 frames spread over the run, at the
 budget's rays, extrapolated by ``estimation.pilot_to_target`` (no recursion through the front door).
@@ -37,7 +39,13 @@ from mincam_sim.frames import MemoryTable, collect
 from mincam_sim.measurements import Measurements
 from mincam_sim.progress import progress
 from mincam_sim.render import backend
-from mincam_sim.render.kernels.change_geometry import changed_shapes, emitters_among, moving_shapes, watch_box
+from mincam_sim.render.kernels.change_geometry import (
+    changed_shapes,
+    emitters_among,
+    light_bounds,
+    moving_shapes,
+    watch_box,
+)
 from mincam_sim.render.kernels.guided_path import supports as guided_path_supports
 from mincam_sim.render.kernels.mask_eval import mask_model_meta
 from mincam_sim.render.kernels.monte_carlo import (
@@ -50,12 +58,14 @@ from mincam_sim.render.kernels.monte_carlo import (
     worst_relative_stderr,
 )
 from mincam_sim.render.kernels.stratified import (
+    buffers_key,
     check_strata,
     frozen_recordings,
     stratified_lanes,
     whole_aperture_estimates,
 )
 from mincam_sim.render.scene.mincam_scene import geometry_meta
+from mincam_sim.render.scene.static_split import StaticSplit, split_refusal
 from mincam_sim.render.scene.world_input import check_frames
 from mincam_sim.render.solvers.base import Plan, Row, Solver
 
@@ -397,11 +407,40 @@ class _StratifiedRun(_Run):
         self.freeze = sim.freeze_launches and not lights_move
         self.launches = ("frozen" if self.freeze else
                          "traced" + (": a moving shape emits light" if sim.freeze_launches else ""))
-        self.recordings_at_start = frozen_recordings(sim.scene)
+        self.split, self.static_geometry = self._split(sim, frames, background)
+        self.recordings_at_start = self._recordings()
         self.frames_traced = 0
         if guided and not self.can_guide:
             self.fallbacks["depth"] = (f"bounces are not guided at max_depth {sim.mincam_scene.max_depth} (the "
                                        "guided path covers 1 .. 5): rays follow Mitsuba's path")
+
+    def _split(self, sim, frames, background) -> tuple[StaticSplit | None, str]:
+        """The run's static / movers split (static geometry built once) and what the run's meta says of it, or
+        None and why the world scene is updated per frame instead."""
+        if not getattr(sim, "split_static", False):
+            return None, "one scene, updated per frame: the split is switched off"
+        if not self.can_guide:
+            return None, "one scene, updated per frame: bounces are not guided (the split traces the guided path)"
+        why = split_refusal(sim.scene, self.moving, [background, *frames])
+        if not why and light_bounds(sim.scene)[0] is None:
+            why = "a light of a kind the change regions do not bound"
+        if why:
+            return None, f"one scene, updated per frame: {why}"
+        key = (frozenset(self.moving), tuple(sorted((k, n) for k, n in sim.revisions.items()
+                                                    if k.split(".", 1)[0] not in self.moving)))
+        static = sim.static_scenes.get(key)
+        split = StaticSplit(sim.scene, self.moving, static)
+        sim.static_scenes.clear()  # one kept: another run's scene holds a million triangles as well
+        sim.static_scenes[key] = split.static
+        return split, ("split: the static shapes in a scene built once " + ("(reused)" if static is not None
+                       else "for this run") + ", the moving meshes in a scene rebuilt per frame")
+
+    def _recordings(self) -> int:
+        """Recordings of the frozen launches of the scenes this run traces."""
+        count = frozen_recordings(self.r.scene)
+        if self.split is not None:
+            count += frozen_recordings(self.split.frame_scene) + frozen_recordings(self.split.background_scene)
+        return count
 
     def note_fallback(self, name: str, reason: str) -> None:
         self.fallbacks.setdefault(name, f"{reason}; the stratified estimator samples the whole aperture and does not "
@@ -411,8 +450,12 @@ class _StratifiedRun(_Run):
     def frame(self, frames, i: int, replicates: int, purpose: str):
         r = self.r
         changed = changed_shapes(frames[i], self.background)
-        r.update({**self.background, **frames[i]})
-        regions, guide, why = r.change_reach(changed)
+        if self.split is not None:  # the world scene stays at the background; the frame's movers scene moves
+            self.split.set_frame(r.scene_updates({**self.background, **frames[i]}))
+            regions, guide, why = r.change_reach(changed, scene=self.split.view)
+        else:
+            r.update({**self.background, **frames[i]})
+            regions, guide, why = r.change_reach(changed)
         for reason in why:
             self.note_fallback(next(iter(sorted(changed))), reason)
         for name in changed:
@@ -423,16 +466,22 @@ class _StratifiedRun(_Run):
         if purpose:
             frame_seed = derive_seed(frame_seed, purpose, i)
         kw = {"expansions": self.expansions, "guide": guide, "max_depth": r.mincam_scene.max_depth}
+        # split: the static scene with the movers where the frame has them, then where the background has them;
+        # a frame that changes nothing (no guide) is the background, which the world scene holds
+        split = self.split is not None and guide is not None
+        shapes = self.split.frame_copies if split else self.shapes
         watch = None
         if self.pairs and guide is not None:
-            watch = [watch_box(self.shapes[name]) for name in sorted(changed)]
+            watch = [watch_box(shapes[name]) for name in sorted(changed)]
             watch += [self.bg_boxes[name] for name in sorted(changed)]
-        lanes = stratified_lanes(r.scene, r.sensor, r.mincam, regions, replicates, self.counts, frame_seed,
-                                 freeze=self._freeze_key(), watch=watch, **kw)
-        r.update(self.background)
+        lanes = stratified_lanes(self.split.frame_scene if split else r.scene, r.sensor, r.mincam, regions,
+                                 replicates, self.counts, frame_seed, freeze=self._freeze_key(), watch=watch, **kw)
+        if self.split is None:
+            r.update(self.background)
         bg_seed = frame_seed if self.correlated else derive_seed(self.seed, "stratified-background", i, purpose)
-        bg_lanes = stratified_lanes(r.scene, r.sensor, r.mincam, regions, replicates, self.counts, bg_seed,
-                                    freeze=self._freeze_key(), pair=lanes if watch is not None else None, **kw)
+        bg_lanes = stratified_lanes(self.split.background_scene if split else r.scene, r.sensor, r.mincam, regions,
+                                    replicates, self.counts, bg_seed, freeze=self._freeze_key(),
+                                    pair=lanes if watch is not None else None, **kw)
         diff = lanes.estimates() - bg_lanes.estimates()
         if not purpose:
             self.frames_traced += 1
@@ -450,7 +499,9 @@ class _StratifiedRun(_Run):
         return diff, frame_v, frame_e, changes, info
 
     def _freeze_key(self) -> tuple | None:
-        return self.r.buffers_key() if self.freeze else None
+        if not self.freeze:
+            return None
+        return self.r.buffers_key() + (() if self.split is None else buffers_key(self.split.copies()))
 
     def _check_recordings(self) -> None:
         """Trace instead of replaying once the frozen launch keeps recording (the moving meshes' buffers land at
@@ -458,7 +509,7 @@ class _StratifiedRun(_Run):
         would never come."""
         if not self.freeze:
             return
-        recorded = frozen_recordings(self.r.scene) - self.recordings_at_start
+        recorded = self._recordings() - self.recordings_at_start
         if recorded > FREEZE_ALLOWANCE + self.frames_traced // 4:
             self.freeze = False
             self.launches = (f"traced from frame {self.frames_traced}: the frozen launch recorded {recorded} times "
@@ -473,6 +524,7 @@ class _StratifiedRun(_Run):
                 "rays_per_mixel_per_frame": int(round(rays)),
                 "background_rays_share": (rays - full) / full,
                 "paired_lanes_reused": bool(self.pairs), "launches": self.launches,
+                "static_geometry": self.static_geometry,
                 "moving_shapes": sorted(self.moving), "guide_bounces": bool(self.guided),
                 "guided_frames": int(rest[:, 1].sum()),
                 "guide_spheres_per_frame": rest[:, 2].astype(int).tolist(),
