@@ -139,7 +139,7 @@ class Simulation:
         self.freeze_launches = backend.variant().startswith("llvm")
         self.pair_lanes = True  # background pass: trace again only the lanes whose frame paths met a moving shape
         self.split_static = True  # change runs: static geometry in a scene of its own, built once (static_split.py)
-        self.static_scenes: dict = {}  # that scene, kept while no static parameter changes: {key: scene}
+        self.static_splits: dict = {}  # that scene and the movers', kept while no static parameter changes
         elements, self._loaded = expand_elements(elements)
         self._loaded.note()
         max_depth, self.max_depth_source = _resolved_depth(max_depth, self._loaded.max_depth)

@@ -117,20 +117,22 @@ class StaticSplit:
         The world scene, with the moving shapes where the background has them.
     moving : iterable of str
         The shapes the frames move (:func:`split_refusal` found none that stops a split).
-    static : mitsuba.Scene, optional
-        The static scene, when one built for the same shapes is still current (:func:`static_scene` otherwise).
+
+    One split serves the runs of a :class:`~mincam_sim.render.simulation.Simulation` while no static parameter
+    changes (the run that builds it keeps it there): its scenes keep their frozen launches' recordings.
     """
 
-    def __init__(self, scene, moving: Iterable[str], static=None) -> None:
+    def __init__(self, scene, moving: Iterable[str]) -> None:
         mi = backend.mitsuba()
         names = sorted(set(moving))
         shapes = {shape.id(): shape for shape in scene.shapes()}
-        self.static = static_scene(scene, names) if static is None else static
+        self.static = static_scene(scene, names)
         self.frame_copies = {name: mesh_copy(shapes[name]) for name in names}
         self.background_copies = {name: mesh_copy(shapes[name]) for name in names}
         frame_movers = mi.load_dict({"type": "scene", **self.frame_copies}, optimize=False)
         background_movers = mi.load_dict({"type": "scene", **self.background_copies}, optimize=False)
         self._frame_params = mi.traverse(frame_movers)
+        self._background_params = mi.traverse(background_movers)
         self.frame_scene = SplitScene(self.static, frame_movers)
         self.background_scene = SplitScene(self.static, background_movers)
         self.view = _ShapesView(self.static, self.frame_copies, frame_movers)
@@ -141,12 +143,22 @@ class StaticSplit:
     def set_frame(self, updates: Mapping[str, object]) -> None:
         """Move the frame's copies (``updates``: ``name.vertex_positions`` in scene coordinates, as the world
         scene's parameters take them) and rebuild the frame's movers scene, nothing else."""
+        if self._move(self._frame_params, self.frame_scene, self.frame_copies, updates):
+            self.movers_updates += 1
+
+    def set_background(self, updates: Mapping[str, object]) -> None:
+        """Move the background's copies (as :meth:`set_frame`): a new run over the same shapes."""
+        self._move(self._background_params, self.background_scene, self.background_copies, updates)
+
+    @staticmethod
+    def _move(params, scene: SplitScene, copies: Mapping[str, object], updates: Mapping[str, object]) -> bool:
+        """Write ``updates`` into ``params`` (in place where the buffer allows: its address keys frozen
+        launches), rebuild ``scene``'s movers if one changed (True) and hold them in its box."""
         mi = backend.mitsuba()
-        params = self._frame_params
         changed = False
         for key, value in updates.items():
             if key not in params:
-                raise KeyError(f"{key!r} is not a parameter of the moving shapes {sorted(self.frame_copies)}")
+                raise KeyError(f"{key!r} is not a parameter of the moving shapes {sorted(copies)}")
             if isinstance(value, np.ndarray) and np.array_equal(np.asarray(params[key]).ravel(),
                                                                 np.asarray(value, dtype=np.float32).ravel()):
                 continue
@@ -155,8 +167,8 @@ class StaticSplit:
             changed = True
         if changed:
             params.update()
-            self.movers_updates += 1
-            self.frame_scene.set_movers_box(*_box_of(self.frame_copies.values()))
+            scene.set_movers_box(*_box_of(copies.values()))
+        return changed
 
     def copies(self) -> list:
         """The moving shapes' copies (frame's, then background's): what a frozen launch's key reads."""

@@ -426,14 +426,18 @@ class _StratifiedRun(_Run):
             why = "a light of a kind the change regions do not bound"
         if why:
             return None, f"one scene, updated per frame: {why}"
-        key = (frozenset(self.moving), tuple(sorted((k, n) for k, n in sim.revisions.items()
-                                                    if k.split(".", 1)[0] not in self.moving)))
-        static = sim.static_scenes.get(key)
-        split = StaticSplit(sim.scene, self.moving, static)
-        sim.static_scenes.clear()  # one kept: another run's scene holds a million triangles as well
-        sim.static_scenes[key] = split.static
-        return split, ("split: the static shapes in a scene built once " + ("(reused)" if static is not None
-                       else "for this run") + ", the moving meshes in a scene rebuilt per frame")
+        # kept with the simulation while no parameter but the movers' vertices changes: a run over the same
+        # shapes reuses the static scene and the frozen launches recorded on the split
+        positions = {f"{name}.vertex_positions" for name in self.moving}
+        key = (frozenset(self.moving), tuple(sorted((k, n) for k, n in sim.revisions.items() if k not in positions)))
+        split = sim.static_splits.get(key)
+        built = split is None
+        if built:
+            sim.static_splits.clear()  # one kept: another's static scene may hold a million triangles as well
+            split = sim.static_splits[key] = StaticSplit(sim.scene, self.moving)
+        split.set_background(sim.scene_updates({k: v for k, v in background.items() if k in positions}))
+        return split, ("split: the static shapes in a scene built " + ("for this run" if built else "by an earlier "
+                       "run") + ", the moving meshes in scenes of their own (the frame's rebuilt per frame)")
 
     def _recordings(self) -> int:
         """Recordings of the frozen launches of the scenes this run traces."""
