@@ -473,6 +473,8 @@ class _StratifiedRun(_Run):
         # split: the static scene with the movers where the frame has them, then where the background has them;
         # a frame that changes nothing (no guide) is the background, which the world scene holds
         split = self.split is not None and guide is not None
+        if self.split is not None and guide is None and changed:  # split_refusal lets no unbounded change through
+            raise RuntimeError(f"frame {i}: a split run met an unbounded change of {sorted(changed)}: {why}")
         shapes = self.split.frame_copies if split else self.shapes
         watch = None
         if self.pairs and guide is not None:
