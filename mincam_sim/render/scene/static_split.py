@@ -4,9 +4,9 @@ Mitsuba 3.9 rebuilds every geometry of a scene (nested shape groups included) wh
 a change run that updates the whole world per frame and per background pays for every static triangle twice a
 frame. Split, the static scene (every shape no frame moves, every light) is built once and kept with the
 :class:`~mincam_sim.render.simulation.Simulation` while none of its parameters changes; the moving shapes are
-copied into two small scenes, one held where the background has them and one updated to each frame, and a pass
-traces the static scene with one of them (:class:`~mincam_sim.render.kernels.split_scene.SplitScene`). The world
-scene itself stays at the background through the run.
+copied into a small scene, moved to each frame and back to the background, and both passes trace the static
+scene with it (:class:`~mincam_sim.render.kernels.split_scene.SplitScene`). The world scene itself stays at the
+background through the run.
 
 The split holds where every moving shape is a triangle mesh moved by its vertex positions, emits no light, has no
 delta BSDF (a moving mirror moves the images the change regions are bounded with) and every shape has an id of
@@ -38,8 +38,9 @@ def split_refusal(scene, moving: Iterable[str], updates: Iterable[Mapping[str, o
     if not moving:
         return "nothing moves"
     ids = [shape.id() for shape in scene.shapes()]
-    if "" in ids or len(set(ids)) != len(ids):
-        return "a shape of the scene has no id of its own"
+    lights = [e.id() for e in scene.emitters() if not int(e.flags()) & int(mi.EmitterFlags.Surface)]
+    if "" in ids + lights or len(set(ids + lights)) != len(ids + lights):
+        return "a shape or light of the scene has no id of its own"
     for emitter in scene.emitters():
         if int(emitter.flags()) & int(mi.EmitterFlags.Infinite):
             return f"the light '{emitter.id()}' reaches from infinity (it is told the whole scene's bounds)"
@@ -78,22 +79,28 @@ def _mover_refusal(mi, name: str, shape) -> str:
 
 def static_scene(scene, moving: Iterable[str]):
     """A Mitsuba scene of ``scene``'s shapes but ``moving`` and of its lights (the same objects, shared: none of
-    them changes while the split is used), built once."""
+    them changes while the split is used), built once.
+
+    The lights keep their order (an emitting shape where ``scene`` has its emitter, a point or spot light between
+    them where ``scene`` has it), so an emitter sample picks the same light as in ``scene``."""
     mi = backend.mitsuba()
     moving = set(moving)
     content: dict = {"type": "scene"}
+    emitting = iter([shape for shape in scene.shapes() if shape.is_emitter()])
+    for emitter in scene.emitters():  # each surface emitter is the next emitting shape's (both in load order)
+        item = next(emitting) if int(emitter.flags()) & int(mi.EmitterFlags.Surface) else emitter
+        content[item.id()] = item  # keyed by its own id: the loader names an object after its key
     for shape in scene.shapes():
-        if shape.id() not in moving:
-            content[shape.id()] = shape  # keyed by its own id: the loader names an object after its key
-    for emitter in scene.emitters():
-        if not int(emitter.flags()) & int(mi.EmitterFlags.Surface):
-            content[emitter.id()] = emitter
+        if shape.id() not in moving and shape.id() not in content:
+            content[shape.id()] = shape
     return mi.load_dict(content, optimize=False)
 
 
 def mesh_copy(mesh):
     """A new Mitsuba mesh with ``mesh``'s id, buffers (copied) and BSDF (shared)."""
     mi = backend.mitsuba()
+    import drjit as dr
+
     props = mi.Properties()
     if mesh.bsdf() is not None:
         props["bsdf"] = mesh.bsdf()
@@ -102,14 +109,14 @@ def mesh_copy(mesh):
     source, target = mi.traverse(mesh), mi.traverse(copy)
     for key in COPIED:
         if key in source:
-            target[key] = type(source[key])(np.array(source[key]))
+            target[key] = dr.copy(source[key])  # a buffer of its own, made by Dr.Jit (not mapped from numpy)
     target.update()
     copy.set_id(mesh.id())
     return copy
 
 
 class StaticSplit:
-    """The static scene of a run and its two movers scenes (the background's, the current frame's).
+    """The static scene of a run and its movers scene, traced together as :attr:`scene`.
 
     Parameters
     ----------
@@ -119,7 +126,9 @@ class StaticSplit:
         The shapes the frames move (:func:`split_refusal` found none that stops a split).
 
     One split serves the runs of a :class:`~mincam_sim.render.simulation.Simulation` while no static parameter
-    changes (the run that builds it keeps it there): its scenes keep their frozen launches' recordings.
+    changes (the run that builds it keeps it there). A frame moves the copies to the frame, then back to the
+    background: one :class:`~mincam_sim.render.kernels.split_scene.SplitScene` for both passes, so both replay
+    the same frozen launches (their buffers keep their addresses), and a rebuild costs a dozen triangles.
     """
 
     def __init__(self, scene, moving: Iterable[str]) -> None:
@@ -127,38 +136,24 @@ class StaticSplit:
         names = sorted(set(moving))
         shapes = {shape.id(): shape for shape in scene.shapes()}
         self.static = static_scene(scene, names)
-        self.frame_copies = {name: mesh_copy(shapes[name]) for name in names}
-        self.background_copies = {name: mesh_copy(shapes[name]) for name in names}
-        frame_movers = mi.load_dict({"type": "scene", **self.frame_copies}, optimize=False)
-        background_movers = mi.load_dict({"type": "scene", **self.background_copies}, optimize=False)
-        self._frame_params = mi.traverse(frame_movers)
-        self._background_params = mi.traverse(background_movers)
-        self.frame_scene = SplitScene(self.static, frame_movers)
-        self.background_scene = SplitScene(self.static, background_movers)
-        self.view = _ShapesView(self.static, self.frame_copies, frame_movers)
-        self.background_scene.set_movers_box(*_box_of(self.background_copies.values()))
-        self.frame_scene.set_movers_box(*_box_of(self.frame_copies.values()))
-        self.movers_updates = 0  # rebuilds of the frame's movers scene (the static scene is never updated)
+        self.copies = {name: mesh_copy(shapes[name]) for name in names}
+        movers = mi.load_dict({"type": "scene", **self.copies}, optimize=False)
+        self._params = mi.traverse(movers)
+        self.scene = SplitScene(self.static, movers)
+        self.scene.set_movers_box(*_box_of(self.copies.values()))
+        self.view = _ShapesView(self.static, self.copies, movers)
+        self.movers_updates = 0  # rebuilds of the movers scene (the static scene is never updated)
 
-    def set_frame(self, updates: Mapping[str, object]) -> None:
-        """Move the frame's copies (``updates``: ``name.vertex_positions`` in scene coordinates, as the world
-        scene's parameters take them) and rebuild the frame's movers scene, nothing else."""
-        if self._move(self._frame_params, self.frame_scene, self.frame_copies, updates):
-            self.movers_updates += 1
-
-    def set_background(self, updates: Mapping[str, object]) -> None:
-        """Move the background's copies (as :meth:`set_frame`): a new run over the same shapes."""
-        self._move(self._background_params, self.background_scene, self.background_copies, updates)
-
-    @staticmethod
-    def _move(params, scene: SplitScene, copies: Mapping[str, object], updates: Mapping[str, object]) -> bool:
-        """Write ``updates`` into ``params`` (in place where the buffer allows: its address keys frozen
-        launches), rebuild ``scene``'s movers if one changed (True) and hold them in its box."""
+    def move(self, updates: Mapping[str, object]) -> None:
+        """Move the copies (``updates``: ``name.vertex_positions`` in scene coordinates, as the world scene's
+        parameters take them; in place where the buffer allows, as its address keys frozen launches) and rebuild
+        the movers scene, nothing else, if one of them changed."""
         mi = backend.mitsuba()
+        params = self._params
         changed = False
         for key, value in updates.items():
             if key not in params:
-                raise KeyError(f"{key!r} is not a parameter of the moving shapes {sorted(copies)}")
+                raise KeyError(f"{key!r} is not a parameter of the moving shapes {sorted(self.copies)}")
             if isinstance(value, np.ndarray) and np.array_equal(np.asarray(params[key]).ravel(),
                                                                 np.asarray(value, dtype=np.float32).ravel()):
                 continue
@@ -167,12 +162,8 @@ class StaticSplit:
             changed = True
         if changed:
             params.update()
-            scene.set_movers_box(*_box_of(copies.values()))
-        return changed
-
-    def copies(self) -> list:
-        """The moving shapes' copies (frame's, then background's): what a frozen launch's key reads."""
-        return [*self.frame_copies.values(), *self.background_copies.values()]
+            self.movers_updates += 1
+            self.scene.set_movers_box(*_box_of(self.copies.values()))
 
 
 def _box_of(shapes) -> tuple[np.ndarray, np.ndarray]:

@@ -435,15 +435,16 @@ class _StratifiedRun(_Run):
         if built:
             sim.static_splits.clear()  # one kept: another's static scene may hold a million triangles as well
             split = sim.static_splits[key] = StaticSplit(sim.scene, self.moving)
-        split.set_background(sim.scene_updates({k: v for k, v in background.items() if k in positions}))
+        self.background_movers = sim.scene_updates({k: v for k, v in background.items() if k in positions})
+        split.move(self.background_movers)
         return split, ("split: the static shapes in a scene built " + ("for this run" if built else "by an earlier "
-                       "run") + ", the moving meshes in scenes of their own (the frame's rebuilt per frame)")
+                       "run") + ", the moving meshes in a scene of their own, rebuilt per pass")
 
     def _recordings(self) -> int:
         """Recordings of the frozen launches of the scenes this run traces."""
         count = frozen_recordings(self.r.scene)
         if self.split is not None:
-            count += frozen_recordings(self.split.frame_scene) + frozen_recordings(self.split.background_scene)
+            count += frozen_recordings(self.split.scene)
         return count
 
     def note_fallback(self, name: str, reason: str) -> None:
@@ -454,8 +455,8 @@ class _StratifiedRun(_Run):
     def frame(self, frames, i: int, replicates: int, purpose: str):
         r = self.r
         changed = changed_shapes(frames[i], self.background)
-        if self.split is not None:  # the world scene stays at the background; the frame's movers scene moves
-            self.split.set_frame(r.scene_updates({**self.background, **frames[i]}))
+        if self.split is not None:  # the world scene stays at the background; the movers scene moves
+            self.split.move(r.scene_updates({**self.background, **frames[i]}))
             regions, guide, why = r.change_reach(changed, scene=self.split.view)
         else:
             r.update({**self.background, **frames[i]})
@@ -470,22 +471,24 @@ class _StratifiedRun(_Run):
         if purpose:
             frame_seed = derive_seed(frame_seed, purpose, i)
         kw = {"expansions": self.expansions, "guide": guide, "max_depth": r.mincam_scene.max_depth}
-        # split: the static scene with the movers where the frame has them, then where the background has them;
+        # split: the static scene with the movers where the frame has them, then where the background has them
         # a frame that changes nothing (no guide) is the background, which the world scene holds
         split = self.split is not None and guide is not None
         if self.split is not None and guide is None and changed:  # split_refusal lets no unbounded change through
             raise RuntimeError(f"frame {i}: a split run met an unbounded change of {sorted(changed)}: {why}")
-        shapes = self.split.frame_copies if split else self.shapes
+        shapes = self.split.copies if split else self.shapes
         watch = None
         if self.pairs and guide is not None:
             watch = [watch_box(shapes[name]) for name in sorted(changed)]
             watch += [self.bg_boxes[name] for name in sorted(changed)]
-        lanes = stratified_lanes(self.split.frame_scene if split else r.scene, r.sensor, r.mincam, regions,
+        lanes = stratified_lanes(self.split.scene if split else r.scene, r.sensor, r.mincam, regions,
                                  replicates, self.counts, frame_seed, freeze=self._freeze_key(), watch=watch, **kw)
         if self.split is None:
             r.update(self.background)
+        else:
+            self.split.move(self.background_movers)
         bg_seed = frame_seed if self.correlated else derive_seed(self.seed, "stratified-background", i, purpose)
-        bg_lanes = stratified_lanes(self.split.background_scene if split else r.scene, r.sensor, r.mincam, regions,
+        bg_lanes = stratified_lanes(self.split.scene if split else r.scene, r.sensor, r.mincam, regions,
                                     replicates, self.counts, bg_seed, freeze=self._freeze_key(),
                                     pair=lanes if watch is not None else None, **kw)
         diff = lanes.estimates() - bg_lanes.estimates()
@@ -507,7 +510,7 @@ class _StratifiedRun(_Run):
     def _freeze_key(self) -> tuple | None:
         if not self.freeze:
             return None
-        return self.r.buffers_key() + (() if self.split is None else buffers_key(self.split.copies()))
+        return self.r.buffers_key() + (() if self.split is None else buffers_key(list(self.split.copies.values())))
 
     def _check_recordings(self) -> None:
         """Trace instead of replaying once the frozen launch keeps recording (the moving meshes' buffers land at
