@@ -138,7 +138,9 @@ class Simulation:
         # meshes' vertices are written in place and their buffers' addresses key the recordings
         self.freeze_launches = backend.variant().startswith("llvm")
         self.pair_lanes = True  # background pass: trace again only the lanes whose frame paths met a moving shape
-        self.split_static = True  # change runs: static geometry in a scene of its own, built once (static_split.py)
+        # change runs: static geometry in a scene of its own, built once (static_split.py): None = where the static
+        # shapes hold >= solvers.change.SPLIT_MIN_TRIANGLES triangles, True = wherever it applies, False = never
+        self.split_static: bool | None = None
         self.static_splits: dict = {}  # that scene and the movers', kept while no static parameter changes
         elements, self._loaded = expand_elements(elements)
         self._loaded.note()

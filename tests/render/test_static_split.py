@@ -24,11 +24,13 @@ TOY.apply_translation((0, 0, 0.01))
 PARK = np.array([5.0, 5.0, 0.0])  # [m] where movers wait out of view
 
 
-def _world(offset=(0.0, 0.0, 0.0), mirror=False, movers=1, leaves=False, ball=False, point_light=False):
+def _world(offset=(0.0, 0.0, 0.0), mirror=False, movers=1, leaves=False, ball=False, point_light=False,
+           rug_cells=0):
     """4 mixels 0.5 m over a textured table under an area light, ``movers`` boxes moved by their vertices over
     3 frames (``leaves``: the last frame takes them out of view), the whole world at ``offset`` [m];
     ``mirror``: a static mirror standing beside the table; ``ball``: a sphere moved by its transform too;
-    ``point_light``: a point light as well, listed first."""
+    ``point_light``: a point light as well, listed first; ``rug_cells``: a static grid of 2 rug_cells^2
+    triangles on the table."""
     at = np.asarray(offset, dtype=float)
     cam = cross_layout(center=Pose(tuple(at + (0.0, 0.0, 0.5)), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)))
     table = np.clip(0.4 + 0.1 * np.random.default_rng(0).standard_normal((16, 16)), 0, 1)
@@ -47,6 +49,9 @@ def _world(offset=(0.0, 0.0, 0.0), mirror=False, movers=1, leaves=False, ball=Fa
     if ball:
         elements["ball"] = {"type": "sphere", "to_world": backend.mitsuba().ScalarTransform4f(
             _ball(at + PARK).tolist()), "bsdf": {"type": "diffuse"}}
+    if rug_cells:
+        verts, faces = _grid(rug_cells, 0.002)
+        elements["rug"] = sd.mesh_object("rug", verts + at, faces, 0.5)
     world = ms.Simulation(cam, world=elements)
     frames = []
     for x in np.linspace(-0.06, 0.06, 3):
@@ -195,3 +200,28 @@ def test_a_mover_that_is_not_a_mesh_falls_back_to_one_scene_and_says_so():
     world, frames, background = _world(ball=True)
     ch = _run(world, frames[:1], background, split=True)
     assert ch.dp.meta["static_geometry"] == "one scene, updated per frame: 'ball' is not a triangle mesh"
+
+
+def _grid(cells: int, at_z_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """A flat square grid of 2 cells^2 triangles, 0.2 m wide, at height ``at_z_m`` [m] off the view's centre."""
+    g = np.linspace(-0.1, 0.1, cells + 1)
+    gx, gy = np.meshgrid(g, g)
+    verts = np.column_stack([gx.ravel() + 0.3, gy.ravel() + 0.3, np.full(gx.size, at_z_m)])
+    idx = np.arange((cells + 1) ** 2).reshape(cells + 1, cells + 1)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
+    return verts, np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+
+
+def test_by_default_only_a_large_static_scene_is_split():
+    """``split_static = None`` (the default): a few static triangles are rebuilt per frame (cheaper than a second
+    scene), and the run says so; with a static mesh of more than SPLIT_MIN_TRIANGLES triangles the run is split."""
+    from mincam_sim.render.solvers.change import SPLIT_MIN_TRIANGLES
+
+    world, frames, background = _world()
+    world.split_static = None
+    small = world.measure_changes(frames[:1], background, ms.StratifiedChange(), ms.Budget(spp=1 << 10, seed=1))
+    assert "fewer than" in small.dp.meta["static_geometry"], small.dp.meta["static_geometry"]
+    world, frames, background = _world(rug_cells=int(np.ceil(np.sqrt(SPLIT_MIN_TRIANGLES / 2))))
+    assert world.split_static is None
+    ch = world.measure_changes(frames[:1], background, ms.StratifiedChange(), ms.Budget(spp=1 << 10, seed=1))
+    assert ch.dp.meta["static_geometry"].startswith("split"), ch.dp.meta["static_geometry"]

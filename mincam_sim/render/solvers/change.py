@@ -15,8 +15,9 @@ per-replicate differences, so it includes that correlation.
   are guided toward the moving shapes (``mincam_sim.render.kernels.guided_path``); the background's whole-aperture
   value (for ``P``) is traced once per run, on a jittered aperture grid with at least
   ``BACKGROUND_MIN_SPP`` rays. Kernels are compiled once and reused. Where the moving shapes are meshes moved
-  by their vertices (``mincam_sim.render.scene.static_split``), the static geometry is a scene of its own, built
-  once, and a frame rebuilds only a scene of its moving shapes; otherwise each frame costs one parameter update
+  by their vertices (``mincam_sim.render.scene.static_split``) and the static shapes hold at least
+  ``SPLIT_MIN_TRIANGLES`` triangles, the static geometry is a scene of its own, built once, and a frame rebuilds
+  only a scene of its moving shapes; otherwise each frame costs one parameter update
   of the world for the frame and one back to the background (the run's meta ``static_geometry`` says which).
 
 A target noise is reached by pilots: the solver's own plan on up to 4 frames spread over the run, at the
@@ -74,6 +75,7 @@ STRATA_EXPANSIONS = (1.0, 2.0, 4.0, 8.0)  # nested rectangles: the change region
 STRATA_SHARES = (0.6, 0.1, 0.1, 0.1, 0.1)  # rays per stratum (region, rings, rest): near Neyman, guided, bench scene
 BACKGROUND_MIN_SPP = 1 << 16  # stratified: rays per mixel (at least) for the background's whole-aperture value
 RETRY_FACTOR = 4  # a frame whose replicates are heavy-tailed is measured again with this many times the replicates
+SPLIT_MIN_TRIANGLES = 10_000  # static split by default from these static triangles (rebuilt: ~0.65 us a triangle)
 FREEZE_ALLOWANCE = 6  # recordings of a run's frozen launch (passes x buffer addresses) before it must replay
 DEFAULT_REPLICATES = 8
 # per frame, kept with the results
@@ -417,13 +419,20 @@ class _StratifiedRun(_Run):
     def _split(self, sim, frames, background) -> tuple[StaticSplit | None, str]:
         """The run's static / movers split (static geometry built once) and what the run's meta says of it, or
         None and why the world scene is updated per frame instead."""
-        if not getattr(sim, "split_static", False):
+        mode = getattr(sim, "split_static", False)
+        if mode is False:
             return None, "one scene, updated per frame: the split is switched off"
         if not self.can_guide:
             return None, "one scene, updated per frame: bounces are not guided (the split traces the guided path)"
         why = split_refusal(sim.scene, self.moving, [background, *frames])
         if not why and light_bounds(sim.scene)[0] is None:
             why = "a light of a kind the change regions do not bound"
+        if not why and mode is None:
+            triangles = sum(int(shape.primitive_count()) for shape in sim.scene.shapes()
+                            if shape.id() not in self.moving)
+            if triangles < SPLIT_MIN_TRIANGLES:
+                why = (f"the static shapes hold {triangles} triangles, fewer than {SPLIT_MIN_TRIANGLES} (their rebuild "
+                       "costs less than tracing a second scene)")
         if why:
             return None, f"one scene, updated per frame: {why}"
         # kept with the simulation while no parameter but the movers' vertices changes: a run over the same
@@ -540,5 +549,6 @@ class _StratifiedRun(_Run):
                 "region_area_fraction_mean": float(rest[:, 3].mean()) if len(rest) else None}
 
 
-__all__ = ["BACKGROUND_MIN_SPP", "INFO_COLUMNS", "MAX_SPP", "RETRY_FACTOR", "STRATA_EXPANSIONS", "STRATA_SHARES",
-           "ChangePlan", "ChangeSolver", "FallbackWarning", "HeavyTailWarning", "PlainChange", "StratifiedChange"]
+__all__ = ["BACKGROUND_MIN_SPP", "INFO_COLUMNS", "MAX_SPP", "RETRY_FACTOR", "SPLIT_MIN_TRIANGLES", "STRATA_EXPANSIONS",
+           "STRATA_SHARES", "ChangePlan", "ChangeSolver", "FallbackWarning", "HeavyTailWarning", "PlainChange",
+           "StratifiedChange"]
