@@ -142,6 +142,10 @@ class Simulation:
         # meshes' vertices are written in place and their buffers' addresses key the recordings
         self.freeze_launches = backend.variant().startswith("llvm")
         self.pair_lanes = True  # background pass: trace again only the lanes whose frame paths met a moving shape
+        # change runs: static geometry in a scene of its own, built once (static_split.py): None = where the static
+        # shapes hold >= solvers.change.SPLIT_MIN_TRIANGLES triangles, True = wherever it applies, False = never
+        self.split_static: bool | None = None
+        self.static_splits: dict = {}  # that scene and the movers', kept while no static parameter changes
         elements, self._loaded = expand_elements(elements)
         self._loaded.note()
         max_depth, self.max_depth_source = _resolved_depth(max_depth, self._loaded.max_depth)
@@ -190,6 +194,23 @@ class Simulation:
     def update(self, updates: Updates) -> None:
         """Set world parameters (numpy arrays or Mitsuba values; positions in world coordinates [m], as
         :attr:`params` reads them) and apply them without reloading."""
+        self._check_updates(updates)
+        for key in updates:
+            self._remember_as_built(key)
+        updates = self._new_values(updates)
+        for key in updates:
+            self.revisions[key] = self.revisions.get(key, 0) + 1
+        self.mincam_scene.update(self._in_scene(updates))
+        if any(key.split(".", 1)[0] in self._mirrors for key in updates):
+            self._mirrors = delta_surfaces(self.scene)
+
+    def scene_updates(self, updates: Updates) -> dict:
+        """``updates`` (world coordinates, as :meth:`update` takes them) checked and in scene coordinates, as the
+        world scene's parameters take them; nothing is applied."""
+        self._check_updates(updates)
+        return self._in_scene(updates)
+
+    def _check_updates(self, updates: Updates) -> None:
         self._require_world("parameters and updates")
         if not isinstance(updates, Mapping):
             raise InputError(f"an update must be a dict 'name.parameter' -> value, got {type(updates).__name__}")
@@ -198,15 +219,10 @@ class Simulation:
             if key not in scene_params or key.split(".", 1)[0] in self._own:
                 raise InputError(_unknown_parameter(key, self._params.keys(), key.split(".", 1)[0] in self._own))
             check_update(key, scene_params[key], value)
-        for key in updates:
-            self._remember_as_built(key)
-        updates = self._new_values(updates)
-        for key in updates:
-            self.revisions[key] = self.revisions.get(key, 0) + 1
-        self.mincam_scene.update({key: _shift(key, value, -self.scene_origin_m) if key in self._shifted else value
-                                  for key, value in updates.items()})
-        if any(key.split(".", 1)[0] in self._mirrors for key in updates):
-            self._mirrors = delta_surfaces(self.scene)
+
+    def _in_scene(self, updates: Updates) -> dict:
+        return {key: _shift(key, value, -self.scene_origin_m) if key in self._shifted else value
+                for key, value in updates.items()}
 
     def _new_values(self, updates: Updates) -> dict:
         """The updates that change something: a numpy value equal to the one set last is left out, so a frame
@@ -296,12 +312,13 @@ class Simulation:
         named shapes, in their current place, with their shadow volumes; None if a change is unbounded."""
         return self.change_reach(moving)[1]
 
-    def change_reach(self, moving: Sequence[str]) -> tuple[ApertureRegions, list | None, list[str]]:
+    def change_reach(self, moving: Sequence[str], scene=None) -> tuple[ApertureRegions, list | None, list[str]]:
         """:meth:`change_regions`, :meth:`change_guide` and why a change is unbounded, from one look at the
-        scene."""
+        scene (``scene``: the world as a static split has it, else the world scene)."""
+        scene = self.scene if scene is None else scene
         points, reasons = {}, []
         for name in sorted(moving):
-            points[name], why = change_points_of(self.scene, [name], self._mirrors)
+            points[name], why = change_points_of(scene, [name], self._mirrors)
             if why:
                 reasons.append(why)
         if reasons:
@@ -313,7 +330,7 @@ class Simulation:
                 regions = regions.union(mixel_regions(self.scene_mincam, seen))
         spheres = guide_spheres(list(points.values()))
         if spheres:  # light reaching the change through a mirror: bounces aimed at the lights' images find it
-            spheres = spheres_of(spheres + self._mirrors.light_image_spheres(self.scene))
+            spheres = spheres_of(spheres + self._mirrors.light_image_spheres(scene))
         return regions, (spheres or None), []
 
     def camera_image(self, spp: int = 64, seed: int = 0) -> np.ndarray:

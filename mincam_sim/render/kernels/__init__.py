@@ -12,6 +12,7 @@ way in.
 * ``map_export.py``: response maps and point-source responses out as NumPy arrays with a JSON sidecar.
 * ``stratified.py``: stratified estimates: most rays where a frame can change things, a few everywhere else.
 * ``guided_path.py``: path tracing with the inter-reflection bounce guided toward what a frame moves.
+* ``split_scene.py``: rays traced against a static scene and a small movers scene as if they were one.
 * ``change_region.py``: bounds on a mixel's aperture plane where a frame can change its measurement.
 * ``change_geometry.py``: the geometry oracle of the change solvers (where a frame's change can reach).
 """

@@ -31,6 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from mincam_sim.render import backend
+from mincam_sim.render.kernels.split_scene import lights_of
 
 GUIDE_SHARE = 0.5  # share of guided bounces drawn toward the guide's sphere
 MIN_CONE_SIN2 = 1e-6  # below this (a sphere seen under < 0.06 degrees) float32 cone sampling is not trusted
@@ -98,7 +99,8 @@ def guided_radiance(scene, sampler, ray, max_depth: int, guide, share: float = G
     Parameters
     ----------
     scene, sampler, ray
-        Mitsuba scene, a seeded sampler (one lane per ray), the rays.
+        Mitsuba scene (or a :class:`.split_scene.SplitScene`: a static and a movers scene traced as one), a
+        seeded sampler (one lane per ray), the rays.
     max_depth : int
         Longest path in segments (1 .. :data:`MAX_GUIDED_DEPTH`), as ``path``'s ``max_depth``.
     guide : (centre (3,) [m], radius [m]), a sequence of them, or None
@@ -138,7 +140,7 @@ def guided_radiance_watched(scene, sampler, ray, max_depth: int, guide, boxes, s
         if watched:
             met |= active & _crosses(mi, dr, watched, ray.o, ray.d, dr.select(si.is_valid(), si.t, dr.inf))
         bsdf = si.bsdf(ray)
-        ds = mi.DirectionSample3f(scene, si=si, ref=si_prev)
+        ds = mi.DirectionSample3f(lights_of(scene), si=si, ref=si_prev)
         mis = mis_weight(dr, pdf_prev, scene.pdf_emitter_direction(si_prev, ds, ~delta_prev))
         radiance += dr.select(active, beta * mis * ds.emitter.eval(si, active), 0.0)
         if depth + 1 >= max_depth:

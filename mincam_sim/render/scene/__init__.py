@@ -16,4 +16,6 @@ name, world coordinates).
 * ``updates.py``: parameter updates of a world scene by name, in world coordinates (and those that take a shape
   or light out).
 * ``mincam_scene.py``: one scene object for a mincam anywhere (a display or a world).
+* ``static_split.py``: a world split for a change run: the static shapes in a scene built once, the moving
+  meshes in small scenes rebuilt per frame.
 """

@@ -14,8 +14,11 @@ per-replicate differences, so it includes that correlation.
   traced with the same seed, counts and regions, so their rays pair up lane by lane; inter-reflection bounces
   are guided toward the moving shapes (``mincam_sim.render.kernels.guided_path``); the background's whole-aperture
   value (for ``P``) is traced once per run, on a jittered aperture grid with at least
-  ``BACKGROUND_MIN_SPP`` rays. Kernels are compiled once and reused; each frame costs one parameter update
-  for the frame and one back to the background.
+  ``BACKGROUND_MIN_SPP`` rays. Kernels are compiled once and reused. Where the moving shapes are meshes moved
+  by their vertices (``mincam_sim.render.scene.static_split``) and the static shapes hold at least
+  ``SPLIT_MIN_TRIANGLES`` triangles, the static geometry is a scene of its own, built once, and a frame rebuilds
+  only a scene of its moving shapes; otherwise each frame costs one parameter update
+  of the world for the frame and one back to the background (the run's meta ``static_geometry`` says which).
 
 A target noise is reached by pilots: the solver's own plan on up to 4 frames spread over the run, at the
 budget's rays, extrapolated by ``estimation.pilot_to_target`` (no recursion through the front door).
@@ -37,7 +40,13 @@ from mincam_sim.frames import MemoryTable, collect
 from mincam_sim.measurements import Measurements
 from mincam_sim.progress import progress
 from mincam_sim.render import backend
-from mincam_sim.render.kernels.change_geometry import changed_shapes, emitters_among, moving_shapes, watch_box
+from mincam_sim.render.kernels.change_geometry import (
+    changed_shapes,
+    emitters_among,
+    light_bounds,
+    moving_shapes,
+    watch_box,
+)
 from mincam_sim.render.kernels.guided_path import supports as guided_path_supports
 from mincam_sim.render.kernels.mask_eval import mask_model_meta
 from mincam_sim.render.kernels.monte_carlo import (
@@ -50,12 +59,14 @@ from mincam_sim.render.kernels.monte_carlo import (
     worst_relative_stderr,
 )
 from mincam_sim.render.kernels.stratified import (
+    buffers_key,
     check_strata,
     frozen_recordings,
     stratified_lanes,
     whole_aperture_estimates,
 )
 from mincam_sim.render.scene.mincam_scene import geometry_meta
+from mincam_sim.render.scene.static_split import StaticSplit, split_refusal
 from mincam_sim.render.scene.world_input import check_frames
 from mincam_sim.render.solvers.base import Plan, Row, Solver
 
@@ -64,6 +75,7 @@ STRATA_EXPANSIONS = (1.0, 2.0, 4.0, 8.0)  # nested rectangles: the change region
 STRATA_SHARES = (0.6, 0.1, 0.1, 0.1, 0.1)  # rays per stratum (region, rings, rest): near Neyman, guided, bench scene
 BACKGROUND_MIN_SPP = 1 << 16  # stratified: rays per mixel (at least) for the background's whole-aperture value
 RETRY_FACTOR = 4  # a frame whose replicates are heavy-tailed is measured again with this many times the replicates
+SPLIT_MIN_TRIANGLES = 10_000  # static split by default from these static triangles (rebuilt: ~0.65 us a triangle)
 FREEZE_ALLOWANCE = 6  # recordings of a run's frozen launch (passes x buffer addresses) before it must replay
 DEFAULT_REPLICATES = 8
 # per frame, kept with the results
@@ -397,11 +409,52 @@ class _StratifiedRun(_Run):
         self.freeze = sim.freeze_launches and not lights_move
         self.launches = ("frozen" if self.freeze else
                          "traced" + (": a moving shape emits light" if sim.freeze_launches else ""))
-        self.recordings_at_start = frozen_recordings(sim.scene)
+        self.split, self.static_geometry = self._split(sim, frames, background)
+        self.recordings_at_start = self._recordings()
         self.frames_traced = 0
         if guided and not self.can_guide:
             self.fallbacks["depth"] = (f"bounces are not guided at max_depth {sim.mincam_scene.max_depth} (the "
                                        "guided path covers 1 .. 5): rays follow Mitsuba's path")
+
+    def _split(self, sim, frames, background) -> tuple[StaticSplit | None, str]:
+        """The run's static / movers split (static geometry built once) and what the run's meta says of it, or
+        None and why the world scene is updated per frame instead."""
+        mode = getattr(sim, "split_static", False)
+        if mode is False:
+            return None, "one scene, updated per frame: the split is switched off"
+        if not self.can_guide:
+            return None, "one scene, updated per frame: bounces are not guided (the split traces the guided path)"
+        why = split_refusal(sim.scene, self.moving, [background, *frames])
+        if not why and light_bounds(sim.scene)[0] is None:
+            why = "a light of a kind the change regions do not bound"
+        if not why and mode is None:
+            triangles = sum(int(shape.primitive_count()) for shape in sim.scene.shapes()
+                            if shape.id() not in self.moving)
+            if triangles < SPLIT_MIN_TRIANGLES:
+                why = (f"the static shapes hold {triangles} triangles, fewer than {SPLIT_MIN_TRIANGLES} (their rebuild "
+                       "costs less than tracing a second scene)")
+        if why:
+            return None, f"one scene, updated per frame: {why}"
+        # kept with the simulation while no parameter but the movers' vertices changes: a run over the same
+        # shapes reuses the static scene and the frozen launches recorded on the split
+        positions = {f"{name}.vertex_positions" for name in self.moving}
+        key = (frozenset(self.moving), tuple(sorted((k, n) for k, n in sim.revisions.items() if k not in positions)))
+        split = sim.static_splits.get(key)
+        built = split is None
+        if built:
+            sim.static_splits.clear()  # one kept: another's static scene may hold a million triangles as well
+            split = sim.static_splits[key] = StaticSplit(sim.scene, self.moving)
+        self.background_movers = sim.scene_updates({k: v for k, v in background.items() if k in positions})
+        split.move(self.background_movers)
+        return split, ("split: the static shapes in a scene built " + ("for this run" if built else "by an earlier "
+                       "run") + ", the moving meshes in a scene of their own, rebuilt per pass")
+
+    def _recordings(self) -> int:
+        """Recordings of the frozen launches of the scenes this run traces."""
+        count = frozen_recordings(self.r.scene)
+        if self.split is not None:
+            count += frozen_recordings(self.split.scene)
+        return count
 
     def note_fallback(self, name: str, reason: str) -> None:
         self.fallbacks.setdefault(name, f"{reason}; the stratified estimator samples the whole aperture and does not "
@@ -411,8 +464,12 @@ class _StratifiedRun(_Run):
     def frame(self, frames, i: int, replicates: int, purpose: str):
         r = self.r
         changed = changed_shapes(frames[i], self.background)
-        r.update({**self.background, **frames[i]})
-        regions, guide, why = r.change_reach(changed)
+        if self.split is not None:  # the world scene stays at the background; the movers scene moves
+            self.split.move(r.scene_updates({**self.background, **frames[i]}))
+            regions, guide, why = r.change_reach(changed, scene=self.split.view)
+        else:
+            r.update({**self.background, **frames[i]})
+            regions, guide, why = r.change_reach(changed)
         for reason in why:
             self.note_fallback(next(iter(sorted(changed))), reason)
         for name in changed:
@@ -423,16 +480,26 @@ class _StratifiedRun(_Run):
         if purpose:
             frame_seed = derive_seed(frame_seed, purpose, i)
         kw = {"expansions": self.expansions, "guide": guide, "max_depth": r.mincam_scene.max_depth}
+        # split: the static scene with the movers where the frame has them, then where the background has them
+        # a frame that changes nothing (no guide) is the background, which the world scene holds
+        split = self.split is not None and guide is not None
+        if self.split is not None and guide is None and changed:  # split_refusal lets no unbounded change through
+            raise RuntimeError(f"frame {i}: a split run met an unbounded change of {sorted(changed)}: {why}")
+        shapes = self.split.copies if split else self.shapes
         watch = None
         if self.pairs and guide is not None:
-            watch = [watch_box(self.shapes[name]) for name in sorted(changed)]
+            watch = [watch_box(shapes[name]) for name in sorted(changed)]
             watch += [self.bg_boxes[name] for name in sorted(changed)]
-        lanes = stratified_lanes(r.scene, r.sensor, r.mincam, regions, replicates, self.counts, frame_seed,
-                                 freeze=self._freeze_key(), watch=watch, **kw)
-        r.update(self.background)
+        lanes = stratified_lanes(self.split.scene if split else r.scene, r.sensor, r.mincam, regions,
+                                 replicates, self.counts, frame_seed, freeze=self._freeze_key(), watch=watch, **kw)
+        if self.split is None:
+            r.update(self.background)
+        else:
+            self.split.move(self.background_movers)
         bg_seed = frame_seed if self.correlated else derive_seed(self.seed, "stratified-background", i, purpose)
-        bg_lanes = stratified_lanes(r.scene, r.sensor, r.mincam, regions, replicates, self.counts, bg_seed,
-                                    freeze=self._freeze_key(), pair=lanes if watch is not None else None, **kw)
+        bg_lanes = stratified_lanes(self.split.scene if split else r.scene, r.sensor, r.mincam, regions,
+                                    replicates, self.counts, bg_seed, freeze=self._freeze_key(),
+                                    pair=lanes if watch is not None else None, **kw)
         diff = lanes.estimates() - bg_lanes.estimates()
         if not purpose:
             self.frames_traced += 1
@@ -450,7 +517,9 @@ class _StratifiedRun(_Run):
         return diff, frame_v, frame_e, changes, info
 
     def _freeze_key(self) -> tuple | None:
-        return self.r.buffers_key() if self.freeze else None
+        if not self.freeze:
+            return None
+        return self.r.buffers_key() + (() if self.split is None else buffers_key(list(self.split.copies.values())))
 
     def _check_recordings(self) -> None:
         """Trace instead of replaying once the frozen launch keeps recording (the moving meshes' buffers land at
@@ -458,7 +527,7 @@ class _StratifiedRun(_Run):
         would never come."""
         if not self.freeze:
             return
-        recorded = frozen_recordings(self.r.scene) - self.recordings_at_start
+        recorded = self._recordings() - self.recordings_at_start
         if recorded > FREEZE_ALLOWANCE + self.frames_traced // 4:
             self.freeze = False
             self.launches = (f"traced from frame {self.frames_traced}: the frozen launch recorded {recorded} times "
@@ -473,11 +542,13 @@ class _StratifiedRun(_Run):
                 "rays_per_mixel_per_frame": int(round(rays)),
                 "background_rays_share": (rays - full) / full,
                 "paired_lanes_reused": bool(self.pairs), "launches": self.launches,
+                "static_geometry": self.static_geometry,
                 "moving_shapes": sorted(self.moving), "guide_bounces": bool(self.guided),
                 "guided_frames": int(rest[:, 1].sum()),
                 "guide_spheres_per_frame": rest[:, 2].astype(int).tolist(),
                 "region_area_fraction_mean": float(rest[:, 3].mean()) if len(rest) else None}
 
 
-__all__ = ["BACKGROUND_MIN_SPP", "INFO_COLUMNS", "MAX_SPP", "RETRY_FACTOR", "STRATA_EXPANSIONS", "STRATA_SHARES",
-           "ChangePlan", "ChangeSolver", "FallbackWarning", "HeavyTailWarning", "PlainChange", "StratifiedChange"]
+__all__ = ["BACKGROUND_MIN_SPP", "INFO_COLUMNS", "MAX_SPP", "RETRY_FACTOR", "SPLIT_MIN_TRIANGLES", "STRATA_EXPANSIONS",
+           "STRATA_SHARES", "ChangePlan", "ChangeSolver", "FallbackWarning", "HeavyTailWarning", "PlainChange",
+           "StratifiedChange"]
