@@ -223,13 +223,13 @@ PAPER_LIKE_CHOICE = (
     "0.9/0.5 to 5.2/1.7 %; scenes/studies/speed/display_timing.toml). So the paper's numbers do not constrain the "
     "timing, which stays at plain camera-like values (60 Hz, 30/s, 20 ms, 2 ms), not fitted. The mask period, which "
     "the paper leaves open too, was studied from 0.2 to 0.5 mm on the same 6 seeds x 32 draws "
-    "(scenes/studies/speed/mask_period.toml): the errors jump with it at the 3 % level (0.29 / 0.30 / 0.31 mm: median "
-    "9.3/6.9, 6.5/5.0, 3.5/2.6 %), and 0.225, 0.275 and 0.35 mm lose the fastest speeds on most road textures even "
-    "with ideal timing. The periods consistent with 7.55 / 2.85 % are isolated points (0.30 mm: medians within a "
-    "factor of two, 85 % of draws; 0.40 mm: the paper's values inside the seeds' spread, 50 %), each 0.01-0.05 mm "
-    "from a period that loses speeds, so the paper's numbers do not pin a period and none is sensible to adopt: the "
-    "mixel stays at 0.2 mm (10 periods across the 2 mm mask) for every row. Against the paper's 7.55 / 2.85 %, the "
-    "maximum lands within a factor of two and the average does not (seed 0).")
+    "(scenes/studies/speed/mask_period.toml): the errors jump with it at the 3 % level (0.29 / 0.30 / 0.31 mm: "
+    "median 9.3/6.9, 6.5/5.0, 3.5/2.6 %), and 0.225, 0.275 and 0.35 mm lose the fastest speeds on half or more of "
+    "the road textures, with ideal timing too. The periods consistent with 7.55 / 2.85 % are isolated points "
+    "(0.30 mm: medians within a factor of two, 85 % of draws; 0.40 mm: the paper's values inside the seeds' spread, "
+    "50 %), each 0.01-0.05 mm from a period that loses speeds, so the paper's numbers do not pin a period and none "
+    "is sensible to adopt: the mixel stays at 0.2 mm (10 periods across the 2 mm mask) for every row. Against the "
+    "paper's 7.55 / 2.85 %, the maximum lands within a factor of two and the average does not (seed 0).")
 
 
 def _displayed_duration_s(params: SpeedParams, shift_px: int) -> float:
