@@ -96,6 +96,33 @@ def test_scrambles_differ_and_subsets_draw_what_the_full_set_draws():
         qmc.owen_sobol(_u32([0]), _u32([0]), qmc.DIMENSIONS + 1)
 
 
+def test_each_stratum_of_each_group_gets_a_net_of_its_own():
+    """The estimator's wiring: in every (group, stratum) with 2^m rays the aperture points are a (0, m, 2)-net and
+    the detector points one per 2^-m interval in each coordinate; other groups and strata get other scrambles."""
+    import drjit as dr
+
+    mi = backend.mitsuba()
+    counts = [64, 16, 16, 8, 8]
+    per, groups = sum(counts), 3
+    lanes = dr.arange(mi.UInt32, per * groups)
+    j, group = lanes % per, lanes // per
+    stratum = mi.UInt32(np.repeat(np.arange(len(counts)), counts)[np.asarray(j)].astype(np.uint32))
+    u, v, pick = st._sobol_samples(dr, mi, mi.UInt32(77), group, j, stratum, counts)
+    u, v = (np.stack([np.asarray(point.x), np.asarray(point.y)], axis=1) for point in (u, v))
+    pick = np.asarray(pick)
+    start = np.r_[0, np.cumsum(counts)]
+    seen = set()
+    for g in range(groups):
+        for s, n in enumerate(counts):
+            rows = g * per + np.arange(start[s], start[s + 1])
+            m = int(np.log2(n))
+            assert all(_boxes_hold(v[rows], k, m) for k in range(m + 1)), f"group {g}, stratum {s}"
+            for x in (u[rows, 0], u[rows, 1], pick[rows]):
+                assert np.array_equal(np.sort(np.floor(x * n).astype(int)), np.arange(n)), f"group {g}, stratum {s}"
+            seen.add(tuple(np.round(v[rows][:4].ravel(), 6)))
+    assert len(seen) == groups * len(counts), "every (group, stratum) must have a scramble of its own"
+
+
 def _irwin_hall_cdf(x: float, n: int) -> float:
     """P(sum of n independent uniforms on [0, 1) <= x)."""
     return sum((-1) ** k * math.comb(n, k) * (x - k) ** n for k in range(int(math.floor(x)) + 1)) / math.factorial(n)
@@ -231,7 +258,7 @@ def test_reported_sigma_is_honest_over_96_seeds(tabletop):
     """96 seeds of a small budget (16 replicates of 128 rays): |z| > 4.5 as often as the replicate sigma says,
     and the reported sigma is the spread over seeds."""
     world, frame, background = tabletop
-    runs = np.stack([_dp(world, frame, background, COUNTS, 1000 + s, freeze=True) for s in range(96)])  # (seeds, reps, n)
+    runs = np.stack([_dp(world, frame, background, COUNTS, 1000 + s, freeze=True) for s in range(96)])
     check_per_run_sigma(runs.mean(1), runs.std(1, ddof=1) / 4.0, 16, "Sobol stratified dP, small tabletop")
 
 

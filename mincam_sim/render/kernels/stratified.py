@@ -353,7 +353,9 @@ def _sobol_samples(dr, mi, seed, group, j, stratum, counts):
     start = mi.UInt32(0)
     for edge in np.cumsum(counts)[:-1]:
         start = dr.select(j >= dr.opaque(mi.UInt32, int(edge)), dr.opaque(mi.UInt32, int(edge)), start)
-    scramble, _ = mi.sample_tea_32(seed, group * dr.opaque(mi.UInt32, len(counts)) + stratum)
+    # keys with the top bit set: never a lane index (< MAX_LANES), so no scramble is a lane sampler's seed
+    key = (group * dr.opaque(mi.UInt32, len(counts)) + stratum) | dr.opaque(mi.UInt32, 0x80000000)
+    scramble, _ = mi.sample_tea_32(seed, key)
     p = qmc.owen_sobol(j - start, scramble, 5)
     return mi.Point2f(p[2], p[3]), mi.Point2f(p[0], p[1]), p[4]
 
