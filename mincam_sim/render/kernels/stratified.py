@@ -15,12 +15,18 @@ variance; an empty region leaves the rest stratum the whole aperture). Each (mix
 and regions (a frame and its background) draw the same random numbers lane by lane, and their difference cancels
 everywhere the scenes agree. Values are summed in float64 in a fixed order (as :mod:`.tracing`).
 
-The region's rays sit on a jittered grid in the region's own coordinates (every cell the same number of times,
-a uniform point in it): unbiased, and less variance from where the object's edges cut the region. The detector
-point stays independent per ray, so no fixed pairing of strata across factors arises. Where a stratum is
-empty for a detector point (a ring beyond the aperture's edge; a region that is empty, off the aperture, or
-unbounded and so the whole aperture) its rays pool with the outermost non-empty stratum's, weighted by their
-share of that stratum's rays: again unbiased, and no ray is spent on nothing. Rays are traced by the scene's
+Each ray's detector point, aperture point (in its stratum's own coordinates) and ring pick are one point of an
+Owen-scrambled Sobol sequence (:mod:`.qmc`, randomised quasi-Monte Carlo): one scramble per (replicate, mixel,
+stratum) drawn from the seed, point ``i`` for the stratum's ``i``-th ray. Every point is uniform (unbiased), the
+points of a stratum are balanced over the joint (detector, aperture) domain (less variance from where the
+object's edges cut the region; no fixed pairing of strata across the two factors), and replicates are
+independent, so their spread stays an honest standard error. The bounces and light samples after them come from
+the per-lane sampler. With ``sobol=False`` the points are independent and the region's aperture points sit on a
+jittered grid in the region's coordinates (the whole-aperture background value still draws them so).
+
+Where a stratum is empty for a detector point (a ring beyond the aperture's edge; a region that is empty, off the
+aperture, or unbounded and so the whole aperture) its rays pool with the outermost non-empty stratum's, weighted
+by their share of that stratum's rays: again unbiased, and no ray is spent on nothing. Rays are traced by the scene's
 integrator, or by :mod:`.guided_path` when a guide is given (inter-reflection bounces drawn partly toward the
 moving shapes; same expectation).
 """
@@ -38,7 +44,7 @@ import numpy as np
 
 from mincam_sim.model.optics import Mincam
 from mincam_sim.render import backend
-from mincam_sim.render.kernels import guided_path, tracing
+from mincam_sim.render.kernels import guided_path, qmc, tracing
 from mincam_sim.render.kernels.change_region import ApertureRegions
 from mincam_sim.render.kernels.tracing import LaneSampler, launch_seed
 
@@ -63,7 +69,7 @@ def check_strata(counts: Sequence[int], expansions: Sequence[float]) -> None:
 def stratified_estimates(scene, sensor, mincam: Mincam, regions: ApertureRegions, replicates: int,
                          counts: Sequence[int], seed: int, expansions: Sequence[float] = (1.0,),
                          by_stratum: bool = False, jitter: bool = True, guide=None,
-                         max_depth: int | None = None, freeze: tuple | None = None) -> np.ndarray:
+                         max_depth: int | None = None, freeze: tuple | None = None, sobol: bool = True) -> np.ndarray:
     """(replicates, n_mixels) independent stratified estimates of each mixel's irradiance [W/m^2].
 
     Parameters
@@ -86,7 +92,7 @@ def stratified_estimates(scene, sensor, mincam: Mincam, regions: ApertureRegions
     jitter : bool
         Region rays on a jittered grid (one per cell of the largest square grid that fits, the remainder
         uniform): still unbiased (every cell equally often, a uniform point in it), less variance from
-        where in the region the object's edges lie.
+        where in the region the object's edges lie. Used only without ``sobol``.
     guide : (centre (3,) [m], radius [m]), optional
         Sphere toward which inter-reflection bounces are guided (:mod:`.guided_path`; the same for both passes of
         a pair). Needs ``max_depth`` (the scene integrator's); without a guide, or at a depth the guided path does
@@ -95,9 +101,14 @@ def stratified_estimates(scene, sensor, mincam: Mincam, regions: ApertureRegions
         Replay each launch from a recording (``dr.freeze``: no Python tracing per call) made with this key,
         :func:`buffers_key` of every object whose parameters changed since the scene was loaded (None:
         trace every launch). Same numbers bit for bit either way.
+    sobol : bool
+        Each ray's detector point, aperture point and ring pick from an Owen-scrambled Sobol sequence
+        (:mod:`.qmc`), one scramble per (replicate, mixel, stratum), point ``i`` for the stratum's ``i``-th ray
+        (randomised quasi-Monte Carlo: unbiased, replicates independent); False: independent numbers (and
+        ``jitter``).
     """
     return stratified_lanes(scene, sensor, mincam, regions, replicates, counts, seed, expansions, jitter, guide,
-                            max_depth, freeze).estimates(by_stratum)
+                            max_depth, freeze, sobol=sobol).estimates(by_stratum)
 
 
 class LaneValues:
@@ -130,7 +141,7 @@ def stratified_lanes(scene, sensor, mincam: Mincam, regions: ApertureRegions, re
                      counts: Sequence[int], seed: int, expansions: Sequence[float] = (1.0,), jitter: bool = True,
                      guide=None, max_depth: int | None = None, freeze: tuple | None = None,
                      watch: Sequence[tuple[np.ndarray, np.ndarray]] | None = None,
-                     pair: LaneValues | None = None) -> LaneValues:
+                     pair: LaneValues | None = None, sobol: bool = True) -> LaneValues:
     """The lanes of :func:`stratified_estimates` (same parameters), with two more for a frame and its
     background traced as a pair.
 
@@ -175,7 +186,7 @@ def stratified_lanes(scene, sensor, mincam: Mincam, regions: ApertureRegions, re
         dr.make_opaque(lanes)
         shape = _LaunchShape(0 if guided else ng * per, tuple(counts), int(replicates), n,
                              tuple(float(e) for e in expansions), bool(jitter), int(max_depth) if guided else 0,
-                             getattr(sensor, "version", 0))
+                             getattr(sensor, "version", 0), bool(sobol))
         met = mi.Bool(False)
         if dr.width(lanes):
             with _no_cyclic_gc():
@@ -198,7 +209,8 @@ def stratified_lanes(scene, sensor, mincam: Mincam, regions: ApertureRegions, re
 class _LaunchShape(NamedTuple):
     """What fixes a launch's kernel code (plain Python values: a frozen launch records again when one
     changes): lanes (0 on the guided path, whose lanes come as an array), rays per stratum, replicates,
-    mixels, expansions, jitter, guided depth (0 = the scene's integrator), the sensor's configuration version."""
+    mixels, expansions, jitter, guided depth (0 = the scene's integrator), the sensor's configuration version,
+    Sobol points (:mod:`.qmc`) or independent ones."""
 
     lanes: int
     counts: tuple[int, ...]
@@ -208,6 +220,7 @@ class _LaunchShape(NamedTuple):
     jitter: bool
     guided_depth: int
     sensor_version: int
+    sobol: bool
 
 
 def _launch(scene, sensor, coeffs, seed, g0, lanes, spheres, boxes, shape: _LaunchShape,
@@ -235,11 +248,14 @@ def _launch(scene, sensor, coeffs, seed, g0, lanes, spheres, boxes, shape: _Laun
         stratum += mi.UInt32(j >= dr.opaque(mi.UInt32, int(edge)))
     k = group // dr.opaque(mi.UInt32, shape.replicates)
     c = [dr.gather(mi.Float, coeffs, k * 9 + i) for i in range(9)]
-    u = sampler.next_2d()
-    v = sampler.next_2d()
-    if shape.jitter:
-        v = _jittered_region(dr, mi, v, j, counts[0])
-    pick = sampler.next_1d()
+    if shape.sobol:
+        u, v, pick = _sobol_samples(dr, mi, seed, group, j, stratum, counts)
+    else:
+        u = sampler.next_2d()
+        v = sampler.next_2d()
+        if shape.jitter:
+            v = _jittered_region(dr, mi, v, j, counts[0])
+        pick = sampler.next_1d()
     wavelength = sampler.next_1d()
     position = mi.Point2f((mi.Float(k) + 0.5 + (u.x - 0.5) * DETECTOR_SHRINK) / shape.n_mixels, u.y)
     x_d = (u.x - 0.5) * DETECTOR_SHRINK * c[8]
@@ -327,6 +343,21 @@ def _frozen_launch(scene):
         while len(_FROZEN) > FROZEN_SCENES:
             _FROZEN.popitem(last=False)
     return _FROZEN[key][1]
+
+
+def _sobol_samples(dr, mi, seed, group, j, stratum, counts):
+    """Detector sample ``u``, aperture sample ``v`` and ring pick of each lane from the Owen-scrambled Sobol
+    sequence (:mod:`.qmc`): the scramble is drawn from the launch seed, the lane's group and its stratum, the
+    point index is the lane's rank among its stratum's rays. ``v`` (which the region's edges cut) takes the
+    sequence's first two dimensions, whose projection is a (0, m, 2)-net."""
+    start = mi.UInt32(0)
+    for edge in np.cumsum(counts)[:-1]:
+        start = dr.select(j >= dr.opaque(mi.UInt32, int(edge)), dr.opaque(mi.UInt32, int(edge)), start)
+    # keys with the top bit set: never a lane index (< MAX_LANES), so no scramble is a lane sampler's seed
+    key = (group * dr.opaque(mi.UInt32, len(counts)) + stratum) | dr.opaque(mi.UInt32, 0x80000000)
+    scramble, _ = mi.sample_tea_32(seed, key)
+    p = qmc.owen_sobol(j - start, scramble, 5)
+    return mi.Point2f(p[2], p[3]), mi.Point2f(p[0], p[1]), p[4]
 
 
 def _jittered_region(dr, mi, v, j, n_region: int):
@@ -431,4 +462,5 @@ def whole_aperture_estimates(scene, sensor, mincam: Mincam, replicates: int, spp
     aperture: the rest stratum is then empty, and its one ray per group pools with the region's.
     """
     per = max(1, -(-int(spp) // int(replicates)))
-    return stratified_estimates(scene, sensor, mincam, ApertureRegions.full(mincam), replicates, [per, 1], seed)
+    return stratified_estimates(scene, sensor, mincam, ApertureRegions.full(mincam), replicates, [per, 1], seed,
+                                sobol=False)
