@@ -94,19 +94,21 @@ WORLDS = {
 
 
 @pytest.mark.parametrize("case", sorted(WORLDS))
-def test_split_scene_agrees_with_one_scene(case):
-    """P and dP of the split run (static scene + movers scene) against the one-scene run at another seed,
-    within 4.5 sigma, on worlds with a shadow, a mirror, a far origin, two movers, a mover leaving the view."""
+def test_split_scene_gives_the_one_scene_numbers(case):
+    """P and dP of the split run (static scene + movers scene) equal the one-scene run's at the same seed, bit
+    for bit, on worlds with a shadow, a mirror, a far origin, two movers, a mover leaving the view: the split
+    changes where rays find the geometry, never what they find. (At different seeds the two agreed within the
+    replicate sigma, but a fixed 4.5-sigma bound on 8-replicate runs over 120 values fails by chance ~1 time in
+    3: seen once at 4.6 on the far world, whose 10 further seed pairs gave max |z| 3.1 and mean z -0.1.)"""
     world, frames, background = _world(**WORLDS[case])
     one = _run(world, frames, background, split=False, seed=5)
-    split = _run(world, frames, background, split=True, seed=6)
+    split = _run(world, frames, background, split=True, seed=5)
     assert one.dp.meta["static_geometry"].startswith("one scene")
     assert split.dp.meta["static_geometry"].startswith("split"), split.dp.meta["static_geometry"]
-    for a, b, what in ((split.dp, one.dp, "dP"), (split.p, one.p, "P")):
-        assert_close_mc(a.irradiance_w_m2, b.irradiance_w_m2, np.hypot(a.stderr_w_m2, b.stderr_w_m2),
-                        what=f"{case}: split vs one scene, {what}")
-    largest = np.abs(one.dp.irradiance_w_m2).max()
-    assert np.hypot(split.dp.stderr_w_m2, one.dp.stderr_w_m2).max() < 0.2 * largest, f"{case}: resolves too little"
+    for a, b in ((split.dp, one.dp), (split.p, one.p)):
+        np.testing.assert_array_equal(a.irradiance_w_m2, b.irradiance_w_m2)
+        np.testing.assert_array_equal(a.stderr_w_m2, b.stderr_w_m2)
+    assert split.dp.stderr_w_m2.max() < 0.2 * np.abs(one.dp.irradiance_w_m2).max(), f"{case}: resolves too little"
 
 
 def test_split_gives_the_one_scene_numbers_with_the_lights_in_their_order():
