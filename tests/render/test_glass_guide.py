@@ -51,17 +51,18 @@ def test_face_planes_of_a_block_are_its_six_planes_and_lights_are_mirrored_in_th
 
 
 def _slab_world():
-    """4 mixels 0.4 m over a grey table lit by a 0.6 m lamp 2 m up; a 1.2 x 1.2 x 1 cm glass slab 0.6 m up
-    covers every path from the lamp to the table the mixels see (frame), or is parked aside (background)."""
+    """4 mixels 0.4 m over a 1 x 1 m grey table (nothing beyond: the mixels see far) lit by a 0.6 m lamp 2 m
+    up; a 1.2 x 1.2 m glass slab 1 mm thick, 0.6 m up, covers every path from the lamp to the table (frame), or
+    is parked aside (background)."""
     cam = cross_layout(center=Pose((0.0, 0.0, 0.4), (0, 0, -1), (0, 1, 0)))
     elements = {
-        "table": {"type": "rectangle", "to_world": sd._transform(np.diag([1.5, 1.5, 1.0, 1.0])),
+        "table": {"type": "rectangle", "to_world": sd._transform(np.diag([0.5, 0.5, 1.0, 1.0])),
                   "bsdf": {"type": "diffuse", "reflectance": {"type": "spectrum", "value": 0.5}}},
         "lamp": sd.area_light(0.6, 0.6, Pose((0.0, 0.0, 2.0), (0.0, 0.0, -1.0)).matrix(), 5.0),
     }
-    box = trimesh.creation.box((1.2, 1.2, 0.01))
-    placed = box.vertices + [0.0, 0.0, 0.605]
-    parked = box.vertices + [8.0, 8.0, 0.605]
+    box = trimesh.creation.box((1.2, 1.2, 0.001))  # thin: the shift of a ray through it (~0.05 mm) changes nothing
+    placed = box.vertices + [0.0, 0.0, 0.6]
+    parked = box.vertices + [8.0, 8.0, 0.6]
     elements["slab"] = _glass_mesh("slab", parked, box.faces)
     world = ms.Simulation(cam, world=elements, max_depth=4)
     return world, [vertex_update("slab", placed)], vertex_update("slab", parked)
@@ -69,9 +70,9 @@ def _slab_world():
 
 def _slab_transmittance_range() -> tuple[float, float]:
     """(least, most) of the slab's transmittance (1 - F)^2 (no inner reflection reaches the lamp within 4
-    segments; the two faces are parallel, so both see the same angle) over the angles from the table the mixels
-    see (within 0.25 m of the centre, generous) to the lamp (0.3 m half-width, 2 m up)."""
-    tan_max = (0.25 * np.sqrt(2) + 0.3 * np.sqrt(2)) / 2.0
+    segments; the two faces are parallel, so both see the same angle) over the angles from the table (0.5 m
+    half-width) to the lamp (0.3 m half-width, 2 m up)."""
+    tan_max = (0.5 * np.sqrt(2) + 0.3 * np.sqrt(2)) / 2.0
     cos = np.linspace(1.0 / np.sqrt(1.0 + tan_max ** 2), 1.0, 200)
     t = (1.0 - fresnel_reflectance(cos)) ** 2
     return float(t.min()), float(t.max())
@@ -90,22 +91,25 @@ def _slab_ratio(solver, spp: int, seed: int):
     return ratio, sigma, ch
 
 
-def test_a_glass_slab_transmits_fresnels_two_surface_share():
+@pytest.mark.parametrize("solver", [ms.StratifiedChange(), ms.PlainChange()], ids=["guided", "plain"])
+def test_a_glass_slab_transmits_fresnels_two_surface_share(solver):
     """The table under a glass slab, lit only through it: P(frame) / P(background) is the slab's
     transmittance (1 - F)^2, F from Fresnel's equations at n = 1.5 (0.9216 near normal incidence), to the
-    estimator's standard error; every light path to the table crosses both faces and the lamp is found by
-    guided bounces (the lamp's direction is kept by a slab with parallel faces)."""
+    estimator's standard error. Guided: the lamp is found by bounces aimed at it (a slab with parallel faces
+    keeps its direction), the glass's reflection and refraction drawn with even odds; plain: Mitsuba's own
+    path, which checks the set-up."""
     lo, hi = _slab_transmittance_range()
-    assert 0.9205 < lo <= hi < 0.9217
-    ratio, sigma, ch = _slab_ratio(ms.StratifiedChange(), 1 << 16, 3)
-    assert ch.info.guided_frames == 1 and not ch.info.fallbacks
+    assert 0.917 < lo <= hi < 0.9217
+    ratio, sigma, ch = _slab_ratio(solver, 1 << 18, 3)
+    if isinstance(solver, ms.StratifiedChange):
+        assert ch.info.guided_frames == 1 and not ch.info.fallbacks
     expected = np.clip(ratio, lo, hi)  # anywhere in the closed form's range
     assert_close_mc(ratio, expected, sigma, what="slab transmittance P(frame) / P(background), per mixel")
     weights = sigma ** -2.0  # the mixels' rays are independent: their inverse-variance mean
     pooled, pooled_sigma = (weights * ratio).sum() / weights.sum(), weights.sum() ** -0.5
-    assert pooled_sigma < 0.01, f"the test needs the ratio to 1 %: {pooled} +/- {pooled_sigma}"
+    assert pooled_sigma < 0.005, f"the test needs the ratio to 0.5 %: {pooled} +/- {pooled_sigma}"
     assert_close_mc(pooled, np.clip(pooled, lo, hi), pooled_sigma, what="slab transmittance, the mixels pooled")
-    assert abs(pooled - 1.0) > 5 * pooled_sigma, "the Fresnel loss must be resolved"
+    assert abs(pooled - 1.0) > 10 * pooled_sigma, "the Fresnel loss must be resolved"
 
 
 @pytest.mark.slow
