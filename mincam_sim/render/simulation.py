@@ -43,9 +43,9 @@ from mincam_sim.frames import FrameSink, MemorySink, collect
 from mincam_sim.measurements import Measurements
 from mincam_sim.model.optics import Mincam
 from mincam_sim.render import backend
-from mincam_sim.render.kernels.change_geometry import change_points_of, delta_surfaces
+from mincam_sim.render.kernels.change_geometry import change_points_of, delta_light_spheres, delta_surfaces
 from mincam_sim.render.kernels.change_region import ApertureRegions, mixel_regions
-from mincam_sim.render.kernels.guided_path import guide_spheres, spheres_of
+from mincam_sim.render.kernels.guided_path import MAX_GUIDES, guide_spheres, spheres_of
 from mincam_sim.render.kernels.map_tracing import FRAME_CHUNK_BYTES, check_radiance
 from mincam_sim.render.kernels.stratified import buffers_key
 from mincam_sim.render.scene.gltf_files import GLTF_SUFFIXES, GltfFile
@@ -330,7 +330,11 @@ class Simulation:
                 regions = regions.union(mixel_regions(self.scene_mincam, seen))
         spheres = guide_spheres(list(points.values()))
         if spheres:  # light reaching the change through a mirror: bounces aimed at the lights' images find it
-            spheres = spheres_of(spheres + self._mirrors.light_image_spheres(scene))
+            spheres = spheres + self._mirrors.light_image_spheres(scene)
+            # light a moving glass block throws: bounces aimed at the lights and their images in its faces, as many
+            # as fit beside the others (the lights first); more would merge all into one sphere holding the view
+            through = delta_light_spheres(scene, moving, taken=len(spheres))
+            spheres = spheres_of(spheres + through[:max(0, MAX_GUIDES - len(spheres))])
         return regions, (spheres or None), []
 
     def camera_image(self, spp: int = 64, seed: int = 0) -> np.ndarray:

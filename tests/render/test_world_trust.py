@@ -235,7 +235,8 @@ def _allowed_beyond(n_values: int) -> int:
 @pytest.mark.parametrize("case, n_seeds", [pytest.param("far_movers", 16, id="far movers"),
                                            pytest.param("mirror", 16, id="mirror"),
                                            pytest.param("emitter", 16, id="moving emitter"),
-                                           pytest.param("textured", 16, id="OBJ torus on a PNG floor")])
+                                           pytest.param("textured", 16, id="OBJ torus on a PNG floor"),
+                                           pytest.param("glass", 16, id="glass block")])
 def test_per_run_sigma_is_honest_on_rare_light_paths(case, n_seeds):
     """Every run's dP against the mean of the other runs, in units of both standard errors: tails no heavier
     than honest Gaussian replicates allow, and never 0 +/- 0 for a change the others resolve. Far-apart movers
@@ -254,7 +255,7 @@ def test_per_run_sigma_is_honest_on_rare_light_paths(case, n_seeds):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("case", ["far_movers", "mirror", "emitter", "textured"])
+@pytest.mark.parametrize("case", ["far_movers", "mirror", "emitter", "textured", "glass"])
 def test_per_run_sigma_is_honest_on_rare_light_paths_many_seeds(case):
     beyond, zero, z, _, _ = tail_counts(case, range(96), 1 << 14)
     assert zero == 0
@@ -294,17 +295,13 @@ def test_warnings_quiet_when_nothing_falls_back():
     assert dp.meta["fallbacks"] == [] and dp.meta["guided_frames"] == 1
 
 
-@pytest.mark.xfail(strict=True, reason="known limit: light refracted by a moving glass block reaches the table "
-                   "only through unguided delta bounces; a run that draws none of those rare heavy paths reports "
-                   "a sigma ~10x too small (seed 26: |z| 11.8), which no within-run diagnostic can see")
 def test_per_run_sigma_on_a_moving_glass_block():
+    """A glass block in view: the light its faces reflect and refract reaches the mixels through delta bounces.
+    Unguided, a run that drew none of the rare heavy paths (the lamp seen in the block's top face by a mixel
+    that sees the block at the edge of its view) reported a sigma ~10x too small: 2 of 384 values beyond 4.5
+    sigma at 96 seeds, max |z| 14.7 (seed 26). Guided through the glass (bounces aimed at the lights and their
+    images in the block's faces, reflection and refraction drawn with even odds) none, max |z| 4.3."""
     beyond, zero, z, _, _ = tail_counts("glass", range(32), 1 << 14)
     assert zero == 0
+    assert beyond <= _allowed_beyond(z.size), f"{beyond} of {z.size} beyond 4.5 sigma (max |z| {np.abs(z).max():.1f})"
     assert np.abs(z).max() <= 6.0, f"max |z| {np.abs(z).max():.1f} over {z.size} values"
-
-
-def test_a_moving_glass_shape_is_said():
-    world, frames, background = rare_scene("glass")
-    with pytest.warns(FallbackWarning, match="'lens' is glass or a mirror"):
-        dp, _ = changes(world, frames, background, spp=1 << 12, solver=ms.StratifiedChange())
-    assert any("lens" in f for f in dp.meta["fallbacks"])

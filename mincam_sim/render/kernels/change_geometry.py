@@ -1,10 +1,11 @@
 """The geometry oracle of the change solvers: where a frame's change can reach in a world scene.
 
-The scene's delta surfaces (mirrors, glass) and their images, the corner points of the moving shapes with their
-shadow volumes from every light (:func:`change_points_of`), where lights shine from (:func:`light_bounds`), which
-shapes an update moves or changes, and the boxes a path must cross to meet a shape. Read by
-``mincam_sim.render.solvers.change`` and by :class:`~mincam_sim.render.simulation.Simulation` (its change regions
-and guides).
+The scene's delta surfaces (mirrors, glass) and their images, the lights and their images in the faces of a
+moving glass block (:func:`delta_light_spheres`: where bounces are guided through it), the corner points of the
+moving shapes with their shadow volumes from every light (:func:`change_points_of`), where lights shine from
+(:func:`light_bounds`), which shapes an update moves or changes, and the boxes a path must cross to meet a shape.
+Read by ``mincam_sim.render.solvers.change`` and by :class:`~mincam_sim.render.simulation.Simulation` (its change
+regions and guides).
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import numpy as np
 
 from mincam_sim.render import backend
 from mincam_sim.render.kernels.change_region import box_corners, change_points
-from mincam_sim.render.kernels.guided_path import guide_sphere
+from mincam_sim.render.kernels.guided_path import MAX_GUIDES, guide_sphere, guide_spheres
 from mincam_sim.render.scene.mincam_scene import CAMERA_KEY, SENSOR_KEY
 
 Updates = Mapping[str, np.ndarray]
@@ -58,6 +59,77 @@ class DeltaSurfaces:
         boxes += [(np.array(s.bbox().min, dtype=float), np.array(s.bbox().max, dtype=float))
                   for s in scene.shapes() if s.is_emitter()]
         return [guide_sphere(im) for lo, hi in boxes for im in self.reflect(box_corners(lo, hi))]
+
+
+MAX_FACE_PLANES = 16  # a delta mesh with more distinct face planes (curved glass) is guided toward the lights only
+
+
+def face_planes(shape, tolerance: float = 1e-5) -> list[tuple[np.ndarray, float]]:
+    """Distinct planes ``(unit normal, offset [m])`` of a mesh's triangles (a plane and its flip count once);
+    empty for a shape that is not a mesh."""
+    if not hasattr(shape, "faces_buffer") or not hasattr(shape, "vertex_positions_buffer"):
+        return []
+    v = np.array(shape.vertex_positions_buffer(), dtype=float).reshape(-1, 3)
+    f = np.array(shape.faces_buffer(), dtype=np.int64).reshape(-1, 3)
+    if not len(f):
+        return []
+    n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    length = np.linalg.norm(n, axis=1)
+    keep = length > 0
+    n = n[keep] / length[keep, None]
+    n *= np.where(n[np.arange(len(n)), np.abs(n).argmax(axis=1)] < 0, -1.0, 1.0)[:, None]  # one sign per plane
+    c = np.einsum("ij,ij->i", n, v[f[keep, 0]])
+    size = 1.0 + float(np.abs(v).max())
+    planes: list[tuple[np.ndarray, float]] = []
+    for normal, offset in zip(n, c, strict=True):
+        if not any(np.all(np.abs(normal - m) < tolerance) and abs(offset - o) < tolerance * size for m, o in planes):
+            planes.append((normal, float(offset)))
+    return planes
+
+
+def light_boxes(scene) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Boxes [m] where the scene's point-like lights and emitting shapes are (directional and environment
+    lights have none)."""
+    lights, _ = light_bounds(scene)
+    boxes = [] if lights is None else list(lights[0])
+    return boxes + [(np.array(s.bbox().min, dtype=float), np.array(s.bbox().max, dtype=float))
+                    for s in scene.shapes() if s.is_emitter()]
+
+
+def delta_light_point_sets(scene, moving) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Where a bounce meets a light through a moving delta shape (glass, a mirror): the lights' corners (a slab
+    with parallel faces shifts a ray but keeps its direction, so light refracted through it comes from the lights'
+    directions), and their images in each face plane of the moving delta meshes (light the faces reflect,
+    Fresnel's share for glass), one point set per light and per light and plane; ([], []) when no moving shape
+    has a delta BSDF."""
+    mi = backend.mitsuba()
+    delta = [s for s in scene.shapes() if s.id() in moving and s.bsdf() is not None
+             and int(s.bsdf().flags()) & int(mi.BSDFFlags.Delta) and not s.is_emitter()]
+    boxes = light_boxes(scene) if delta else []
+    if not boxes:
+        return [], []
+    lights = [box_corners(lo, hi) for lo, hi in boxes]
+    images = []
+    for shape in delta:
+        planes = face_planes(shape)
+        if len(planes) > MAX_FACE_PLANES:
+            continue
+        for n, c in planes:
+            images += [p - 2.0 * (p @ n - c)[:, None] * n for p in lights]
+    return lights, images
+
+
+def delta_light_spheres(scene, moving, taken: int = 0) -> list[tuple[np.ndarray, float]]:
+    """Guide spheres around :func:`delta_light_point_sets`: one around the lights, and around their images
+    (compact groups merged) as many as :data:`~.guided_path.MAX_GUIDES` leaves beside ``taken`` (the spheres
+    the movers already use) and the lights' (at least one)."""
+    lights, images = delta_light_point_sets(scene, moving)
+    if not lights:
+        return []
+    spheres = [guide_sphere(np.concatenate(lights))]
+    if images:
+        spheres += guide_spheres(images, max_spheres=max(1, MAX_GUIDES - taken - 1))
+    return spheres
 
 
 def delta_surfaces(scene) -> DeltaSurfaces:

@@ -21,7 +21,11 @@ expectation; :func:`supports` says which depths.
 
 Where the BSDF has a delta component (mirrors, glass, null), where the shading point lies inside the guide's
 sphere or sees it under less than :data:`MIN_CONE_SIN2` (sin^2 of the half angle), and at the last bounce (whose
-hit only adds emission) the bounce is the BSDF's own. The random numbers each vertex draws do not depend on
+hit only adds emission) the bounce is the BSDF's own, but for one thing: at smooth glass (a delta reflection and
+a delta transmission) reflection and refraction are drawn with even odds (:data:`FRESNEL_SHARE`) rather than
+Fresnel's, and weighted back (:func:`_even_fresnel`), so that the few percent of a lamp that a glass face
+reflects are found in every run. The guides of a moving glass block hold the lights and their images in its
+faces (``change_geometry.delta_light_spheres``). The random numbers each vertex draws do not depend on
 the scene (the mixture's choice and the cone sample are drawn on every lane), so two passes with the same seed
 (a frame and its background) stay paired ray by ray until their paths part.
 """
@@ -37,6 +41,7 @@ GUIDE_SHARE = 0.5  # share of guided bounces drawn toward the guide's sphere
 MIN_CONE_SIN2 = 1e-6  # below this (a sphere seen under < 0.06 degrees) float32 cone sampling is not trusted
 MAX_GUIDED_DEPTH = 5  # Mitsuba's path uses Russian roulette from depth 5 (rr_depth); beyond it, use path itself
 MAX_GUIDES = 4  # spheres per frame; more are merged into one holding them
+FRESNEL_SHARE = 0.5  # at smooth glass, the probability of drawing the reflection (the BSDF's own: Fresnel's F)
 
 
 def supports(max_depth: int) -> bool:
@@ -57,15 +62,17 @@ def guide_sphere(points_m: np.ndarray | None) -> tuple[np.ndarray, float] | None
     return centre, max(radius, 1e-6)
 
 
-def guide_spheres(point_sets: list[np.ndarray], merge_ratio: float = 8.0) -> list[tuple[np.ndarray, float]]:
+def guide_spheres(point_sets: list[np.ndarray], merge_ratio: float = 8.0,
+                  max_spheres: int = MAX_GUIDES) -> list[tuple[np.ndarray, float]]:
     """Guide spheres for a frame's moving shapes: one per shape (its change points: the shape and its shadow
     volume), groups merged while the merged sphere is compact.
 
     Two groups merge when the sphere holding both has at most ``merge_ratio`` times the volume of the two
     together (touching spheres of one size: ratio 4; one sphere inside the other: <= 1), and any groups beyond
-    :data:`MAX_GUIDES` merge, the most compact pair first. One sphere around movers far apart would hold
-    most of what the mixels see, and a shading point inside its sphere is not guided: the light a mover throws
-    would then be found only by BSDF sampling again (rare hits, a standard error that scatters per run).
+    ``max_spheres`` (:data:`MAX_GUIDES` unless told) merge, the most compact pair first. One sphere around
+    movers far apart would hold most of what the mixels see, and a shading point inside its sphere is not
+    guided: the light a mover throws would then be found only by BSDF sampling again (rare hits, a standard
+    error that scatters per run).
     """
     groups = [np.asarray(p, dtype=float).reshape(-1, 3) for p in point_sets if p is not None and np.size(p)]
     spheres = [guide_sphere(g) for g in groups]
@@ -77,7 +84,7 @@ def guide_spheres(point_sets: list[np.ndarray], merge_ratio: float = 8.0) -> lis
                 ratio = merged[1] ** 3 / (spheres[a][1] ** 3 + spheres[b][1] ** 3)
                 if ratio < best_ratio:
                     best, best_ratio = (a, b, merged), ratio
-        if best_ratio > merge_ratio and len(groups) <= MAX_GUIDES:
+        if best_ratio > merge_ratio and len(groups) <= max(1, int(max_spheres)):
             break
         a, b, merged = best
         groups[a] = np.concatenate([groups[a], groups[b]])
@@ -135,6 +142,7 @@ def guided_radiance_watched(scene, sampler, ray, max_depth: int, guide, boxes, s
     spheres = opaque_spheres(guide) if share > 0 else []
     watched = [mi.BoundingBox3f(lo, hi) for lo, hi in boxes]
     met = mi.Bool(False)  # no width literal: a frozen launch replays with other lane counts
+    even_fresnel = has_glass(scene)
     for depth in range(int(max_depth)):
         si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=depth == 0, active=active)
         if watched:
@@ -162,7 +170,10 @@ def guided_radiance_watched(scene, sampler, ray, max_depth: int, guide, boxes, s
         mis_em = dr.select(ds.delta, 1.0, mis_weight(dr, ds.pdf, pdf_em))
         radiance += dr.select(active_em, beta * mis_em * value_em * em_weight, 0.0)
 
-        sample, weight = bsdf.sample(ctx, si, sampler.next_1d(), sampler.next_2d(), active_next)
+        choice, u_bsdf = sampler.next_1d(), sampler.next_2d()
+        sample, weight = bsdf.sample(ctx, si, choice, u_bsdf, active_next)
+        if even_fresnel:
+            sample, weight = _even_fresnel(mi, dr, ctx, si, bsdf, choice, u_bsdf, sample, weight, active_next)
         direction = si.to_world(sample.wo)
         pdf_prev = mi.Float(sample.pdf)
         delta_prev = mi.has_flag(sample.sampled_type, mi.BSDFFlags.Delta)
@@ -185,6 +196,43 @@ def guided_radiance_watched(scene, sampler, ray, max_depth: int, guide, boxes, s
         si_prev = si
         active = active_next & (dr.max(mi.unpolarized_spectrum(beta)) != 0.0)
     return radiance, met
+
+
+def has_glass(scene) -> bool:
+    """True if a shape of ``scene`` (or of both parts of a :class:`.split_scene.SplitScene`) has a BSDF with a
+    delta reflection and a delta transmission (smooth glass: ``dielectric``, ``thindielectric``)."""
+    mi = backend.mitsuba()
+    parts = [scene.static, scene.movers] if hasattr(scene, "movers") else [scene]
+    both = int(mi.BSDFFlags.DeltaReflection) | int(mi.BSDFFlags.DeltaTransmission)
+    return any(s.bsdf() is not None and int(s.bsdf().flags()) & both == both
+               for part in parts for s in part.shapes())
+
+
+def _even_fresnel(mi, dr, ctx, si, bsdf, choice, u, sample, weight, active):
+    """At smooth glass, reflection or refraction drawn with even odds (:data:`FRESNEL_SHARE`) instead of
+    Fresnel's reflectance ``F``, weighted by ``F / q`` (reflection) and ``(1 - F) / (1 - q)`` (refraction): the
+    reflected light of glass (a few percent of a lamp, seen by a mixel in a face of the block) is then drawn
+    about as often as the refracted light, and the estimate stays unbiased. ``F`` is what the BSDF reports as
+    the pdf of its reflection (Mitsuba's ``dielectric`` and ``thindielectric``); where ``F`` is 0 or 1 (total
+    internal reflection) the BSDF's own choice stands. The random numbers drawn are the BSDF's own (``choice``,
+    ``u``), so paired passes stay paired."""
+    flags = bsdf.flags()
+    glass = (active & mi.has_flag(flags, mi.BSDFFlags.DeltaReflection)
+             & mi.has_flag(flags, mi.BSDFFlags.DeltaTransmission))
+    reflected, w_r = bsdf.sample(ctx, si, 0.0, u, glass)  # choice 0 <= F: the reflection, pdf F
+    refracted, w_t = bsdf.sample(ctx, si, mi.Float(dr.one_minus_epsilon(mi.Float)), u, glass)  # > F: refraction
+    is_r = mi.has_flag(reflected.sampled_type, mi.BSDFFlags.DeltaReflection)
+    is_t = mi.has_flag(refracted.sampled_type, mi.BSDFFlags.DeltaTransmission)
+    f = reflected.pdf
+    split = glass & is_r & is_t & (f > 0.0) & (f < 1.0)
+    take_r = choice < FRESNEL_SHARE
+    q = dr.select(take_r, FRESNEL_SHARE, 1.0 - FRESNEL_SHARE)
+    chosen = dr.select(take_r, reflected, refracted)
+    w = dr.select(take_r, w_r * (f / q), w_t * ((1.0 - f) / q))
+    chosen.pdf = q
+    sample = dr.select(split, chosen, sample)
+    weight = dr.select(split, w, weight)
+    return sample, weight
 
 
 def _crosses(mi, dr, boxes, origin, direction, length):

@@ -41,8 +41,10 @@ from mincam_sim.measurements import Measurements
 from mincam_sim.progress import progress
 from mincam_sim.render import backend
 from mincam_sim.render.kernels.change_geometry import (
+    MAX_FACE_PLANES,
     changed_shapes,
     emitters_among,
+    face_planes,
     light_bounds,
     moving_shapes,
     watch_box,
@@ -306,19 +308,24 @@ class _Run:
         self.fallbacks: dict[str, str] = {}
 
     def note_delta_movers(self, moving) -> None:
-        """Say it when a moving shape is glass or a mirror (a delta BSDF): the light it redirects onto the rest of
-        the scene is found only by unguided delta bounces, and a run that draws none of those rare heavy paths
-        reports too small a sigma (on a glass block in view, ~10x in one run of 32), which no diagnostic inside
-        one run can see."""
+        """Say it when a moving shape is glass or a mirror (a delta BSDF) whose redirected light is not guided:
+        the light it refracts or reflects onto the rest of the scene is then found only by delta bounces drawn
+        as the BSDF draws them, and a run that draws none of those rare heavy paths reports too small a sigma
+        (on a glass block in view, ~10x in one run of 32), which no diagnostic inside one run can see."""
         mi = backend.mitsuba()
         shapes = self.r.shapes_by_id
         for name in sorted(moving):
             bsdf = shapes[name].bsdf() if name in shapes else None
-            if bsdf is not None and int(bsdf.flags()) & int(mi.BSDFFlags.Delta):
+            if bsdf is not None and int(bsdf.flags()) & int(mi.BSDFFlags.Delta) and not self.guides_through(name):
                 self.fallbacks[f"delta:{name}"] = (
-                    f"'{name}' is glass or a mirror and moves: the light it refracts or reflects onto the scene is "
-                    "found only by unguided delta bounces, so one run's sigma can be too small when it draws none "
-                    "of those rare paths; raise the replicates or compare a few seeds")
+                    f"'{name}' is glass or a mirror and moves, and is curved, a mirror or not guided: the light it "
+                    "refracts or reflects onto the scene is found only by delta bounces not aimed at it, so one "
+                    "run's sigma can be too small when it draws none of those rare paths; raise the replicates or "
+                    "compare a few seeds")
+
+    def guides_through(self, name: str) -> bool:
+        """True if the bounces of this run are guided through the moving delta shape ``name``."""
+        return False
 
     def rows(self, frames, todo, show_progress: bool):
         """(frame index, values, stderr, info) per frame of ``todo``: dP then P per mixel; then heavy-tailed and
@@ -455,6 +462,19 @@ class _StratifiedRun(_Run):
         if self.split is not None:
             count += frozen_recordings(self.split.scene)
         return count
+
+    def guides_through(self, name: str) -> bool:
+        """A moving glass or mirror mesh with at most ``MAX_FACE_PLANES`` face planes (a block, a slab, a prism),
+        with bounces guided: they are aimed at the lights and at the lights' images in its faces, and smooth glass
+        draws reflection and refraction with even odds (``mincam_sim.render.kernels.guided_path``), so the light
+        it throws is found in every run. Curved glass and moving mirrors are not (only the lights guide there).
+        """
+        mi = backend.mitsuba()
+        shape = self.shapes.get(name)
+        if not self.can_guide or shape is None or shape.bsdf() is None:
+            return False
+        glass = int(mi.BSDFFlags.DeltaReflection) | int(mi.BSDFFlags.DeltaTransmission)
+        return int(shape.bsdf().flags()) & glass == glass and 0 < len(face_planes(shape)) <= MAX_FACE_PLANES
 
     def note_fallback(self, name: str, reason: str) -> None:
         self.fallbacks.setdefault(name, f"{reason}; the stratified estimator samples the whole aperture and does not "
