@@ -251,7 +251,15 @@ def test_per_run_sigma_is_honest_on_rare_light_paths(case, n_seeds):
     spread = values.std(0, ddof=1)
     reported = np.sqrt((sigmas ** 2).mean(0))
     ratio = spread[resolved] / reported[resolved]
-    assert np.all((ratio > 0.5) & (ratio < 2.0)), f"spread / reported sigma {ratio}"
+    # the spread of n seeds is itself an estimate: for an honest sigma, ratio^2 ~ chi2(n - 1) / (n - 1); the
+    # bounds are its 1e-4 and 1 - 1e-4 quantiles (0.40 .. 1.72 at 16 seeds; the upper one raised to 2 for the
+    # noise of the reported sigma). A fixed 0.5 failed once: far movers' seeds 0-15 gave 0.46 on one mixel, and
+    # seeds 16-63 in three sets of 16 gave 0.78-1.32.
+    from scipy.stats import chi2
+
+    low = np.sqrt(chi2.ppf(1e-4, n_seeds - 1) / (n_seeds - 1))
+    high = max(2.0, np.sqrt(chi2.ppf(1 - 1e-4, n_seeds - 1) / (n_seeds - 1)))
+    assert np.all((ratio > low) & (ratio < high)), f"spread / reported sigma {ratio} outside {low:.2f} .. {high:.2f}"
 
 
 @pytest.mark.slow
