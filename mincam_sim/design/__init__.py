@@ -18,8 +18,8 @@ renderer itself).
   model), measured on the same suite, each decoder refitted on the physics.
 * :mod:`.gradcheck`: AD against central finite differences.
 * :mod:`.run`: one run and its outputs (``mincam-sim design TASK``).
-* :mod:`.tasks`: the registry: every task as data (scenes, target, metric and direction, decoder, suite, hand).
-* :mod:`.scene_tasks`, :mod:`.counting`, :mod:`.depth`, :mod:`.scene_design`, :mod:`.scene_run`: the tasks whose
+* ``tasks.py``: the registry: every task as data (scenes, target, metric and direction, decoder, suite, hand).
+* ``scene_tasks.py``, ``counting.py``, ``depth.py``, ``scene_design.py``, ``scene_run.py``: the tasks whose
   scenes are flat objects or textured planes (counting, depth) and the machinery that designs and measures them.
 
 Files:

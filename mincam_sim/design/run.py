@@ -140,8 +140,8 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
     Parameters
     ----------
     task_name : str
-        A registered task (:data:`mincam_sim.design.tasks.REGISTRY`): ``tracking`` (:mod:`.tracking`) runs
-        here; ``counting`` and ``depth`` run through :func:`mincam_sim.design.scene_run.run_scene_task`.
+        A registered task (``mincam_sim.design.tasks.REGISTRY``): ``tracking`` (:mod:`.tracking`) runs
+        here; ``counting`` and ``depth`` run through ``mincam_sim.design.scene_run.run_scene_task``.
     out_dir : path
         Output directory (created).
     quick : bool
@@ -158,7 +158,7 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
         ideal-trained one doubles the optimisation time); without them ``suite.summary`` has ``hand`` only.
     overrides
         Fields of ``TrackingTask`` (training distribution, geometry, film; ``make_task``), or of
-        :class:`~mincam_sim.design.scene_tasks.Sizes` for the scene tasks.
+        ``mincam_sim.design.scene_tasks.Sizes`` for the scene tasks.
     """
     from mincam_sim.design.gradcheck import check_gradients
     from mincam_sim.design.optimise import design
