@@ -80,7 +80,7 @@ def _separate_with_far_twin() -> dict:
     return {**_room(), **_separate(PLACED), **twin}
 
 
-@pytest.mark.parametrize("unit_m", [1.0, 0.01])
+@pytest.mark.parametrize("unit_m", [pytest.param(1.0, marks=pytest.mark.slow), 0.01])  # cm holds the harder case
 def test_an_instance_in_a_file_moves_as_the_same_shapes_given_one_by_one(tmp_path, unit_m):
     """A file with a shape group drawn by two instances (in metres, and in cm with ``unit_m``: the group's own
     shapes are never scaled or shifted a second time): moving one instance by its ``to_world`` changes P as

@@ -93,7 +93,9 @@ WORLDS = {
 }
 
 
-@pytest.mark.parametrize("case", sorted(WORLDS))
+# the default suite keeps the far origin and two movers; the rest run with the slow tests
+@pytest.mark.parametrize("case", [c if c in ("far", "two_movers") else pytest.param(c, marks=pytest.mark.slow)
+                                  for c in sorted(WORLDS)])
 def test_split_scene_gives_the_one_scene_numbers(case):
     """P and dP of the split run (static scene + movers scene) equal the one-scene run's at the same seed, bit
     for bit, on worlds with a shadow, a mirror, a far origin, two movers, a mover leaving the view: the split

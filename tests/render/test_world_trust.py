@@ -234,9 +234,11 @@ def _allowed_beyond(n_values: int) -> int:
 
 @pytest.mark.parametrize("case, n_seeds", [pytest.param("far_movers", 16, id="far movers"),
                                            pytest.param("mirror", 16, id="mirror"),
-                                           pytest.param("emitter", 16, id="moving emitter"),
-                                           pytest.param("textured", 16, id="OBJ torus on a PNG floor"),
-                                           pytest.param("glass", 16, id="glass block")])
+                                           # 96 seeds of these in the slow suite; 16 here
+                                           pytest.param("emitter", 16, id="moving emitter", marks=pytest.mark.slow),
+                                           pytest.param("textured", 16, id="OBJ torus on a PNG floor",
+                                                        marks=pytest.mark.slow),
+                                           pytest.param("glass", 16, id="glass block", marks=pytest.mark.slow)])
 def test_per_run_sigma_is_honest_on_rare_light_paths(case, n_seeds):
     """Every run's dP against the mean of the other runs, in units of both standard errors: tails no heavier
     than honest Gaussian replicates allow, and never 0 +/- 0 for a change the others resolve. Far-apart movers
