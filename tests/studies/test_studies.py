@@ -243,7 +243,9 @@ def test_shipped_study_files_load():
             assert load_study(path, quick=quick).points
 
 
-@pytest.mark.parametrize("name", ["tracking_spacing_toy", "tracking_spacing_albedo", "render_d_f"])
+# the two tracking studies take ~40 s each even with --quick: they run with the slow tests
+@pytest.mark.parametrize("name", [pytest.param("tracking_spacing_toy", marks=pytest.mark.slow),
+                                  pytest.param("tracking_spacing_albedo", marks=pytest.mark.slow), "render_d_f"])
 def test_shipped_studies_run_with_quick_from_the_command_line(tmp_path, name):
     from typer.testing import CliRunner
 
