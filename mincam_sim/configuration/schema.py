@@ -76,9 +76,9 @@ def refuse_unknown(section: str, given: Iterable[Any], allowed: Sequence[str], w
 
 
 def warn_ignored(section: str, given: dict, keys: Sequence[str], why: str, cls: type | None = None) -> None:
-    """One :class:`~mincam_sim.errors.IgnoredSettingWarning` line naming the ``keys`` that ``given`` sets (to other than their default
-    in the section dataclass ``cls``, when given: a default written out changes nothing) and ``why`` they are
-    ignored."""
+    """One :class:`~mincam_sim.errors.IgnoredSettingWarning` line naming the ``keys`` that ``given`` sets (to other
+    than their default in the section dataclass ``cls``, when given: a default written out changes nothing) and
+    ``why`` they are ignored."""
     default = defaults(cls) if cls is not None else {}
     named = [k for k in keys if k in given and (k not in default or plain(given[k]) != default[k])]
     if named:

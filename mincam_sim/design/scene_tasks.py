@@ -22,7 +22,7 @@ from mincam_sim.design import tracking as tr
 from mincam_sim.design.optimise import TrainingFrames
 from mincam_sim.errors import ConfigError
 from mincam_sim.estimation.polynomial import poly_terms
-from mincam_sim.masks import Mask, PrintedFilm
+from mincam_sim.masks import Mask
 from mincam_sim.model.optics import Mincam
 
 SHAPES = ("square", "bar", "texture")
@@ -189,7 +189,7 @@ class TaskSpec:
 
 
 @dataclass(frozen=True)
-class Sizes:
+class Sizes(tr.PrintedSizes):
     """Sizes and geometry of one run of a scene task (``quick`` for the CLI's ``--quick``).
 
     Attributes
@@ -239,14 +239,6 @@ class Sizes:
         params.update(overrides)
         return cls(**params)
 
-    def as_dict(self) -> dict:
-        return asdict(self)
-
-    def film(self) -> PrintedFilm:
-        return PrintedFilm(t_min=self.film_t_min, t_max=self.film_t_max, dpi=self.dpi)
-
-    def dot_shape(self) -> tuple[int, int]:
-        return self.film().grid_shape(tr.MASK_SIZE_M, tr.MASK_SIZE_M)
 
     def mincam(self, masks: list[Mask]) -> Mincam:
         return tr.mincam(masks, self.spacing_m, self.d_f_m)

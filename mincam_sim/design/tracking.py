@@ -38,8 +38,22 @@ POSITIONS = ("left", "right", "top", "bottom")  # where each mixel sits, seen fr
 OFFSETS_M = ((-SPACING_M, 0.0), (SPACING_M, 0.0), (0.0, SPACING_M), (0.0, -SPACING_M))
 
 
+class PrintedSizes:
+    """What a task's size record (fields ``film_t_min``, ``film_t_max``, ``dpi``) derives: its JSON-able dict, the
+    printed film and the grid of printer dots on a mask of ``MASK_SIZE_M``."""
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+    def film(self) -> PrintedFilm:
+        return PrintedFilm(t_min=self.film_t_min, t_max=self.film_t_max, dpi=self.dpi)
+
+    def dot_shape(self) -> tuple[int, int]:
+        return self.film().grid_shape(MASK_SIZE_M, MASK_SIZE_M)
+
+
 @dataclass(frozen=True)
-class TrackingTask:
+class TrackingTask(PrintedSizes):
     """Sizes of one design run (``quick`` for the CLI's ``--quick``).
 
     Attributes
@@ -175,14 +189,6 @@ class TrackingTask:
         params.update(overrides)
         return cls(**params)
 
-    def as_dict(self) -> dict:
-        return asdict(self)
-
-    def film(self) -> PrintedFilm:
-        return PrintedFilm(t_min=self.film_t_min, t_max=self.film_t_max, dpi=self.dpi)
-
-    def dot_shape(self) -> tuple[int, int]:
-        return self.film().grid_shape(MASK_SIZE_M, MASK_SIZE_M)
 
     def mincam(self, masks: list[Mask]) -> Mincam:
         """:func:`mincam` with this task's spacing and ``d_f``."""
