@@ -315,6 +315,16 @@ class Simulation:
     def change_reach(self, moving: Sequence[str], scene=None) -> tuple[ApertureRegions, list | None, list[str]]:
         """:meth:`change_regions`, :meth:`change_guide` and why a change is unbounded, from one look at the
         scene (``scene``: the world as a static split has it, else the world scene)."""
+        each, spheres, reasons = self.change_reach_each(moving, scene)
+        regions = ApertureRegions.empty(self.mincam)
+        for part in each:
+            regions = regions.union(part)
+        return regions, spheres, reasons
+
+    def change_reach_each(self, moving: Sequence[str],
+                          scene=None) -> tuple[list[ApertureRegions], list | None, list[str]]:
+        """:meth:`change_reach` with the regions of each named shape apart (in sorted name order; each one's
+        own and its mirror images' bounding rectangle), or ``[whole aperture]`` if a change is unbounded."""
         scene = self.scene if scene is None else scene
         points, reasons = {}, []
         for name in sorted(moving):
@@ -322,12 +332,13 @@ class Simulation:
             if why:
                 reasons.append(why)
         if reasons:
-            return ApertureRegions.full(self.mincam), None, reasons
-        regions = ApertureRegions.empty(self.mincam)
+            return [ApertureRegions.full(self.mincam)], None, reasons
+        each = []
         for name, p in points.items():
-            regions = regions.union(mixel_regions(self.scene_mincam, p))
+            regions = ApertureRegions.empty(self.mincam).union(mixel_regions(self.scene_mincam, p))
             for seen in self._mirrors.images(p, exclude=name):
                 regions = regions.union(mixel_regions(self.scene_mincam, seen))
+            each.append(regions)
         spheres = guide_spheres(list(points.values()))
         if spheres:  # light reaching the change through a mirror: bounces aimed at the lights' images find it
             spheres = spheres + self._mirrors.light_image_spheres(scene)
@@ -335,7 +346,7 @@ class Simulation:
             # as fit beside the others (the lights first); more would merge all into one sphere holding the view
             through = delta_light_spheres(scene, moving, taken=len(spheres))
             spheres = spheres_of(spheres + through[:max(0, MAX_GUIDES - len(spheres))])
-        return regions, (spheres or None), []
+        return each, (spheres or None), []
 
     def camera_image(self, spp: int = 64, seed: int = 0) -> np.ndarray:
         """The ground-truth camera's image [W m^-2 sr^-1], row 0 at the top (world scenes)."""

@@ -97,6 +97,157 @@ class ApertureRegions:
         """(n_mixels, 8) float64: base then slope, what the kernel gathers per lane."""
         return np.concatenate([self.base, self.slope], axis=1)
 
+    @property
+    def n_regions(self) -> int:
+        """Rectangles per mixel: one (the kernel samples it with nested strata)."""
+        return 1
+
+
+@dataclass(frozen=True)
+class RegionSet:
+    """Several rectangle bounds per mixel (one per moving shape and per moving shape's background place, merged
+    where they overlap), each one as in :class:`ApertureRegions`; the estimator samples each with rays of its own
+    and weighs every ray by all of them (multi-sample importance sampling, :mod:`.stratified`).
+
+    Attributes
+    ----------
+    base : (n_mixels, n_regions, 4) float
+        ``(B_lo_x, B_lo_y, B_hi_x, B_hi_y)`` of each rectangle (dimensionless; ``[0, 1]`` spans the mask).
+    slope : (n_mixels, n_regions, 4) float
+        ``(a_min / w, a_max / w, a_min / h, a_max / h)`` of each rectangle [1/m].
+    detector_half_m : (n_mixels,) float
+        Half the detector's side [m].
+    distinct : (n_mixels,) int
+        How many of a mixel's ``n_regions`` slots hold a rectangle of their own; the others repeat them in turn
+        (more rays for them); 0: nothing that moves is in view, every slot is empty (the kernel samples the whole
+        aperture there).
+    """
+
+    base: np.ndarray
+    slope: np.ndarray
+    detector_half_m: np.ndarray
+    distinct: np.ndarray
+
+    @property
+    def n_regions(self) -> int:
+        """Rectangle slots per mixel (the same for every mixel)."""
+        return int(self.base.shape[1])
+
+    def region(self, k: int) -> ApertureRegions:
+        """Slot ``k`` of every mixel as one :class:`ApertureRegions`."""
+        return ApertureRegions(self.base[:, k], self.slope[:, k], self.detector_half_m)
+
+    def area_fraction(self) -> np.ndarray:
+        """(n_mixels,) share of the aperture the distinct rectangles cover for the detector's centre point (their
+        areas summed, at most 1)."""
+        lo = np.clip(self.base[:, :, :2], 0.0, 1.0)
+        hi = np.clip(self.base[:, :, 2:], 0.0, 1.0)
+        area = np.prod(np.clip(hi - lo, 0.0, None), axis=2)
+        own = np.arange(self.n_regions)[None, :] < self.distinct[:, None]
+        return np.minimum(1.0, np.where(own, area, 0.0).sum(axis=1))
+
+    def allocation(self, counts: Sequence[int], expansions: Sequence[float]) -> np.ndarray:
+        """(n_mixels, len(expansions), n_regions) int: how a mixel's ``counts[e]`` rays of expansion ``e`` split over
+        its rectangles: one each, the rest in proportion to each one's area scaled by ``expansions[e]`` about its
+        centre (widened by its slopes' reach over the detector, clipped to the aperture), largest remainders
+        first; empty slots none. They add up to ``counts[e]`` where the mixel has a rectangle (else all 0)."""
+        if len(counts) != len(expansions):
+            raise ValueError(f"counts (rays per expansion) needs one entry per expansion: got {len(counts)} counts, "
+                             f"{len(expansions)} expansions")
+        n, k_max = self.base.shape[:2]
+        reach = np.abs(self.slope).max(axis=2) * self.detector_half_m[:, None]  # (n, K)
+        lo, hi = self.base[:, :, :2] - reach[..., None], self.base[:, :, 2:] + reach[..., None]
+        own = np.arange(k_max)[None, :] < self.distinct[:, None]
+        out = np.zeros((n, len(expansions), k_max), dtype=np.int64)
+        for e, (count, scale) in enumerate(zip(counts, expansions, strict=True)):
+            with np.errstate(invalid="ignore"):  # an unbounded rectangle: the whole aperture
+                mid, half = 0.5 * (lo + hi), 0.5 * scale * (hi - lo)
+                box_lo = np.where(np.isfinite(mid), np.clip(mid - half, 0.0, 1.0), 0.0)
+                box_hi = np.where(np.isfinite(mid), np.clip(mid + half, 0.0, 1.0), 1.0)
+            area = np.where(own, np.prod(np.clip(box_hi - box_lo, 0.0, None), axis=2), 0.0)
+            for m in range(n):
+                kept = int(self.distinct[m])
+                if not kept:
+                    continue
+                base = 1 if int(count) >= kept else 0
+                rest = int(count) - base * kept
+                weight = area[m, :kept] + 1e-12
+                share = rest * weight / weight.sum()
+                alloc = np.floor(share).astype(np.int64)
+                order = np.argsort(-(share - alloc), kind="stable")
+                alloc[order[:rest - int(alloc.sum())]] += 1
+                out[m, e, :kept] = base + alloc
+        return out
+
+    def packed(self) -> np.ndarray:
+        """(n_mixels, 8 n_regions) float64: each slot's base then slope, what the kernel gathers per lane."""
+        return np.concatenate([self.base, self.slope], axis=2).reshape(len(self.base), -1)
+
+
+MAX_REGIONS = 8  # rectangles a mixel keeps in a RegionSet; beyond, the pair whose bounding box grows least merges
+
+
+def mover_regions(parts: Sequence[ApertureRegions], max_regions: int = MAX_REGIONS) -> RegionSet:
+    """The rectangles of ``parts`` (e.g. one per moving shape in the frame and one per its background place) that a
+    mixel sees, per mixel: empty ones dropped, two merged into their bounding rectangle where that covers no more
+    than the two apart (nested or overlapping ones), and the pair whose merge adds the least area merged while more
+    than ``max_regions`` remain. An unbounded part leaves the mixel one unbounded rectangle. The slots are as many as
+    the mixel that keeps the most has (at least 1); a mixel with fewer repeats its own in turn.
+    """
+    if not parts:
+        raise ValueError("parts (the rectangle bounds to keep apart) must hold at least one ApertureRegions")
+    if int(max_regions) < 1:
+        raise ValueError(f"max_regions (rectangles a mixel keeps) must be >= 1, got {max_regions!r}")
+    n, half = len(parts[0].base), parts[0].detector_half_m
+    empty = [p.is_empty() for p in parts]
+    kept = []
+    for m in range(n):
+        rects = [(p.base[m], p.slope[m]) for p, e in zip(parts, empty, strict=True) if not e[m]]
+        if any(not np.all(np.isfinite(b)) for b, _ in rects):
+            rects = [(FULL, np.zeros(4))]
+        kept.append(_merged(rects, float(half[m]), int(max_regions)))
+    k_max = max(1, max(len(r) for r in kept))
+    base = np.tile(np.array([1.0, 1.0, 0.0, 0.0]), (n, k_max, 1))
+    slope = np.zeros((n, k_max, 4))
+    for m, rects in enumerate(kept):
+        for k, (b, sl) in enumerate(rects):
+            base[m, k], slope[m, k] = b, sl
+    return RegionSet(base, slope, half, np.array([len(r) for r in kept]))
+
+
+def _reach_areas(base: np.ndarray, slope: np.ndarray, half_m: float) -> np.ndarray:
+    """Aperture share each rectangle can cover (``base``, ``slope``: (..., 4)): its base widened by its slopes'
+    reach over the detector, clipped to the aperture."""
+    reach = np.abs(slope).max(axis=-1, keepdims=True) * half_m
+    lo = np.clip(base[..., :2] - reach, 0.0, 1.0)
+    hi = np.clip(base[..., 2:] + reach, 0.0, 1.0)
+    return np.prod(np.clip(hi - lo, 0.0, None), axis=-1)
+
+
+def _joined(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """The bounding rectangles of ``a`` and ``b`` (as :meth:`ApertureRegions.union`; (base, slope), (..., 4) each,
+    broadcast)."""
+    base = np.concatenate([np.minimum(a[0][..., :2], b[0][..., :2]), np.maximum(a[0][..., 2:], b[0][..., 2:])], -1)
+    lo, hi = np.minimum(a[1], b[1]), np.maximum(a[1], b[1])
+    return base, np.stack([lo[..., 0], hi[..., 1], lo[..., 2], hi[..., 3]], axis=-1)
+
+
+def _merged(rects: list, half_m: float, max_regions: int) -> list:
+    """``rects`` with overlapping pairs merged, then the cheapest pairs until at most ``max_regions`` remain."""
+    rects = list(rects)
+    while len(rects) >= 2:
+        base = np.array([r[0] for r in rects])
+        slope = np.array([r[1] for r in rects])
+        area = _reach_areas(base, slope, half_m)
+        joined = _joined((base[:, None], slope[:, None]), (base[None, :], slope[None, :]))
+        grow = _reach_areas(*joined, half_m) - area[:, None] - area[None, :]
+        grow[np.tril_indices(len(rects))] = np.inf
+        i, j = np.unravel_index(int(np.argmin(grow)), grow.shape)
+        if grow[i, j] > 0.0 and len(rects) <= max_regions:
+            break
+        rects = [r for q, r in enumerate(rects) if q not in (i, j)] + [(joined[0][i, j], joined[1][i, j])]
+    return rects
+
 
 def box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """(8, 3) corners of an axis-aligned box [m]."""

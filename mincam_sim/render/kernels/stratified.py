@@ -158,6 +158,7 @@ def stratified_lanes(scene, sensor, mincam: Mincam, regions: ApertureRegions, re
     """
     counts = [int(c) for c in counts]
     check_strata(counts, expansions)
+    n_regions = regions.n_regions
     mi = backend.mitsuba()
     import drjit as dr
 
@@ -165,6 +166,8 @@ def stratified_lanes(scene, sensor, mincam: Mincam, regions: ApertureRegions, re
     per = sum(counts)
     n_groups = n * int(replicates)
     packed = np.concatenate([regions.packed(), 2.0 * regions.detector_half_m[:, None]], axis=1)  # (n, 9)
+    if n_regions > 1:  # the rays of each stratum but the last per rectangle
+        packed = np.concatenate([packed, regions.allocation(counts[:-1], expansions).reshape(n, -1)], axis=1)
     coeffs = mi.Float(np.ascontiguousarray(packed.ravel(), dtype=np.float32))
     guided = guide is not None and max_depth is not None and guided_path.supports(max_depth)
     if (watch is not None or pair is not None) and not guided:
@@ -186,7 +189,7 @@ def stratified_lanes(scene, sensor, mincam: Mincam, regions: ApertureRegions, re
         dr.make_opaque(lanes)
         shape = _LaunchShape(0 if guided else ng * per, tuple(counts), int(replicates), n,
                              tuple(float(e) for e in expansions), bool(jitter), int(max_depth) if guided else 0,
-                             getattr(sensor, "version", 0), bool(sobol))
+                             getattr(sensor, "version", 0), bool(sobol), n_regions)
         met = mi.Bool(False)
         if dr.width(lanes):
             with _no_cyclic_gc():
@@ -210,7 +213,8 @@ class _LaunchShape(NamedTuple):
     """What fixes a launch's kernel code (plain Python values: a frozen launch records again when one
     changes): lanes (0 on the guided path, whose lanes come as an array), rays per stratum, replicates,
     mixels, expansions, jitter, guided depth (0 = the scene's integrator), the sensor's configuration version,
-    Sobol points (:mod:`.qmc`) or independent ones."""
+    Sobol points (:mod:`.qmc`) or independent ones, rectangles per mixel (1: nested strata about one region;
+    more: :func:`_mis_sample`)."""
 
     lanes: int
     counts: tuple[int, ...]
@@ -221,6 +225,7 @@ class _LaunchShape(NamedTuple):
     guided_depth: int
     sensor_version: int
     sobol: bool
+    n_regions: int = 1
 
 
 def _launch(scene, sensor, coeffs, seed, g0, lanes, spheres, boxes, shape: _LaunchShape,
@@ -247,9 +252,17 @@ def _launch(scene, sensor, coeffs, seed, g0, lanes, spheres, boxes, shape: _Laun
     for edge in np.cumsum(counts)[:-1]:
         stratum += mi.UInt32(j >= dr.opaque(mi.UInt32, int(edge)))
     k = group // dr.opaque(mi.UInt32, shape.replicates)
-    c = [dr.gather(mi.Float, coeffs, k * 9 + i) for i in range(9)]
+    n_rect, n_exp = shape.n_regions, len(shape.expansions)
+    # each rectangle's base and slope, the detector's side, then (several rectangles) the rays of each stratum but
+    # the last per rectangle (RegionSet.allocation)
+    stride = 8 * n_rect + 1 + (n_exp * n_rect if n_rect > 1 else 0)
+    c = [dr.gather(mi.Float, coeffs, k * stride + i) for i in range(stride)]
+    sub = rank = alloc = None
+    if n_rect > 1:
+        alloc = [c[8 * n_rect + 1 + e * n_rect:8 * n_rect + 1 + (e + 1) * n_rect] for e in range(n_exp)]
+        sub, rank = _mis_technique(dr, mi, alloc, j, stratum, counts)
     if shape.sobol:
-        u, v, pick = _sobol_samples(dr, mi, seed, group, j, stratum, counts)
+        u, v, pick = _sobol_samples(dr, mi, seed, group, j, stratum, counts, sub, rank, n_rect)
     else:
         u = sampler.next_2d()
         v = sampler.next_2d()
@@ -258,10 +271,14 @@ def _launch(scene, sensor, coeffs, seed, g0, lanes, spheres, boxes, shape: _Laun
         pick = sampler.next_1d()
     wavelength = sampler.next_1d()
     position = mi.Point2f((mi.Float(k) + 0.5 + (u.x - 0.5) * DETECTOR_SHRINK) / shape.n_mixels, u.y)
-    x_d = (u.x - 0.5) * DETECTOR_SHRINK * c[8]
-    y_d = (u.y - 0.5) * c[8]
+    x_d = (u.x - 0.5) * DETECTOR_SHRINK * c[8 * n_rect]
+    y_d = (u.y - 0.5) * c[8 * n_rect]
     rays = [dr.opaque(mi.Float, float(count)) for count in counts]
-    aperture, scale = _stratum_sample(dr, mi, c, x_d, y_d, v, pick, stratum, list(shape.expansions), rays)
+    if n_rect > 1:
+        aperture, scale = _mis_sample(dr, mi, [c[8 * r:8 * r + 8] for r in range(n_rect)], alloc, x_d, y_d, v,
+                                      stratum, sub, list(shape.expansions), rays)
+    else:
+        aperture, scale = _stratum_sample(dr, mi, c, x_d, y_d, v, pick, stratum, list(shape.expansions), rays)
     ray, weight = sensor.sample_ray_differential(0.0, wavelength, position, aperture)
     if shape.guided_depth:
         radiance, met = guided_path.guided_radiance_watched(scene, sampler, ray, shape.guided_depth, spheres,
@@ -345,19 +362,49 @@ def _frozen_launch(scene):
     return _FROZEN[key][1]
 
 
-def _sobol_samples(dr, mi, seed, group, j, stratum, counts):
+def _sobol_samples(dr, mi, seed, group, j, stratum, counts, sub=None, rank=None, n_sub: int = 1):
     """Detector sample ``u``, aperture sample ``v`` and ring pick of each lane from the Owen-scrambled Sobol
     sequence (:mod:`.qmc`): the scramble is drawn from the launch seed, the lane's group and its stratum, the
     point index is the lane's rank among its stratum's rays. ``v`` (which the region's edges cut) takes the
-    sequence's first two dimensions, whose projection is a (0, m, 2)-net."""
+    sequence's first two dimensions, whose projection is a (0, m, 2)-net. With several rectangles (``n_sub``),
+    each (stratum, rectangle ``sub`` of ``n_sub``, or ``n_sub`` for none) has a scramble of its own and the
+    index is the lane's ``rank`` among that technique's rays (:func:`_mis_technique`)."""
+    if sub is None:
+        start = mi.UInt32(0)
+        for edge in np.cumsum(counts)[:-1]:
+            start = dr.select(j >= dr.opaque(mi.UInt32, int(edge)), dr.opaque(mi.UInt32, int(edge)), start)
+        # keys with the top bit set: never a lane index (< MAX_LANES), so no scramble is a lane sampler's seed
+        key = (group * dr.opaque(mi.UInt32, len(counts)) + stratum) | dr.opaque(mi.UInt32, 0x80000000)
+        index = j - start
+    else:
+        key = ((group * dr.opaque(mi.UInt32, len(counts)) + stratum) * dr.opaque(mi.UInt32, n_sub + 1) + sub
+               ) | dr.opaque(mi.UInt32, 0x80000000)
+        index = rank
+    scramble, _ = mi.sample_tea_32(seed, key)
+    p = qmc.owen_sobol(index, scramble, 5)
+    return mi.Point2f(p[2], p[3]), mi.Point2f(p[0], p[1]), p[4]
+
+
+def _mis_technique(dr, mi, alloc, j, stratum, counts):
+    """Rectangle (``sub``) and rank among that rectangle's rays of each lane of a stratum that several rectangles
+    share: stratum ``e``'s lanes go to rectangle 0 for its first ``alloc[e][0]`` ranks, then rectangle 1, ...;
+    ``sub`` = the number of rectangles where none takes the lane (the last stratum, rays left over): the whole
+    aperture."""
     start = mi.UInt32(0)
     for edge in np.cumsum(counts)[:-1]:
         start = dr.select(j >= dr.opaque(mi.UInt32, int(edge)), dr.opaque(mi.UInt32, int(edge)), start)
-    # keys with the top bit set: never a lane index (< MAX_LANES), so no scramble is a lane sampler's seed
-    key = (group * dr.opaque(mi.UInt32, len(counts)) + stratum) | dr.opaque(mi.UInt32, 0x80000000)
-    scramble, _ = mi.sample_tea_32(seed, key)
-    p = qmc.owen_sobol(j - start, scramble, 5)
-    return mi.Point2f(p[2], p[3]), mi.Point2f(p[0], p[1]), p[4]
+    r = j - start
+    rank_f = mi.Float(r)  # ranks < 2^24: exact
+    sub, before, cum = mi.UInt32(0), mi.Float(0.0), mi.Float(0.0)
+    for k in range(len(alloc[0])):
+        rays = mi.Float(0.0)
+        for e, row in enumerate(alloc):
+            rays = dr.select(stratum == e, row[k], rays)
+        cum = cum + rays
+        past = rank_f >= cum
+        sub += mi.UInt32(past)
+        before = dr.select(past, cum, before)
+    return sub, r - mi.UInt32(before)
 
 
 def _jittered_region(dr, mi, v, j, n_region: int):
@@ -451,6 +498,67 @@ def _stratum_sample(dr, mi, c, x_d, y_d, v, pick, stratum, expansions, rays):
     y1 = dr.select(first, iy0, dr.select(second, oy1, iy1))
     aperture = mi.Point2f(x0 + (x1 - x0) * v.x, y0 + (y1 - y0) * v.y)
     return aperture, area * own_rays / sharing
+
+
+def _mis_sample(dr, mi, regions, alloc, x_d, y_d, v, stratum, sub, expansions, rays):
+    """Aperture sample in [0, 1]^2 and its weight for several rectangles per mixel: multi-sample importance
+    sampling with the balance heuristic.
+
+    Technique ``(e, k)`` (stratum ``e < len(expansions)``, its lanes given to rectangle ``k`` by
+    :func:`_mis_technique`, ``n_ek = alloc[e][k]`` rays) draws its aperture point uniformly in rectangle ``k``
+    scaled by ``expansions[e]`` about its centre and clipped to the aperture (the whole aperture where that is
+    empty, off the aperture or unbounded); the last stratum's rays, and any a stratum gives no rectangle, draw over
+    the whole aperture. Given the detector point, a ray at aperture point ``x`` is weighted by
+    ``n_own / sum_s n_s q_s(x)`` over every technique ``s`` (``q_s = 1 / |R_s|`` inside ``R_s``, 0 outside, 1 for
+    the whole aperture; ``n_own`` the rays of the ray's stratum, ``rays``): each stratum's lanes summed and divided
+    by its rays, the strata added, give ``sum_i f(x_i) / sum_s n_s q_s(x_i)``, unbiased for any rectangles since
+    the whole aperture always has rays. ``regions`` holds each rectangle's 8 coefficients (as
+    :class:`.change_region.RegionSet` packs them)."""
+    whole = [mi.Float(0.0), mi.Float(0.0), mi.Float(1.0), mi.Float(1.0)]
+
+    def bounds(c):
+        """Rectangle ``c`` at this detector point: (lo_x, lo_y, hi_x, hi_y)."""
+        return (c[0] + dr.minimum(c[4] * x_d, c[5] * x_d), c[1] + dr.minimum(c[6] * y_d, c[7] * y_d),
+                c[2] + dr.maximum(c[4] * x_d, c[5] * x_d), c[3] + dr.maximum(c[6] * y_d, c[7] * y_d))
+
+    def scaled(rect, scale):
+        """``rect`` scaled about its centre and clipped (the whole aperture where that is empty or unbounded), and
+        its area."""
+        lo_x, lo_y, hi_x, hi_y = rect
+        finite = dr.isfinite(lo_x) & dr.isfinite(lo_y) & dr.isfinite(hi_x) & dr.isfinite(hi_y)
+        mid_x, mid_y = 0.5 * (lo_x + hi_x), 0.5 * (lo_y + hi_y)
+        half_x, half_y = 0.5 * (hi_x - lo_x), 0.5 * (hi_y - lo_y)
+        box = [dr.clip(x, 0.0, 1.0) for x in (mid_x - scale * half_x, mid_y - scale * half_y,
+                                              mid_x + scale * half_x, mid_y + scale * half_y)]
+        width, height = box[2] - box[0], box[3] - box[1]
+        ok = finite & (hi_x > lo_x) & (hi_y > lo_y) & (width > 0.0) & (height > 0.0)
+        return [dr.select(ok, b, w) for b, w in zip(box, whole, strict=True)], dr.select(ok, width * height, 1.0)
+
+    rects = [bounds(c) for c in regions]
+    # this ray's own rectangle: its region at its stratum's scale (the whole aperture for the last stratum)
+    own_rect = list(rects[0])
+    for k in range(1, len(regions)):
+        own_rect = [dr.select(sub == k, a, b) for a, b in zip(rects[k], own_rect, strict=True)]
+    own_scale = mi.Float(expansions[0])
+    own_rays = rays[-1]
+    for e in range(len(expansions)):
+        own_scale = dr.select(stratum == e, expansions[e], own_scale)
+        own_rays = dr.select(stratum == e, rays[e], own_rays)
+    own, _ = scaled(own_rect, own_scale)
+    sampled = sub < len(regions)
+    x0, y0, x1, y1 = (dr.select(sampled, a, b) for a, b in zip(own, whole, strict=True))
+    px, py = x0 + (x1 - x0) * v.x, y0 + (y1 - y0) * v.y
+    density = rays[-1]  # sum_s n_s q_s at the point: the whole aperture's, then each technique's
+    for e, scale in enumerate(expansions):
+        left = rays[e]  # a stratum's rays that no rectangle takes sample the whole aperture
+        for k in range(len(regions)):
+            box, area = scaled(rects[k], scale)
+            inside = (px >= box[0]) & (px <= box[2]) & (py >= box[1]) & (py <= box[3])
+            inside |= (stratum == e) & (sub == k)  # its own rectangle holds the point, whatever rounding did
+            density += dr.select(inside, alloc[e][k] / area, 0.0)
+            left -= alloc[e][k]
+        density += left
+    return mi.Point2f(px, py), own_rays / density
 
 
 def whole_aperture_estimates(scene, sensor, mincam: Mincam, replicates: int, spp: int, seed: int) -> np.ndarray:

@@ -49,6 +49,7 @@ from mincam_sim.render.kernels.change_geometry import (
     moving_shapes,
     watch_box,
 )
+from mincam_sim.render.kernels.change_region import ApertureRegions, mover_regions
 from mincam_sim.render.kernels.guided_path import supports as guided_path_supports
 from mincam_sim.render.kernels.mask_eval import mask_model_meta
 from mincam_sim.render.kernels.monte_carlo import (
@@ -486,14 +487,21 @@ class _StratifiedRun(_Run):
         changed = changed_shapes(frames[i], self.background)
         if self.split is not None:  # the world scene stays at the background; the movers scene moves
             self.split.move(r.scene_updates({**self.background, **frames[i]}))
-            regions, guide, why = r.change_reach(changed, scene=self.split.view)
+            each, guide, why = r.change_reach_each(changed, scene=self.split.view)
         else:
             r.update({**self.background, **frames[i]})
-            regions, guide, why = r.change_reach(changed)
+            each, guide, why = r.change_reach_each(changed)
         for reason in why:
             self.note_fallback(next(iter(sorted(changed))), reason)
+        regions = ApertureRegions.empty(r.mincam)
+        for part in each:
+            regions = regions.union(part)
         for name in changed:
             regions = regions.union(self.bg_regions[name])
+        if changed and not why:  # a rectangle per mover and per mover's background place, where they lie apart
+            apart = mover_regions(each + [self.bg_regions[name] for name in sorted(changed)])
+            if apart.n_regions > 1:  # else the one rectangle of the union, sampled with nested strata
+                regions = apart
         guide = guide if self.can_guide else None
         frame_seed = (derive_seed(self.seed, "stratified") if self.correlated
                       else derive_seed(self.seed, "stratified", i))
