@@ -97,7 +97,8 @@ def test_each_mover_in_view_has_its_own_rectangle_and_a_far_one_none():
 
 def test_overlapping_rectangles_merge_and_the_count_is_capped():
     """Nested or overlapping rectangles merge into their bounding rectangle (as ``union`` does), disjoint ones stay
-    apart, and beyond ``max_regions`` the pair that adds the least area merges."""
+    apart (in a power-of-two count of slots), and beyond ``max_regions`` the pair that adds the least area merges;
+    each expansion's rays split over the rectangles by area, one at least each."""
     n, half = 2, np.full(2, 1e-3)
 
     def rect(lo_x, lo_y, hi_x, hi_y):
@@ -108,6 +109,9 @@ def test_overlapping_rectangles_merge_and_the_count_is_capped():
     merged = mover_regions([a, b, c])
     assert merged.n_regions == 2 and np.all(merged.distinct == 2)
     assert {tuple(merged.base[0, k]) for k in range(2)} == {tuple(a.union(b).base[0]), tuple(c.base[0])}
+    three = mover_regions([a, c, d])  # slots: a power of two, the spare one empty and without rays
+    assert three.n_regions == 4 and np.all(three.distinct == 3) and np.all(three.region(3).is_empty())
+    assert np.all(three.allocation([600], (1.0,))[:, 0] == [200, 200, 200, 0])
     capped = mover_regions([a, c, d], max_regions=2)
     assert capped.n_regions == 2
     assert tuple(a.union(d).base[0]) in {tuple(capped.base[0, k]) for k in range(2)}, "a and d lie closest"

@@ -29,7 +29,7 @@ Pure numpy; scene bounds come from the renderer.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -118,15 +118,15 @@ class RegionSet:
     detector_half_m : (n_mixels,) float
         Half the detector's side [m].
     distinct : (n_mixels,) int
-        How many of a mixel's ``n_regions`` slots hold a rectangle of their own; the others repeat them in turn
-        (more rays for them); 0: nothing that moves is in view, every slot is empty (the kernel samples the whole
-        aperture there).
+        How many of a mixel's ``n_regions`` slots (the first ones) hold a rectangle; the others are empty and get
+        no rays (:meth:`allocation`); 0: nothing that moves is in view (the kernel samples the whole aperture).
     """
 
     base: np.ndarray
     slope: np.ndarray
     detector_half_m: np.ndarray
     distinct: np.ndarray
+    _allocations: dict = field(default_factory=dict, compare=False, repr=False)  # allocation() by its arguments
 
     @property
     def n_regions(self) -> int:
@@ -151,6 +151,12 @@ class RegionSet:
         its rectangles: one each, the rest in proportion to each one's area scaled by ``expansions[e]`` about its
         centre (widened by its slopes' reach over the detector, clipped to the aperture), largest remainders
         first; empty slots none. They add up to ``counts[e]`` where the mixel has a rectangle (else all 0)."""
+        key = (tuple(int(c) for c in counts), tuple(float(e) for e in expansions))
+        if key not in self._allocations:
+            self._allocations[key] = self._allocation(*key)
+        return self._allocations[key]
+
+    def _allocation(self, counts: tuple[int, ...], expansions: tuple[float, ...]) -> np.ndarray:
         if len(counts) != len(expansions):
             raise ValueError(f"counts (rays per expansion) needs one entry per expansion: got {len(counts)} counts, "
                              f"{len(expansions)} expansions")
@@ -192,7 +198,8 @@ def mover_regions(parts: Sequence[ApertureRegions], max_regions: int = MAX_REGIO
     mixel sees, per mixel: empty ones dropped, two merged into their bounding rectangle where that covers no more
     than the two apart (nested or overlapping ones), and the pair whose merge adds the least area merged while more
     than ``max_regions`` remain. An unbounded part leaves the mixel one unbounded rectangle. The slots are as many as
-    the mixel that keeps the most has (at least 1); a mixel with fewer repeats its own in turn.
+    the mixel that keeps the most has, rounded up to a power of two (1, 2, 4, ...: each count is a kernel of its
+    own); a mixel's slots beyond its own rectangles are empty.
     """
     if not parts:
         raise ValueError("parts (the rectangle bounds to keep apart) must hold at least one ApertureRegions")
@@ -206,7 +213,8 @@ def mover_regions(parts: Sequence[ApertureRegions], max_regions: int = MAX_REGIO
         if any(not np.all(np.isfinite(b)) for b, _ in rects):
             rects = [(FULL, np.zeros(4))]
         kept.append(_merged(rects, float(half[m]), int(max_regions)))
-    k_max = max(1, max(len(r) for r in kept))
+    most = max(len(r) for r in kept)
+    k_max = 1 if most <= 1 else 1 << (most - 1).bit_length()  # 2, 4, 8, ...: few launch shapes (recordings)
     base = np.tile(np.array([1.0, 1.0, 0.0, 0.0]), (n, k_max, 1))
     slope = np.zeros((n, k_max, 4))
     for m, rects in enumerate(kept):

@@ -493,15 +493,17 @@ class _StratifiedRun(_Run):
             each, guide, why = r.change_reach_each(changed)
         for reason in why:
             self.note_fallback(next(iter(sorted(changed))), reason)
-        regions = ApertureRegions.empty(r.mincam)
-        for part in each:
-            regions = regions.union(part)
-        for name in changed:
-            regions = regions.union(self.bg_regions[name])
-        if changed and not why:  # a rectangle per mover and per mover's background place, where they lie apart
-            apart = mover_regions(each + [self.bg_regions[name] for name in sorted(changed)])
-            if apart.n_regions > 1:  # else the one rectangle of the union, sampled with nested strata
-                regions = apart
+        # a rectangle per mover and per mover's background place, where a mixel sees two or more apart; else the
+        # one rectangle that holds them all, sampled with nested strata
+        apart = None if why or not changed else mover_regions(each + [self.bg_regions[n] for n in sorted(changed)])
+        if apart is not None and apart.n_regions > 1:
+            regions = apart
+        else:
+            regions = ApertureRegions.empty(r.mincam)
+            for part in each:
+                regions = regions.union(part)
+            for name in changed:
+                regions = regions.union(self.bg_regions[name])
         guide = guide if self.can_guide else None
         frame_seed = (derive_seed(self.seed, "stratified") if self.correlated
                       else derive_seed(self.seed, "stratified", i))
