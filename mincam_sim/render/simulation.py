@@ -333,9 +333,10 @@ class Simulation:
                 reasons.append(why)
         if reasons:
             return [ApertureRegions.full(self.mincam)], None, reasons
-        each = []
+        each, half = [], ApertureRegions.empty(self.mincam).detector_half_m
         for name, p in points.items():
-            regions = ApertureRegions.empty(self.mincam).union(mixel_regions(self.scene_mincam, p))
+            own = mixel_regions(self.scene_mincam, p)
+            regions = ApertureRegions(own.base, own.slope, half)
             for seen in self._mirrors.images(p, exclude=name):
                 regions = regions.union(mixel_regions(self.scene_mincam, seen))
             each.append(regions)

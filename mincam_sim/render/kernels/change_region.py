@@ -23,6 +23,9 @@ with ``B`` the extreme corner terms ``X d_f / (Z w) + 1/2`` and ``a = 1 - d_f / 
 ``w`` the mask's width or height). :class:`ApertureRegions` holds these coefficients per mixel; the estimator
 (:mod:`.stratified`) clips the rectangle to the aperture. The bounds need not be tight or even right: the rest
 of the aperture is sampled too (indirect light, an object missed by the bounds), they only move variance.
+Several moving shapes far apart would make one rectangle hold the static scene between them:
+:func:`mover_regions` keeps a rectangle per shape (and per shape's background place) instead, merging only
+overlapping ones (and the closest beyond :data:`MAX_REGIONS`), as a :class:`RegionSet`.
 Pure numpy; scene bounds come from the renderer.
 """
 

@@ -11,7 +11,9 @@ per-replicate differences, so it includes that correlation.
   shadow
   volumes from the emitting shapes, for both the frame and the background) gets most rays, the rest of the
   aperture a few, both strata unbiased (``mincam_sim.render.kernels.stratified``). The frame and the background are
-  traced with the same seed, counts and regions, so their rays pair up lane by lane; inter-reflection bounces
+  traced with the same seed, counts and regions, so their rays pair up lane by lane (several moving shapes that a
+  mixel sees apart each keep a rectangle of their own, with their background places: ``change_region.RegionSet``,
+  sampled by multi-sample importance sampling; one rectangle keeps the nested strata); inter-reflection bounces
   are guided toward the moving shapes (``mincam_sim.render.kernels.guided_path``); the background's whole-aperture
   value (for ``P``) is traced once per run, on a jittered aperture grid with at least
   ``BACKGROUND_MIN_SPP`` rays. Kernels are compiled once and reused. Where the moving shapes are meshes moved
