@@ -285,7 +285,7 @@ def _launch(scene, sensor, coeffs, seed, g0, lanes, spheres, boxes, shape: _Laun
     rays = [dr.opaque(mi.Float, float(count)) for count in counts]
     if n_rect > 1:
         aperture, scale = _mis_sample(dr, mi, [c[8 * r:8 * r + 8] for r in range(n_rect)], alloc, x_d, y_d, v,
-                                      stratum, sub, list(shape.expansions), rays)
+                                      pick, stratum, sub, list(shape.expansions), rays)
     else:
         aperture, scale = _stratum_sample(dr, mi, c, x_d, y_d, v, pick, stratum, list(shape.expansions), rays)
     ray, weight = sensor.sample_ray_differential(0.0, wavelength, position, aperture)
@@ -509,64 +509,102 @@ def _stratum_sample(dr, mi, c, x_d, y_d, v, pick, stratum, expansions, rays):
     return aperture, area * own_rays / sharing
 
 
-def _mis_sample(dr, mi, regions, alloc, x_d, y_d, v, stratum, sub, expansions, rays):
-    """Aperture sample in [0, 1]^2 and its weight for several rectangles per mixel: multi-sample importance
-    sampling with the balance heuristic.
+def _mis_sample(dr, mi, regions, alloc, x_d, y_d, v, pick, stratum, sub, expansions, rays):
+    """Aperture sample in [0, 1]^2 and its weight for several rectangles per mixel: the nested strata of each
+    rectangle, combined by multi-sample importance sampling with the balance heuristic.
 
     Technique ``(e, k)`` (stratum ``e < len(expansions)``, its lanes given to rectangle ``k`` by
-    :func:`_mis_technique`, ``n_ek = alloc[e][k]`` rays) draws its aperture point uniformly in rectangle ``k``
-    scaled by ``expansions[e]`` about its centre and clipped to the aperture (the whole aperture where that is
-    empty, off the aperture or unbounded); the last stratum's rays, and any a stratum gives no rectangle, draw over
-    the whole aperture. Given the detector point, a ray at aperture point ``x`` is weighted by
-    ``n_own / sum_s n_s q_s(x)`` over every technique ``s`` (``q_s = 1 / |R_s|`` inside ``R_s``, 0 outside, 1 for
-    the whole aperture; ``n_own`` the rays of the ray's stratum, ``rays``): each stratum's lanes summed and divided
-    by its rays, the strata added, give ``sum_i f(x_i) / sum_s n_s q_s(x_i)``, unbiased for any rectangles since
-    the whole aperture always has rays. ``regions`` holds each rectangle's 8 coefficients (as
+    :func:`_mis_technique`, ``n_ek = alloc[e][k]`` rays) draws its aperture point uniformly in stratum ``e`` of
+    rectangle ``k`` as :func:`_stratum_sample` lays them out (the rectangle for ``e = 0``, else the ring between it
+    scaled by ``expansions[e - 1]`` and by ``expansions[e]`` about its centre, clipped to the aperture; the ring's
+    strip picked by ``pick`` in proportion to its area), or over the whole aperture where that is empty (beyond the
+    aperture's edge, an empty or unbounded rectangle); the last stratum's rays, and any a stratum gives no
+    rectangle, draw over the whole aperture. Given the detector point, a ray at aperture point ``x`` is weighted by
+    ``n_own / sum_s n_s q_s(x)`` over every technique ``s`` (``q_s = 1 / |S_s|`` inside its stratum ``S_s``, 0
+    outside, 1 for the whole aperture; ``n_own`` the rays of the ray's stratum, ``rays``): each stratum's lanes
+    summed and divided by its rays, the strata added, give ``sum_i f(x_i) / sum_s n_s q_s(x_i)``, unbiased for any
+    rectangles since the whole aperture always has rays. A rectangle that overlaps no other is sampled as the nested
+    strata sample one region. ``regions`` holds each rectangle's 8 coefficients (as
     :class:`.change_region.RegionSet` packs them)."""
-    whole = [mi.Float(0.0), mi.Float(0.0), mi.Float(1.0), mi.Float(1.0)]
+    zero, one = mi.Float(0.0), mi.Float(1.0)
 
     def bounds(c):
-        """Rectangle ``c`` at this detector point: (lo_x, lo_y, hi_x, hi_y)."""
-        return (c[0] + dr.minimum(c[4] * x_d, c[5] * x_d), c[1] + dr.minimum(c[6] * y_d, c[7] * y_d),
-                c[2] + dr.maximum(c[4] * x_d, c[5] * x_d), c[3] + dr.maximum(c[6] * y_d, c[7] * y_d))
+        """Rectangle ``c`` at this detector point: (lo_x, lo_y, hi_x, hi_y) and whether it is finite and not
+        empty."""
+        lo_x = c[0] + dr.minimum(c[4] * x_d, c[5] * x_d)
+        lo_y = c[1] + dr.minimum(c[6] * y_d, c[7] * y_d)
+        hi_x = c[2] + dr.maximum(c[4] * x_d, c[5] * x_d)
+        hi_y = c[3] + dr.maximum(c[6] * y_d, c[7] * y_d)
+        ok = (dr.isfinite(lo_x) & dr.isfinite(lo_y) & dr.isfinite(hi_x) & dr.isfinite(hi_y)
+              & (hi_x > lo_x) & (hi_y > lo_y))
+        return (lo_x, lo_y, hi_x, hi_y), ok
 
     def scaled(rect, scale):
-        """``rect`` scaled about its centre and clipped (the whole aperture where that is empty or unbounded), and
-        its area."""
+        """``rect`` scaled about its centre, clipped to the aperture."""
         lo_x, lo_y, hi_x, hi_y = rect
-        finite = dr.isfinite(lo_x) & dr.isfinite(lo_y) & dr.isfinite(hi_x) & dr.isfinite(hi_y)
         mid_x, mid_y = 0.5 * (lo_x + hi_x), 0.5 * (lo_y + hi_y)
         half_x, half_y = 0.5 * (hi_x - lo_x), 0.5 * (hi_y - lo_y)
-        box = [dr.clip(x, 0.0, 1.0) for x in (mid_x - scale * half_x, mid_y - scale * half_y,
+        return [dr.clip(x, 0.0, 1.0) for x in (mid_x - scale * half_x, mid_y - scale * half_y,
                                               mid_x + scale * half_x, mid_y + scale * half_y)]
-        width, height = box[2] - box[0], box[3] - box[1]
-        ok = finite & (hi_x > lo_x) & (hi_y > lo_y) & (width > 0.0) & (height > 0.0)
-        return [dr.select(ok, b, w) for b, w in zip(box, whole, strict=True)], dr.select(ok, width * height, 1.0)
+
+    def strips(inner, outer):
+        """Areas of the ring's bottom, top, left and right strips (``inner`` within ``outer``)."""
+        ix0, iy0, ix1, iy1 = inner
+        ox0, oy0, ox1, oy1 = outer
+        return ((ox1 - ox0) * (iy0 - oy0), (ox1 - ox0) * (oy1 - iy1), (ix0 - ox0) * (iy1 - iy0),
+                (ox1 - ix1) * (iy1 - iy0))
+
+    def stratum_of(rect, e):
+        """(inner, outer) rectangles of stratum ``e`` of ``rect``: the first one is a ring around its corner."""
+        outer = scaled(rect, expansions[e])
+        inner = [outer[0], outer[1], outer[0], outer[1]] if e == 0 else scaled(rect, expansions[e - 1])
+        return inner, outer
 
     rects = [bounds(c) for c in regions]
-    # this ray's own rectangle: its region at its stratum's scale (the whole aperture for the last stratum)
-    own_rect = list(rects[0])
+    # this ray's own stratum of its own rectangle, its strip picked by area, a uniform point in the strip
+    own_rect, own_ok = list(rects[0][0]), rects[0][1]
     for k in range(1, len(regions)):
-        own_rect = [dr.select(sub == k, a, b) for a, b in zip(rects[k], own_rect, strict=True)]
-    own_scale = mi.Float(expansions[0])
+        own_rect = [dr.select(sub == k, a, b) for a, b in zip(rects[k][0], own_rect, strict=True)]
+        own_ok = dr.select(sub == k, rects[k][1], own_ok)
+    inner, outer = stratum_of(own_rect, 0)
+    for e in range(1, len(expansions)):
+        e_inner, e_outer = stratum_of(own_rect, e)
+        inner = [dr.select(stratum == e, a, b) for a, b in zip(e_inner, inner, strict=True)]
+        outer = [dr.select(stratum == e, a, b) for a, b in zip(e_outer, outer, strict=True)]
+    a0, a1, a2, a3 = strips(inner, outer)
+    area = a0 + a1 + a2 + a3
+    sampled = (sub < len(regions)) & (stratum < len(expansions)) & own_ok & (area > 0.0)
+    ox0, oy0, ox1, oy1 = outer
+    ix0, iy0, ix1, iy1 = inner
+    t = pick * area
+    first, second, third = t < a0, t < a0 + a1, t < a0 + a1 + a2
+    x0 = dr.select(first | second | third, ox0, ix1)
+    x1 = dr.select(first | second, ox1, dr.select(third, ix0, ox1))
+    y0 = dr.select(first, oy0, dr.select(second, iy1, iy0))
+    y1 = dr.select(first, iy0, dr.select(second, oy1, iy1))
+    x0, y0 = dr.select(sampled, x0, zero), dr.select(sampled, y0, zero)
+    x1, y1 = dr.select(sampled, x1, one), dr.select(sampled, y1, one)
+    px, py = x0 + (x1 - x0) * v.x, y0 + (y1 - y0) * v.y
     own_rays = rays[-1]
     for e in range(len(expansions)):
-        own_scale = dr.select(stratum == e, expansions[e], own_scale)
         own_rays = dr.select(stratum == e, rays[e], own_rays)
-    own, _ = scaled(own_rect, own_scale)
-    sampled = sub < len(regions)
-    x0, y0, x1, y1 = (dr.select(sampled, a, b) for a, b in zip(own, whole, strict=True))
-    px, py = x0 + (x1 - x0) * v.x, y0 + (y1 - y0) * v.y
     density = rays[-1]  # sum_s n_s q_s at the point: the whole aperture's, then each technique's
-    for e, scale in enumerate(expansions):
-        left = rays[e]  # a stratum's rays that no rectangle takes sample the whole aperture
-        for k in range(len(regions)):
-            box, area = scaled(rects[k], scale)
-            inside = (px >= box[0]) & (px <= box[2]) & (py >= box[1]) & (py <= box[3])
-            inside |= (stratum == e) & (sub == k)  # its own rectangle holds the point, whatever rounding did
-            density += dr.select(inside, alloc[e][k] / area, 0.0)
-            left -= alloc[e][k]
-        density += left
+    for k, (rect, ok) in enumerate(rects):
+        boxes = [scaled(rect, scale) for scale in expansions]
+        inside_prev = mi.Bool(False)
+        for e in range(len(expansions)):
+            outer_e = boxes[e]
+            inner_e = [outer_e[0], outer_e[1], outer_e[0], outer_e[1]] if e == 0 else boxes[e - 1]
+            ring = sum(strips(inner_e, outer_e))
+            in_outer = (px >= outer_e[0]) & (px <= outer_e[2]) & (py >= outer_e[1]) & (py <= outer_e[3])
+            inside = in_outer & ~inside_prev
+            inside_prev = in_outer
+            usable = ok & (ring > 0.0)
+            inside |= (stratum == e) & (sub == k)  # its own stratum holds the point, whatever rounding did
+            q = dr.select(usable, dr.select(inside, 1.0 / ring, 0.0), 1.0)
+            density += alloc[e][k] * q
+    for e in range(len(expansions)):  # a stratum's rays that no rectangle takes sample the whole aperture
+        density += rays[e] - sum(alloc[e][1:], alloc[e][0])
     return mi.Point2f(px, py), own_rays / density
 
 
