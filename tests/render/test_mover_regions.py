@@ -251,3 +251,4 @@ def test_reported_sigma_matches_the_spread_over_16_seeds_of_8_movers():
     pooled = float(np.mean(ratio))
     lo, hi = stats.chi2.ppf([1e-4, 1 - 1e-4], dof) / dof
     assert lo * (1 - noise) < pooled < hi * (1 + noise), f"pooled ratio {pooled:.2f} ({lo:.2f} .. {hi:.2f})"
+

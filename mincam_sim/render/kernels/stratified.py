@@ -54,7 +54,7 @@ import numpy as np
 from mincam_sim.model.optics import Mincam
 from mincam_sim.render import backend
 from mincam_sim.render.kernels import guided_path, qmc, tracing
-from mincam_sim.render.kernels.change_region import ApertureRegions
+from mincam_sim.render.kernels.change_region import ApertureRegions, RegionSet
 from mincam_sim.render.kernels.tracing import LaneSampler, launch_seed
 
 DETECTOR_SHRINK = 1 - 2e-6  # as mixel_sensor.mixel_position_sample: keeps x strictly inside the mixel's film cell
@@ -75,7 +75,7 @@ def check_strata(counts: Sequence[int], expansions: Sequence[float]) -> None:
                          f"got {list(expansions)!r}")
 
 
-def stratified_estimates(scene, sensor, mincam: Mincam, regions: ApertureRegions, replicates: int,
+def stratified_estimates(scene, sensor, mincam: Mincam, regions: ApertureRegions | RegionSet, replicates: int,
                          counts: Sequence[int], seed: int, expansions: Sequence[float] = (1.0,),
                          by_stratum: bool = False, jitter: bool = True, guide=None,
                          max_depth: int | None = None, freeze: tuple | None = None, sobol: bool = True) -> np.ndarray:
@@ -85,8 +85,10 @@ def stratified_estimates(scene, sensor, mincam: Mincam, regions: ApertureRegions
     ----------
     scene, sensor
         The fast scene and its mixel-array sensor (:class:`.mincam_scene.MincamScene`).
-    regions : ApertureRegions
-        Per-mixel region bounds (aperture-sample units, affine in the detector point).
+    regions : ApertureRegions or RegionSet
+        Per-mixel region bounds (aperture-sample units, affine in the detector point): one rectangle (nested
+        strata) or several (:class:`.change_region.RegionSet`: each one's nested strata, combined by multi-sample
+        importance sampling).
     replicates : int
         Independent groups per mixel (their spread gives the standard error).
     counts : sequence of int
@@ -146,7 +148,7 @@ class LaneValues:
         return parts if by_stratum else parts.sum(axis=2)
 
 
-def stratified_lanes(scene, sensor, mincam: Mincam, regions: ApertureRegions, replicates: int,
+def stratified_lanes(scene, sensor, mincam: Mincam, regions: ApertureRegions | RegionSet, replicates: int,
                      counts: Sequence[int], seed: int, expansions: Sequence[float] = (1.0,), jitter: bool = True,
                      guide=None, max_depth: int | None = None, freeze: tuple | None = None,
                      watch: Sequence[tuple[np.ndarray, np.ndarray]] | None = None,
