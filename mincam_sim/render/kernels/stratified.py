@@ -27,11 +27,12 @@ jittered grid in the region's coordinates (the whole-aperture background value s
 Several rectangles (a :class:`.change_region.RegionSet`: one per moving shape and per moving shape's background
 place, where a mixel sees two or more apart) replace the one region by multi-sample importance sampling with the
 balance heuristic (:func:`_mis_sample`): each stratum but the last is split over the rectangles (its rays in
-proportion to their areas, one at least each; the rectangle scaled by the stratum's expansion, not a ring), the last
+proportion to their areas, one at least each), whose nested strata (region, rings) are laid out as below; the last
 samples the whole aperture, and every ray is weighted by ``n_own / sum_s n_s q_s(x)`` over all of them. Unbiased
 for any rectangles (the whole aperture always has rays); each (stratum, rectangle) has its own scramble and point
 indices, so each rectangle gets a Sobol sequence of its own, and the lane layout still depends only on the counts
-(frame and background pair lane by lane). A single rectangle keeps the nested strata below.
+(frame and background pair lane by lane). A single rectangle keeps the nested strata without MIS weights (same
+numbers as before several rectangles existed).
 
 Where a stratum is empty for a detector point (a ring beyond the aperture's edge; a region that is empty, off the
 aperture, or unbounded and so the whole aperture) its rays pool with the outermost non-empty stratum's, weighted
