@@ -178,8 +178,10 @@ def stratified_lanes(scene, sensor, mincam: Mincam, regions: ApertureRegions | R
     per = sum(counts)
     n_groups = n * int(replicates)
     packed = np.concatenate([regions.packed(), 2.0 * regions.detector_half_m[:, None]], axis=1)  # (n, 9)
-    if n_regions > 1:  # the rays of each stratum but the last per rectangle
-        packed = np.concatenate([packed, regions.allocation(counts[:-1], expansions).reshape(n, -1)], axis=1)
+    if n_regions > 1:  # then 3 unused, the rays of each stratum but the last per rectangle, in packets of 4
+        packed = np.concatenate([packed, np.zeros((n, 3)),
+                                 regions.allocation(counts[:-1], expansions).reshape(n, -1)], axis=1)
+        packed = np.pad(packed, ((0, 0), (0, _mis_stride(n_regions, len(expansions)) - packed.shape[1])))
     coeffs = mi.Float(np.ascontiguousarray(packed.ravel(), dtype=np.float32))
     guided = guide is not None and max_depth is not None and guided_path.supports(max_depth)
     if (watch is not None or pair is not None) and not guided:
@@ -265,14 +267,17 @@ def _launch(scene, sensor, coeffs, seed, g0, lanes, spheres, boxes, shape: _Laun
         stratum += mi.UInt32(j >= dr.opaque(mi.UInt32, int(edge)))
     k = group // dr.opaque(mi.UInt32, shape.replicates)
     n_rect, n_exp = shape.n_regions, len(shape.expansions)
-    # each rectangle's base and slope, the detector's side, then (several rectangles) the rays of each stratum but
-    # the last per rectangle (RegionSet.allocation)
-    stride = 8 * n_rect + 1 + (n_exp * n_rect if n_rect > 1 else 0)
-    c = [dr.gather(mi.Float, coeffs, k * stride + i) for i in range(stride)]
     sub = rank = alloc = None
-    if n_rect > 1:
-        alloc = [c[8 * n_rect + 1 + e * n_rect:8 * n_rect + 1 + (e + 1) * n_rect] for e in range(n_exp)]
+    if n_rect > 1:  # packets of 4 (one load each): the rectangles, the detector's side, the rays per rectangle
+        stride = _mis_stride(n_rect, n_exp)
+        c = []
+        for q in range(stride // 4):
+            packet = dr.gather(mi.Array4f, coeffs, k * (stride // 4) + q)
+            c += [packet[i] for i in range(4)]
+        alloc = [c[8 * n_rect + 4 + e * n_rect:8 * n_rect + 4 + (e + 1) * n_rect] for e in range(n_exp)]
         sub, rank = _mis_technique(dr, mi, alloc, j, stratum, counts)
+    else:  # the rectangle's base and slope, the detector's side
+        c = [dr.gather(mi.Float, coeffs, k * 9 + i) for i in range(9)]
     if shape.sobol:
         u, v, pick = _sobol_samples(dr, mi, seed, group, j, stratum, counts, sub, rank, n_rect)
     else:
@@ -395,6 +400,12 @@ def _sobol_samples(dr, mi, seed, group, j, stratum, counts, sub=None, rank=None,
     scramble, _ = mi.sample_tea_32(seed, key)
     p = qmc.owen_sobol(index, scramble, 5)
     return mi.Point2f(p[2], p[3]), mi.Point2f(p[0], p[1]), p[4]
+
+
+def _mis_stride(n_regions: int, n_expansions: int) -> int:
+    """Floats per mixel of the coefficients with several rectangles: 8 per rectangle, the detector's side and 3
+    unused, the rays per (expansion, rectangle), padded to packets of 4."""
+    return -(-(8 * n_regions + 4 + n_expansions * n_regions) // 4) * 4
 
 
 def _mis_technique(dr, mi, alloc, j, stratum, counts):
