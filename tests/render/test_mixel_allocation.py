@@ -1,0 +1,127 @@
+"""Per-mixel replicate allocation of the stratified change solver: each (frame, mixel) value gets the replicates its
+own pilot spread asks for at the budget's target, traced as lane subsets of one launch layout."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import assert_close_mc
+from test_moving import _world
+
+import mincam_sim as ms
+from mincam_sim.render.solvers.change import allocate_replicates, pooled_mean_stderr
+
+
+def test_allocation_rule():
+    """R_k = clip(ceil(R0 (rel / target)^2), floor, most); insignificant or spread-free values get the floor."""
+    rng = np.random.default_rng(0)
+    r0 = 16
+    pilot = np.stack([1.0 + 0.04 * rng.standard_normal(r0),  # rel ~ 0.01: ~ 4 x 16 at target 0.005
+                      1.0 + 0.001 * rng.standard_normal(r0),  # tiny spread: the floor
+                      0.1 * rng.standard_normal(r0),  # insignificant mean: the floor
+                      np.zeros(r0),  # no ray met the change: the floor
+                      1.0 + 0.5 * rng.standard_normal(r0)], axis=1)  # far too noisy: capped
+    got = allocate_replicates(pilot, 0.005, 24, 256)
+    rel = pilot[:, 0].std(ddof=1) / np.sqrt(r0) / abs(pilot[:, 0].mean())
+    assert got[0] == int(np.ceil(r0 * (rel / 0.005) ** 2))
+    assert list(got[1:]) == [24, 24, 24, 256]
+
+
+def test_pooled_mean_and_stderr():
+    """NaN replicates are left out of the mean; sigma comes from the chosen rows, divided by sqrt(all traced)."""
+    rng = np.random.default_rng(1)
+    diff = rng.standard_normal((12, 3))
+    full_mean, full_err = pooled_mean_stderr(diff)
+    np.testing.assert_array_equal(full_mean, diff.mean(0))
+    np.testing.assert_array_equal(full_err, diff.std(0, ddof=1) / np.sqrt(12))
+    diff[8:, 1] = np.nan
+    rows = np.zeros_like(diff, dtype=bool)
+    rows[4:] = True
+    mean, err = pooled_mean_stderr(diff, rows)
+    np.testing.assert_allclose(mean[1], diff[:8, 1].mean())
+    np.testing.assert_allclose(err[1], diff[4:8, 1].std(ddof=1) / np.sqrt(8))
+    np.testing.assert_allclose(err[0], diff[4:, 0].std(ddof=1) / np.sqrt(12))
+
+
+def test_group_subsets_draw_what_a_full_pass_draws():
+    """Two passes on complementary (replicate, mixel) groups give a full pass's estimates bit for bit, the
+    untraced groups NaN; the paired background pass on the same groups equals a full paired pass there."""
+    from mincam_sim.render.kernels.change_geometry import watch_box
+    from mincam_sim.render.kernels.stratified import stratified_lanes
+
+    world, frames, bg = _world({}, (0.04, 0.02, 0.02))
+    frame = frames([(0.03, 0.02, 0.0)])[0]
+    world.update(frame)
+    regions, guide, _ = world.change_reach({"mover"})
+    world.update(bg)
+    bg_regions, _, _ = world.change_reach({"mover"})
+    regions = regions.union(bg_regions)
+    world.update(frame)
+    kw = dict(expansions=(1.0, 2.0), guide=guide, max_depth=world.mincam_scene.max_depth)
+    watch = [watch_box(world.shapes_by_id["mover"])]
+    n, reps, counts = len(world.mincam), 6, [40, 8, 8]
+    some = np.zeros((reps, n), dtype=bool)
+    some[:2] = True
+    some[2:5, 1] = True
+    args = (world.scene, world.sensor, world.mincam, regions, reps, counts, 11)
+    full = stratified_lanes(*args, watch=watch, **kw)
+    part = stratified_lanes(*args, watch=watch, groups=some, **kw)
+    rest = stratified_lanes(*args, groups=~some, **kw)
+    whole = full.estimates()
+    np.testing.assert_array_equal(part.estimates()[some], whole[some])
+    assert np.isnan(part.estimates()[~some]).all() and np.isnan(rest.estimates()[some]).all()
+    np.testing.assert_array_equal(rest.estimates()[~some], whole[~some])
+    assert part.traced + rest.traced == full.traced
+    watch.append(watch_box(world.shapes_by_id["mover"]))
+    world.update(bg)
+    watch[1] = watch_box(world.shapes_by_id["mover"])
+    bg_full = stratified_lanes(*args, pair=full, **kw).estimates()
+    bg_part = stratified_lanes(*args, pair=part, groups=some, **kw).estimates()
+    np.testing.assert_array_equal(bg_part[some], bg_full[some])
+    assert np.isnan(bg_part[~some]).all()
+    with pytest.raises(ValueError, match="groups"):
+        stratified_lanes(*args, groups=some[:2], **kw)
+
+
+def _run(world, frames, bg, seed, **solver):
+    budget = ms.Budget(spp=1 << 11, replicates=16, seed=seed, target_rel_stderr=0.02)
+    return world.measure_changes(frames, bg, ms.StratifiedChange(**solver), budget)
+
+
+def test_allocated_run_is_reproducible_frozen_equals_traced_and_says_what_it_traced():
+    world, frames, bg = _world({}, (0.04, 0.02, 0.02))
+    fr = frames([(0.03, 0.02, 0.0), (-0.05, 0.0, 0.0), (0.16, 0.0, 0.0)])
+    one = _run(world, fr, bg, 5)
+    two = _run(world, fr, bg, 5)
+    world.freeze_launches = world.pair_lanes = False
+    traced = _run(world, fr, bg, 5)
+    world.freeze_launches = world.pair_lanes = True
+    for other in (two, traced):
+        np.testing.assert_array_equal(other.dp.irradiance_w_m2, one.dp.irradiance_w_m2)
+        np.testing.assert_array_equal(other.dp.stderr_w_m2, one.dp.stderr_w_m2)
+    alloc = one.dp.meta["allocation"]
+    reps = np.asarray(alloc["replicates_per_frame_and_mixel"])
+    assert reps.shape == (3, 4) and alloc["floor_replicates"] == 24 and alloc["max_replicates"] == 256
+    assert reps.min() >= 24 and reps.max() <= 256 and reps.max() > reps.min()
+    # rays as traced: the frame pass and the (paired) background pass of every replicate traced
+    per = alloc["rays_per_frame_pass_per_replicate"]
+    assert per * reps.mean() <= one.info.rays_per_mixel_per_frame <= 2 * per * reps.mean() + 1
+    # a value sized to the target reaches about it (sigma's own noise aside); unsized ones sit at the floor
+    rel = np.abs(one.dp.stderr_w_m2 / one.dp.irradiance_w_m2)
+    sized = (reps > 24) & (reps < 256)
+    assert sized.any() and np.all(rel[sized] < 0.02 * 1.6)
+    pooled = _run(world, fr, bg, 5, allocation_sigma="pooled")
+    assert pooled.dp.meta["allocation"]["floor_replicates"] == 16
+    with pytest.raises(ms.InputError, match="allocation_sigma"):
+        _run(world, fr, bg, 5, allocation_sigma="mine")
+
+
+def test_allocated_dp_agrees_with_plain_reference():
+    """Unbiased: the allocated dP against the plain estimator at many rays (independent code path)."""
+    world, frames, bg = _world({}, (0.04, 0.02, 0.02))
+    fr = frames([(0.03, 0.02, 0.0), (-0.05, 0.0, 0.0)])
+    plain = world.measure_changes(fr, bg, ms.PlainChange(), ms.Budget(spp=1 << 16, replicates=16, seed=3)).dp
+    for seed in (21, 22):
+        fast = _run(world, fr, bg, seed).dp
+        sigma = np.hypot(fast.stderr_w_m2, plain.stderr_w_m2)
+        assert_close_mc(fast.irradiance_w_m2, plain.irradiance_w_m2, sigma, what=f"allocated vs plain, seed {seed}")
