@@ -336,7 +336,7 @@ def _grid_mincam(n: int, height_m: float):
 
 
 def _cost_point(n_mixels: int = 4, table_triangles: int = 2, n_movers: int = 1, n_frames: int = 16,
-                spp: int = 1 << 14, target: float = 0.0, pilot_spp: int = 1 << 12) -> dict:
+                spp: int = 1 << 14, target: float = 0.0, pilot_spp: int = 4320, pilot_replicates: int = 24) -> dict:
     """One point of the cost curves: the stratified and the plain estimator on the same frames at the same rays
     per pass; frames/s and the rays per mixel per frame each needs for <= 1 % worst relative sigma of dP
     (extrapolated with sigma ~ rays^-1/2 and time ~ rays from the measured run). 16 frames: a run's one-off
@@ -344,7 +344,7 @@ def _cost_point(n_mixels: int = 4, table_triangles: int = 2, n_movers: int = 1, 
     they are over a video's hundreds of frames, not charged to 4.
 
     With ``target`` > 0, the stratified estimator is also run with per-mixel allocation at that target
-    (``pilot_spp`` rays per pass in its 16 pilot replicates): measured, not extrapolated, under the key
+    (``pilot_spp`` rays per pass in its ``pilot_replicates``): measured, not extrapolated, under the key
     ``stratified_allocated`` (rays as traced, worst sigma reached, seconds per frame)."""
     import trimesh
 
@@ -398,7 +398,7 @@ def _cost_point(n_mixels: int = 4, table_triangles: int = 2, n_movers: int = 1, 
                                                               / out["plain"]["frames_per_second_at_1pct"])
     if target > 0:
         solver = StratifiedChange()
-        budget = Budget(spp=pilot_spp, replicates=16, seed=3, target_rel_stderr=target)
+        budget = Budget(spp=pilot_spp, replicates=pilot_replicates, seed=3, target_rel_stderr=target)
         world.measure_changes(frames[:1], background, solver, replace(budget, seed=1))  # warm-up
         t = time.perf_counter()
         ch = world.measure_changes(frames, background, solver, budget)
@@ -408,7 +408,8 @@ def _cost_point(n_mixels: int = 4, table_triangles: int = 2, n_movers: int = 1, 
         rel = np.abs(dp.stderr_w_m2 / dp.irradiance_w_m2)[significant]
         alloc = dp.meta["allocation"]
         out["stratified_allocated"] = {
-            "target_rel_stderr": target, "pilot_spp": pilot_spp, "seconds_per_frame": seconds / n_frames,
+            "target_rel_stderr": target, "pilot_spp": pilot_spp, "pilot_replicates": pilot_replicates,
+            "sigma_from": alloc["sigma_from"], "seconds_per_frame": seconds / n_frames,
             "rays_per_mixel_per_frame": ch.info.rays_per_mixel_per_frame,
             "worst_rel_stderr_dP": float(rel.max()) if rel.size else float("nan"),
             "significant_values": int(significant.sum()),

@@ -101,17 +101,19 @@ def test_allocated_run_is_reproducible_frozen_equals_traced_and_says_what_it_tra
         np.testing.assert_array_equal(other.dp.stderr_w_m2, one.dp.stderr_w_m2)
     alloc = one.dp.meta["allocation"]
     reps = np.asarray(alloc["replicates_per_frame_and_mixel"])
-    assert reps.shape == (3, 4) and alloc["floor_replicates"] == 24 and alloc["max_replicates"] == 256
-    assert reps.min() >= 24 and reps.max() <= 256 and reps.max() > reps.min()
+    assert reps.shape == (3, 4) and alloc["floor_replicates"] == 16 and alloc["max_replicates"] == 256
+    assert alloc["sigma_from"] == "pilot"
+    assert reps.min() >= 16 and reps.max() <= 256 and reps.max() > reps.min()
     # rays as traced: the frame pass and the (paired) background pass of every replicate traced
     per = alloc["rays_per_frame_pass_per_replicate"]
     assert per * reps.mean() <= one.info.rays_per_mixel_per_frame <= 2 * per * reps.mean() + 1
     # a value sized to the target reaches about it (sigma's own noise aside); unsized ones sit at the floor
     rel = np.abs(one.dp.stderr_w_m2 / one.dp.irradiance_w_m2)
-    sized = (reps > 24) & (reps < 256)
-    assert sized.any() and np.all(rel[sized] < 0.02 * 1.6)
-    pooled = _run(world, fr, bg, 5, allocation_sigma="pooled")
-    assert pooled.dp.meta["allocation"]["floor_replicates"] == 16
+    sized = (reps > 16) & (reps < 256)
+    assert sized.any() and np.all(rel[sized] < 0.02 * 1.2)
+    for sigma, floor in (("pooled", 16), ("independent", 24)):
+        other = _run(world, fr, bg, 5, allocation_sigma=sigma).dp.meta["allocation"]
+        assert other["floor_replicates"] == floor and min(map(min, other["replicates_per_frame_and_mixel"])) == floor
     with pytest.raises(ms.InputError, match="allocation_sigma"):
         _run(world, fr, bg, 5, allocation_sigma="mine")
 
@@ -125,3 +127,23 @@ def test_allocated_dp_agrees_with_plain_reference():
         fast = _run(world, fr, bg, seed).dp
         sigma = np.hypot(fast.stderr_w_m2, plain.stderr_w_m2)
         assert_close_mc(fast.irradiance_w_m2, plain.irradiance_w_m2, sigma, what=f"allocated vs plain, seed {seed}")
+
+
+def test_allocated_sigma_matches_spread_over_seeds():
+    """Stein's two-stage sigma (the default) against the scatter of dP over 12 independent seeds, pooled over
+    frames and mixels (chi-square bounds at ~1e-4 false-alarm probability), and no |z| beyond 4.5 against the
+    seeds' mean."""
+    from scipy.stats import chi2
+
+    world, frames, bg = _world({}, (0.04, 0.02, 0.02))
+    fr = frames([(0.03, 0.02, 0.0), (-0.05, 0.0, 0.0)])
+    runs = [_run(world, fr, bg, 300 + s).dp for s in range(12)]
+    values = np.stack([r.irradiance_w_m2 for r in runs])
+    sigma = np.stack([r.stderr_w_m2 for r in runs])
+    dof = values[0].size * (len(runs) - 1)
+    ratio = float(np.sum(values.var(axis=0, ddof=1)) / np.sum(np.mean(sigma**2, axis=0)))
+    # sigma's own noise (R0 - 1 = 15 degrees of freedom) widens the bounds a little: 30 % allowance
+    lo, hi = chi2.ppf(1e-4 / 2, dof) / dof / 1.3, chi2.ppf(1 - 1e-4 / 2, dof) / dof * 1.3
+    assert lo < ratio < hi, f"spread / reported variance = {ratio:.2f}, bounds {lo:.2f} .. {hi:.2f}"
+    z = (values - values.mean(axis=0)) / sigma
+    assert np.abs(z).max() < 4.5

@@ -54,6 +54,7 @@ from mincam_sim.render.kernels.mask_eval import mask_model_meta
 from mincam_sim.render.kernels.monte_carlo import (
     check_counts,
     derive_seed,
+    dominance_threshold,
     heavy_tailed,
     pilot_to_target,
     warn_target_missed,
@@ -82,7 +83,7 @@ FREEZE_ALLOWANCE = 6  # recordings of a run's frozen launch (passes x buffer add
 DEFAULT_REPLICATES = 8
 ALLOCATION_MAX_FACTOR = 16  # per-mixel allocation: a value gets at most this many times the pilot's replicates
 ALLOCATION_SIGNIFICANCE = 4.0  # |dP| under this many pilot sigmas: the value is not sized (it gets the floor)
-ALLOCATION_SIGMA = ("independent", "pooled")  # where a per-mixel allocated value's sigma comes from
+ALLOCATION_SIGMA = ("pilot", "independent", "pooled")  # where a per-mixel allocated value's sigma comes from
 # per frame, kept with the results
 INFO_COLUMNS = ("retried", "guided", "guide_spheres", "region_area_fraction", "rays_per_mixel")
 Updates = Mapping[str, np.ndarray]
@@ -207,10 +208,14 @@ class StratifiedChange(ChangeSolver):
         (``_StratifiedRun.allocation``). Only on the guided path (frames whose rays are not guided keep the
         budget's replicates).
     allocation_sigma : str
-        Where an allocated value's sigma comes from: ``"independent"`` (default) the spread of the replicates
-        traced after the decision only (at least half the pilot's count more for every value; the mean pools all),
-        unbiased whatever the pilot drew; ``"pooled"`` the spread of all its replicates, pilot included (cheaper;
-        sigma biased low by a few percent, since values whose pilot spread came out large get more replicates).
+        Where an allocated value's sigma comes from (the mean always pools all its replicates): ``"pilot"``
+        (default) the pilot's spread over sqrt(all its replicates), Stein's two-stage: for Gaussian replicates
+        (dP - true) / sigma is exactly Student's t with R0 - 1 degrees of freedom, and a sized value's sigma sits
+        near the target by construction; ``"independent"`` the spread of the replicates traced after the
+        decision only (every value gets at least half the pilot's count more), unbiased whatever the pilot drew,
+        but with fewer degrees of freedom (a noisier sigma); ``"pooled"`` the spread of all its replicates, pilot
+        included (biased low by a few percent: values whose pilot spread came out large get more replicates,
+        which dilute it).
     correlated : bool
         As ``ChangeSolver``.
     """
@@ -219,7 +224,7 @@ class StratifiedChange(ChangeSolver):
     strata_expansions: Sequence[float] = STRATA_EXPANSIONS
     guide_bounces: bool = True
     allocate: bool = True
-    allocation_sigma: str = "independent"
+    allocation_sigma: str = "pilot"
     name: ClassVar[str] = "stratified_change"
 
     def allocates(self, budget: Budget) -> bool:
@@ -309,7 +314,11 @@ class ChangePlan(Plan):
         reached = worst_relative_stderr(values[:, :n], errors[:, :n], significance=3.0)
         meta["reached_rel_stderr"] = reached if np.isfinite(reached) else None
         meta["target_rel_stderr"] = self.target
-        warn_target_missed(reached, self.target, self.spp, self.cap)
+        alloc = meta.get("allocation")
+        warn_target_missed(reached, self.target, self.spp, self.cap,
+                           None if not alloc else
+                           f"per-mixel allocation: sigma's own noise, or values at the most replicates, "
+                           f"{alloc['max_replicates']}; see meta['allocation']")
         run.warn(meta)
         warn_unreached(Measurements(values[:, n:2 * n], errors[:, n:2 * n], names))
         dp = Measurements(values[:, :n], errors[:, :n], names, {**meta, "quantity": "dP = P(frame) - P(background)"})
@@ -333,11 +342,21 @@ def _unseen(diff: np.ndarray, changes: np.ndarray) -> np.ndarray:
         return changes & (np.nanmax(diff, axis=0) == np.nanmin(diff, axis=0))
 
 
-def _heavy_tailed(diff: np.ndarray) -> np.ndarray:
-    """``heavy_tailed`` per mixel over the replicates traced (a column's NaN left out)."""
+def _heavy_tailed(diff: np.ndarray, pilot: int) -> np.ndarray:
+    """``heavy_tailed`` per mixel; where replicates were allocated per mixel (NaN where not traced), on the first
+    ``pilot`` replicates and, apart, on each mixel's replicates after them, the latter at the threshold of the
+    largest power of two not above their count (a threshold per count costs a Monte Carlo quantile; the one of
+    fewer replicates is higher: no more false alarms, a little less sensitive)."""
     if not np.isnan(diff).any():
         return heavy_tailed(diff)
-    return np.array([bool(heavy_tailed(col[~np.isnan(col)][:, None])[0]) for col in diff.T], dtype=bool)
+    flags = heavy_tailed(diff[:pilot])
+    for k, col in enumerate(diff[pilot:].T):
+        more = col[~np.isnan(col)]
+        if len(more) >= 3:
+            dev2 = (more - more.mean()) ** 2
+            total = dev2.sum()
+            flags[k] |= total > 0 and dev2.max() / total > dominance_threshold(1 << (len(more).bit_length() - 1))
+    return flags
 
 
 def pooled_mean_stderr(diff: np.ndarray, sigma_rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -414,11 +433,11 @@ class _Run:
         for i in progress(todo, desc="frames", disable=not show_progress):
             i = int(i)
             diff, frame_v, frame_e, changes, info = self.frame(frames, i, self.replicates, "")
-            retried = bool((_heavy_tailed(diff) | _unseen(diff, changes)).any())
+            retried = bool((_heavy_tailed(diff, self.replicates) | _unseen(diff, changes)).any())
             heavy = unseen = np.zeros(n, dtype=bool)
             if retried:
                 diff, frame_v, frame_e, changes, _ = self.frame(frames, i, RETRY_FACTOR * self.replicates, "retry")
-                heavy, unseen = _heavy_tailed(diff), _unseen(diff, changes)
+                heavy, unseen = _heavy_tailed(diff, RETRY_FACTOR * self.replicates), _unseen(diff, changes)
             mean, err = pooled_mean_stderr(diff, self.sigma_rows)
             row_v = np.concatenate([mean, frame_v])
             row_e = np.concatenate([err, frame_e])
@@ -500,7 +519,7 @@ class _StratifiedRun(_Run):
         self.split, self.static_geometry = self._split(sim, frames, background)
         self.recordings_at_start = self._recordings()
         self.frames_traced = 0
-        self.target, self.cap, self.allocation_sigma = 0.0, MAX_SPP, "independent"
+        self.target, self.cap, self.allocation_sigma = 0.0, MAX_SPP, "pilot"
         if guided and not self.can_guide:
             self.fallbacks["depth"] = (f"bounces are not guided at max_depth {sim.mincam_scene.max_depth} (the "
                                        "guided path covers 1 .. 5): rays follow Mitsuba's path")
@@ -515,9 +534,10 @@ class _StratifiedRun(_Run):
         of the mixels that need them are traced (background pass first, the scene being there, then the frame's,
         paired the other way round). Launches are laid out for the most replicates, so a replicate draws the same
         numbers whichever pass traces it. A value whose pilot |dP| is under ``ALLOCATION_SIGNIFICANCE`` pilot
-        sigmas gets the floor. The mean pools all ``R_k`` replicates; sigma, with ``"independent"``, comes from
-        the spread of the replicates traced after the decision only (unbiased: their number is fixed before they
-        are drawn), and with ``"pooled"`` from all of them."""
+        sigmas gets the floor. The mean pools all ``R_k`` replicates; sigma, with ``"pilot"``, is the pilot's
+        spread over sqrt(R_k) (Stein's two-stage), with ``"independent"`` the spread of the replicates traced
+        after the decision only (unbiased: their number is fixed before they are drawn) over sqrt(R_k), with
+        ``"pooled"`` the spread of all of them."""
         self.target, self.cap, self.allocation_sigma = target, cap, sigma
 
     def extra_floor(self, replicates: int) -> int:
@@ -655,6 +675,8 @@ class _StratifiedRun(_Run):
             extra = (rows >= replicates) & (rows < want[None, :])
             if self.allocation_sigma == "independent":
                 self.sigma_rows = extra
+            elif self.allocation_sigma == "pilot":  # Stein's two-stage: the pilot's spread, the mean of all
+                self.sigma_rows = np.broadcast_to(rows < replicates, extra.shape)
             if extra.any():
                 # the scene holds the background now: its pass first (watching the boxes), then the frame's
                 bg_more = stratified_lanes(scene, r.sensor, r.mincam, regions, layout, self.counts, bg_seed,
