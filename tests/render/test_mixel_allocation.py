@@ -83,8 +83,8 @@ def test_group_subsets_draw_what_a_full_pass_draws():
         stratified_lanes(*args, groups=some[:2], **kw)
 
 
-def _run(world, frames, bg, seed, **solver):
-    budget = ms.Budget(spp=1 << 11, replicates=16, seed=seed, target_rel_stderr=0.02)
+def _run(world, frames, bg, seed, replicates=16, **solver):
+    budget = ms.Budget(spp=128 * replicates, replicates=replicates, seed=seed, target_rel_stderr=0.02)
     return world.measure_changes(frames, bg, ms.StratifiedChange(**solver), budget)
 
 
@@ -131,19 +131,19 @@ def test_allocated_dp_agrees_with_plain_reference():
 
 def test_allocated_sigma_matches_spread_over_seeds():
     """Stein's two-stage sigma (the default) against the scatter of dP over 12 independent seeds, pooled over
-    frames and mixels (chi-square bounds at ~1e-4 false-alarm probability), and no |z| beyond 4.5 against the
-    seeds' mean."""
+    frames and mixels (chi-square bounds at ~1e-4 false-alarm probability), and at most one |z| of 96 beyond 4.5
+    against the seeds' mean (a 24-replicate pilot: Student's t with 23 degrees of freedom)."""
     from scipy.stats import chi2
 
     world, frames, bg = _world({}, (0.04, 0.02, 0.02))
     fr = frames([(0.03, 0.02, 0.0), (-0.05, 0.0, 0.0)])
-    runs = [_run(world, fr, bg, 300 + s).dp for s in range(12)]
+    runs = [_run(world, fr, bg, 300 + s, replicates=24).dp for s in range(12)]
     values = np.stack([r.irradiance_w_m2 for r in runs])
     sigma = np.stack([r.stderr_w_m2 for r in runs])
     dof = values[0].size * (len(runs) - 1)
     ratio = float(np.sum(values.var(axis=0, ddof=1)) / np.sum(np.mean(sigma**2, axis=0)))
-    # sigma's own noise (R0 - 1 = 15 degrees of freedom) widens the bounds a little: 30 % allowance
+    # sigma's own noise (R0 - 1 = 23 degrees of freedom) widens the bounds a little: 30 % allowance
     lo, hi = chi2.ppf(1e-4 / 2, dof) / dof / 1.3, chi2.ppf(1 - 1e-4 / 2, dof) / dof * 1.3
     assert lo < ratio < hi, f"spread / reported variance = {ratio:.2f}, bounds {lo:.2f} .. {hi:.2f}"
     z = (values - values.mean(axis=0)) / sigma
-    assert np.abs(z).max() < 4.5
+    assert np.sum(np.abs(z) > 4.5) <= 1, f"|z| > 4.5 in {np.sum(np.abs(z) > 4.5)} of {z.size} values"
