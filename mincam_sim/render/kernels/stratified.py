@@ -200,7 +200,7 @@ def stratified_lanes(scene, sensor, mincam: Mincam, regions: ApertureRegions, re
             lanes = dr.arange(mi.UInt32, ng * per)
         else:
             lanes = dr.compress(pair.touched[launch])
-        if group_on is not None and not group_on[g0:g0 + ng].all():
+        if group_on is not None and not group_on[g0:g0 + ng].all() and dr.width(lanes):
             keep = dr.gather(mi.Bool, mi.Bool(np.ascontiguousarray(group_on[g0:g0 + ng])), lanes // per)
             lanes = dr.gather(mi.UInt32, lanes, dr.compress(keep))  # the lanes of the groups traced
         dr.make_opaque(lanes)
