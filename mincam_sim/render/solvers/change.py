@@ -81,7 +81,7 @@ RETRY_FACTOR = 4  # a frame whose replicates are heavy-tailed is measured again 
 SPLIT_MIN_TRIANGLES = 10_000  # static split by default from these static triangles (rebuilt: ~0.65 us a triangle)
 FREEZE_ALLOWANCE = 6  # recordings of a run's frozen launch (passes x buffer addresses) before it must replay
 DEFAULT_REPLICATES = 8
-ALLOCATION_MAX_FACTOR = 16  # per-mixel allocation: a value gets at most this many times the pilot's replicates
+ALLOCATION_MAX_FACTOR = 4  # per-mixel allocation: a value gets at most this many times the pilot's replicates
 ALLOCATION_SIGNIFICANCE = 4.0  # |dP| under this many pilot sigmas: the value is not sized (it gets the floor)
 ALLOCATION_SIGMA = ("pilot", "independent", "pooled")  # where a per-mixel allocated value's sigma comes from
 # per frame, kept with the results
