@@ -21,7 +21,10 @@ per-replicate differences, so it includes that correlation.
   of the world for the frame and one back to the background (the run's meta ``static_geometry`` says which).
 
 A target noise is reached by pilots: the solver's own plan on up to 4 frames spread over the run, at the
-budget's rays, extrapolated by ``estimation.pilot_to_target`` (no recursion through the front door).
+budget's rays, extrapolated by ``estimation.pilot_to_target`` (no recursion through the front door). The
+stratified solver instead sizes every (frame, mixel) value itself (``StratifiedChange.allocate``, on by default):
+the budget's rays and replicates are each frame's pilot part, and a mixel gets the extra replicates its own pilot
+spread asks for at the target (``_StratifiedRun.allocate``), not the rays the worst value of the run needs.
 """
 
 from __future__ import annotations
@@ -83,6 +86,8 @@ FREEZE_ALLOWANCE = 6  # recordings of a run's frozen launch (passes x buffer add
 DEFAULT_REPLICATES = 8
 ALLOCATION_MAX_FACTOR = 4  # per-mixel allocation: a value gets at most this many times the pilot's replicates
 ALLOCATION_SIGNIFICANCE = 4.0  # |dP| under this many pilot sigmas: the value is not sized (it gets the floor)
+ALLOCATION_PILOT_REPLICATES = 24  # per-mixel allocation, a budget naming no replicates: each frame's pilot part
+ALLOCATION_PILOT_SPP = 24 * 180  # ... and naming no spp: its rays per mixel per pass (180 per replicate)
 ALLOCATION_SIGMA = ("pilot", "independent", "pooled")  # where a per-mixel allocated value's sigma comes from
 # per frame, kept with the results
 INFO_COLUMNS = ("retried", "guided", "guide_spheres", "region_area_fraction", "rays_per_mixel")
@@ -126,7 +131,7 @@ class ChangeSolver(Solver):
 
     def plan(self, sim, frames, budget: Budget, *, background=None, cache=None, show_progress: bool = False) -> Plan:
         background = {} if background is None else background
-        replicates = budget.replicates_or(DEFAULT_REPLICATES)
+        replicates = budget.replicates_or(self.default_replicates(budget))
         self._check(frames, background, budget.rays(), replicates, budget.target_rel_stderr)
         background = sim.complete_background(frames, background)
         spp, resolved = self._resolve_spp(sim, frames, background, budget, replicates)
@@ -136,6 +141,10 @@ class ChangeSolver(Solver):
     def allocates(self, budget: Budget) -> bool:
         """True if this solver sizes each (frame, mixel) value's replicates itself to the budget's target."""
         return False
+
+    def default_replicates(self, budget: Budget) -> int:
+        """Replicates when the budget names none."""
+        return ALLOCATION_PILOT_REPLICATES if self.allocates(budget) else DEFAULT_REPLICATES
 
     def _check(self, frames, background, spp, replicates, target) -> None:
         """Refuse, in one line each, what a change run cannot honestly measure."""
@@ -155,7 +164,7 @@ class ChangeSolver(Solver):
         if not target > 0 or not len(frames):
             return spp, {}
         if self.allocates(budget):  # sized per mixel and frame by the run itself, from each frame's pilot part
-            return spp, {"target_rel_stderr": target}
+            return (budget.spp if budget.spp is not None else ALLOCATION_PILOT_SPP), {"target_rel_stderr": target}
         pilot_idx = np.unique(np.linspace(0, len(frames) - 1, min(4, len(frames))).astype(int))
         pilot_frames = [frames[i] for i in pilot_idx]
 
@@ -204,9 +213,11 @@ class StratifiedChange(ChangeSolver):
         cover.
     allocate : bool
         With a budget's ``target_rel_stderr``: size each (frame, mixel) value's replicates to the target from the
-        frame's own first ``replicates`` (the pilot part), instead of every value at the rays the worst needs
-        (``_StratifiedRun.allocation``). Only on the guided path (frames whose rays are not guided keep the
-        budget's replicates).
+        frame's own first ``replicates`` (the pilot part: the budget's spp and replicates, by default
+        ``ALLOCATION_PILOT_SPP`` and ``ALLOCATION_PILOT_REPLICATES``), up to ``ALLOCATION_MAX_FACTOR`` times them,
+        instead of every value at the rays the worst needs (``_StratifiedRun.allocate``; no pilot runs). Only on
+        the guided path (frames whose rays are not guided keep the pilot part). False: the pilot runs size the
+        whole run by its worst value, as before.
     allocation_sigma : str
         Where an allocated value's sigma comes from (the mean always pools all its replicates): ``"pilot"``
         (default) the pilot's spread over sqrt(all its replicates), Stein's two-stage: for Gaussian replicates
