@@ -147,3 +147,23 @@ def test_allocated_sigma_matches_spread_over_seeds():
     assert lo < ratio < hi, f"spread / reported variance = {ratio:.2f}, bounds {lo:.2f} .. {hi:.2f}"
     z = (values - values.mean(axis=0)) / sigma
     assert np.sum(np.abs(z) > 4.5) <= 1, f"|z| > 4.5 in {np.sum(np.abs(z) > 4.5)} of {z.size} values"
+
+
+def test_allocated_split_run_gives_the_one_scene_numbers():
+    """The extra replicates move the movers scene of a static split back to the frame and again to the
+    background: the same numbers bit for bit as the one-scene run (two movers, far origin)."""
+    from test_static_split import _world as split_world
+
+    for kw in ({"movers": 2}, {"offset": (1200.0, -800.0, 30.0)}):
+        world, frames, background = split_world(**kw)
+        runs = []
+        for split in (False, True):
+            world.split_static = split
+            runs.append(world.measure_changes(frames, background, ms.StratifiedChange(),
+                                              ms.Budget(spp=1 << 11, replicates=16, seed=5, target_rel_stderr=0.02)))
+        one, two = runs
+        assert two.dp.meta["static_geometry"].startswith("split"), two.dp.meta["static_geometry"]
+        assert np.asarray(one.dp.meta["allocation"]["replicates_per_frame_and_mixel"]).max() > 16
+        for a, b in ((two.dp, one.dp), (two.p, one.p)):
+            np.testing.assert_array_equal(a.irradiance_w_m2, b.irradiance_w_m2)
+            np.testing.assert_array_equal(a.stderr_w_m2, b.stderr_w_m2)

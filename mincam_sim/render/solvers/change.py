@@ -241,6 +241,15 @@ class StratifiedChange(ChangeSolver):
     def allocates(self, budget: Budget) -> bool:
         return bool(self.allocate) and budget.target_rel_stderr > 0
 
+    def identity(self) -> dict:
+        # the allocation options at their defaults leave the identity of stores written before them as it was
+        # (a store of a target run before them has no replicate columns, and is refused for that)
+        out = super().identity()
+        for name, default in (("allocate", True), ("allocation_sigma", "pilot")):
+            if out.get(name) == default:
+                out.pop(name)
+        return out
+
     def _check(self, frames, background, spp, replicates, target) -> None:
         super()._check(frames, background, spp, replicates, target)
         self.shares()
@@ -286,7 +295,7 @@ class StratifiedChange(ChangeSolver):
 class ChangePlan(Plan):
     """One change run at the budget's ``spp`` rays per pass (the target already resolved): the background traced
     once, then a row per frame (dP and P per mixel, then heavy-tailed and unseen flags per mixel and
-    ``INFO_COLUMNS``, then the replicates traced per mixel)."""
+    ``INFO_COLUMNS``, then, where replicates are allocated per mixel, the replicates traced per mixel)."""
 
     def __init__(self, solver: ChangeSolver, sim, frames, background, budget: Budget, replicates: int,
                  resolved: dict, show_progress: bool) -> None:
@@ -303,7 +312,7 @@ class ChangePlan(Plan):
         self.n_rows = len(frames)
         self.columns = ([f"dP_{m}" for m in names] + [f"P_{m}" for m in names]
                         + [f"heavy_tailed_{m}" for m in names] + [f"unseen_{m}" for m in names] + list(INFO_COLUMNS)
-                        + [f"replicates_{m}" for m in names])
+                        + ([f"replicates_{m}" for m in names] if self.run.per_mixel_replicates else []))
 
     def rows(self, pending: np.ndarray) -> Iterator[Row]:
         # one row per frame: dP and P, then the flags and info (no standard error of their own)
@@ -417,6 +426,7 @@ class _Run:
         self.bg = bg
         self.fallbacks: dict[str, str] = {}
         self.sigma_rows: np.ndarray | None = None  # the last frame's replicates whose spread gives sigma (None: all)
+        self.per_mixel_replicates = False  # replicates allocated per mixel: a column of them per mixel
 
     def note_delta_movers(self, moving) -> None:
         """Say it when a moving shape is glass or a mirror (a delta BSDF) whose redirected light is not guided:
@@ -440,7 +450,7 @@ class _Run:
 
     def rows(self, frames, todo, show_progress: bool):
         """(frame index, values, stderr, info) per frame of ``todo``: dP then P per mixel; then heavy-tailed and
-        unseen flags per mixel, ``INFO_COLUMNS`` and the replicates traced per mixel."""
+        unseen flags per mixel, ``INFO_COLUMNS`` and (allocated per mixel) the replicates traced per mixel."""
         n = len(self.r.mincam)
         for i in progress(todo, desc="frames", disable=not show_progress):
             i = int(i)
@@ -453,7 +463,7 @@ class _Run:
             mean, err = pooled_mean_stderr(diff, self.sigma_rows)
             row_v = np.concatenate([mean, frame_v])
             row_e = np.concatenate([err, frame_e])
-            reps = (~np.isnan(diff)).sum(axis=0)  # replicates traced per mixel
+            reps = (~np.isnan(diff)).sum(axis=0) if self.per_mixel_replicates else []  # replicates traced per mixel
             yield i, row_v, row_e, np.concatenate([heavy, unseen, [retried, *info], reps]).astype(float)
 
     def meta(self, info: np.ndarray) -> dict:
@@ -551,6 +561,7 @@ class _StratifiedRun(_Run):
         after the decision only (unbiased: their number is fixed before they are drawn) over sqrt(R_k), with
         ``"pooled"`` the spread of all of them."""
         self.target, self.cap, self.allocation_sigma = target, cap, sigma
+        self.per_mixel_replicates = True
 
     def extra_floor(self, replicates: int) -> int:
         """Replicates every allocated value gets beyond the pilot's: half the pilot's (at least 2) when its sigma
