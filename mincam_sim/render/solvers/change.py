@@ -766,7 +766,7 @@ class _StratifiedRun(_Run):
         return {**super().meta(info), "strata_expansions": list(self.expansions), "strata_rays_per_replicate": counts,
                 "allocation": allocation,
                 "rays_per_mixel_per_frame": int(round(rays)),
-                "background_rays_share": (rays - full) / full,
+                "background_rays_share": None if allocation else (rays - full) / full,  # allocated: no one full pass
                 "paired_lanes_reused": bool(self.pairs), "launches": self.launches,
                 "static_geometry": self.static_geometry,
                 "moving_shapes": sorted(self.moving), "guide_bounces": bool(self.guided),
