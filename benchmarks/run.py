@@ -15,6 +15,7 @@ import resource
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -205,6 +206,9 @@ def bench_moving_object() -> dict:
 
 
 MOVING_OBJECT_REPLICATES = 64  # see bench_moving_object
+# per-mixel allocation on the moving object: 24 pilot replicates of 180 rays per pass, each value sized to 0.95 %
+# (Stein's two-stage sigma sits at the target for a sized value, times |pilot dP / dP|: 5 % under the 1 % goal)
+ALLOCATED_PILOT_SPP, ALLOCATED_PILOT_REPLICATES, ALLOCATED_TARGET = 4320, 24, 0.0095
 RECHECK_SEED_SETS = 8  # independent 9-frame runs at the chosen budget, each one's worst sigma reported
 
 
@@ -278,6 +282,7 @@ def _moving_object_stratified(world, frames, background, plain) -> dict:
     for seed in range(RECHECK_SEED_SETS):
         again = fast_dp(frames, spp, 100 + seed).dp
         recheck.append(float(np.max(np.abs(again.stderr_w_m2 / again.irradiance_w_m2))))
+    allocated = _moving_object_allocated(world, frames, background, plain)
     # the same runs traced every frame with full background passes (the estimator before frozen launches and
     # paired lanes): the same numbers bit for bit, timed in this run beside the frozen, paired ones
     _set_frozen_paired(world, False)
@@ -317,6 +322,52 @@ def _moving_object_stratified(world, frames, background, plain) -> dict:
         "fps_background_spp_per_mixel": int(dp.meta["background_spp_per_mixel"]),
         "fps_background_worst_rel_stderr_P": float(np.max(np.asarray(dp.meta["background_stderr_w_m2"])
                                                           / np.asarray(dp.meta["background_w_m2"]))),
+        **allocated,
+    }
+
+
+def _moving_object_allocated(world, frames, background, plain) -> dict:
+    """The stratified estimator with per-mixel allocation at ``ALLOCATED_TARGET`` (no pilot runs: each frame's
+    first replicates are its pilot): frames/s over 3 timed runs (seeds 30-32, as the uniform runs), rays per mixel
+    per frame as traced, the worst sigma of each of ``RECHECK_SEED_SETS`` independent seed sets, |z| against
+    the plain run."""
+    from mincam_sim import Budget, StratifiedChange
+
+    def run(seed: int, run_frames=frames):
+        budget = Budget(spp=ALLOCATED_PILOT_SPP, replicates=ALLOCATED_PILOT_REPLICATES, seed=seed,
+                        target_rel_stderr=ALLOCATED_TARGET)
+        return world.measure_changes(run_frames, background, StratifiedChange(), budget)
+
+    run(21)  # warm-up over every frame: kernels, recordings, the heavy-tail thresholds of each replicate count
+    seconds, worst, z_max, rays = 0.0, [], 0.0, []
+    for seed in range(3):
+        t = time.perf_counter()
+        ch = run(30 + seed)
+        seconds += time.perf_counter() - t
+        dp = ch.dp
+        worst.append(float(np.max(np.abs(dp.stderr_w_m2 / dp.irradiance_w_m2))))
+        rays.append(ch.info.rays_per_mixel_per_frame)
+        z = (dp.irradiance_w_m2 - plain.irradiance_w_m2) / np.hypot(dp.stderr_w_m2, plain.stderr_w_m2)
+        z_max = max(z_max, float(np.max(np.abs(z))))
+    recheck, recheck_rays = [], []
+    for seed in range(RECHECK_SEED_SETS):
+        again = run(100 + seed)
+        recheck.append(float(np.max(np.abs(again.dp.stderr_w_m2 / again.dp.irradiance_w_m2))))
+        recheck_rays.append(again.info.rays_per_mixel_per_frame)
+    alloc = dp.meta["allocation"]
+    return {
+        "allocated_frames_per_second": 3 * len(frames) / seconds,
+        "allocated_rays_per_mixel_per_frame": float(np.mean(rays)),
+        "allocated_worst_rel_stderr_dP": max(worst),
+        "allocated_worst_rel_stderr_dP_independent_seed_sets": recheck,
+        "allocated_rays_per_mixel_per_frame_independent_seed_sets": recheck_rays,
+        "allocated_vs_plain_max_abs_z": z_max,
+        "allocated_target_rel_stderr": ALLOCATED_TARGET,
+        "allocated_pilot_spp": ALLOCATED_PILOT_SPP,
+        "allocated_pilot_replicates": ALLOCATED_PILOT_REPLICATES,
+        "allocated_sigma_from": alloc["sigma_from"],
+        "allocated_replicates_mean": alloc["replicates_mean"],
+        "allocated_replicates_max": alloc["replicates_max"],
     }
 
 
@@ -335,12 +386,18 @@ def _grid_mincam(n: int, height_m: float):
 
 
 def _cost_point(n_mixels: int = 4, table_triangles: int = 2, n_movers: int = 1, n_frames: int = 16,
-                spp: int = 1 << 14) -> dict:
+                spp: int = 1 << 14, target: float = 0.0, pilot_spp: int = 4320, pilot_replicates: int = 24) -> dict:
     """One point of the cost curves: the stratified and the plain estimator on the same frames at the same rays
     per pass; frames/s and the rays per mixel per frame each needs for <= 1 % worst relative sigma of dP
     (extrapolated with sigma ~ rays^-1/2 and time ~ rays from the measured run). 16 frames: a run's one-off
     costs (a frozen launch's first recordings, the static scene of a large world built once) are spread as
-    they are over a video's hundreds of frames, not charged to 4."""
+    they are over a video's hundreds of frames, not charged to 4.
+
+    With ``target`` > 0, the stratified estimator is also run with per-mixel allocation at that target
+    (``pilot_spp`` rays per pass in its ``pilot_replicates``): measured, not extrapolated, under the key
+    ``stratified_allocated`` (rays as traced, worst sigma reached, seconds per frame); and the uniform estimator
+    at the rays its extrapolation gives for 1 %, measured (``stratified_at_1pct_measured``). Both are warmed up
+    over every frame first (kernels, recordings, heavy-tail thresholds: one-off costs of a long video)."""
     import trimesh
 
     from mincam_sim import Budget, PlainChange, Simulation, StratifiedChange, cross_layout
@@ -386,11 +443,46 @@ def _cost_point(n_mixels: int = 4, table_triangles: int = 2, n_movers: int = 1, 
         rays = ch.info.rays_per_mixel_per_frame
         scale = (worst / 0.01) ** 2
         out[estimator] = {"seconds_per_frame": seconds / n_frames, "rays_per_mixel_per_frame": rays,
+                          "retried_frames": len(dp.meta["retried_frames"]),
                           "worst_rel_stderr_dP": worst, "significant_values": int(significant.sum()),
                           "rays_per_mixel_per_frame_at_1pct": rays * scale,
                           "frames_per_second_at_1pct": n_frames / seconds / scale}
     out["stratified_over_plain_frames_per_second_at_1pct"] = (out["stratified"]["frames_per_second_at_1pct"]
                                                               / out["plain"]["frames_per_second_at_1pct"])
+    if target > 0:
+        # the uniform estimator at the rays its extrapolation asks for 1 %, measured (time is not quite ~ rays)
+        spp_1pct = int(np.ceil(spp * out["stratified"]["rays_per_mixel_per_frame_at_1pct"]
+                               / out["stratified"]["rays_per_mixel_per_frame"]))
+        budget = Budget(spp=spp_1pct, replicates=16, seed=4)
+        world.measure_changes(frames, background, StratifiedChange(), budget)  # warm-up at that size
+        t = time.perf_counter()
+        ch = world.measure_changes(frames, background, StratifiedChange(), replace(budget, seed=5))
+        seconds = time.perf_counter() - t
+        dp = ch.dp
+        significant = np.abs(dp.irradiance_w_m2) > 4 * dp.stderr_w_m2
+        rel = np.abs(dp.stderr_w_m2 / dp.irradiance_w_m2)[significant]
+        out["stratified_at_1pct_measured"] = {
+            "spp": spp_1pct, "seconds_per_frame": seconds / n_frames,
+            "rays_per_mixel_per_frame": ch.info.rays_per_mixel_per_frame,
+            "worst_rel_stderr_dP": float(rel.max()) if rel.size else float("nan")}
+        solver = StratifiedChange()
+        budget = Budget(spp=pilot_spp, replicates=pilot_replicates, seed=3, target_rel_stderr=target)
+        world.measure_changes(frames, background, solver, replace(budget, seed=1))  # warm-up (every frame: as above)
+        t = time.perf_counter()
+        ch = world.measure_changes(frames, background, solver, budget)
+        seconds = time.perf_counter() - t
+        dp = ch.dp
+        significant = np.abs(dp.irradiance_w_m2) > 4 * dp.stderr_w_m2
+        rel = np.abs(dp.stderr_w_m2 / dp.irradiance_w_m2)[significant]
+        alloc = dp.meta["allocation"]
+        out["stratified_allocated"] = {
+            "target_rel_stderr": target, "pilot_spp": pilot_spp, "pilot_replicates": pilot_replicates,
+            "sigma_from": alloc["sigma_from"], "seconds_per_frame": seconds / n_frames,
+            "rays_per_mixel_per_frame": ch.info.rays_per_mixel_per_frame,
+            "worst_rel_stderr_dP": float(rel.max()) if rel.size else float("nan"),
+            "significant_values": int(significant.sum()),
+            "replicates_mean": alloc["replicates_mean"], "replicates_max": alloc["replicates_max"],
+            "retried_frames": len(dp.meta["retried_frames"])}
     return out
 
 

@@ -167,14 +167,16 @@ class TargetNotReachedWarning(UserWarning):
     """A run that asked for a relative standard error and did not reach it everywhere."""
 
 
-def warn_target_missed(reached: float, target: float, samples: int, cap: int) -> None:
-    """Warn when the worst relative standard error ``reached`` is above a requested ``target`` (> 0)."""
+def warn_target_missed(reached: float, target: float, samples: int, cap: int, why: str | None = None) -> None:
+    """Warn when the worst relative standard error ``reached`` is above a requested ``target`` (> 0); ``why``
+    the target was missed, if the caller knows better than the pilot / cap rule."""
     if target > 0 and not np.isfinite(reached):
         warnings.warn(f"no measurement was significantly non-zero (> 3 sigma) with {samples} samples, so the "
                       f"target relative standard error {target:.3g} could not be checked; raise the samples if the "
                       "frames should change what the mixels see", TargetNotReachedWarning, stacklevel=3)
     elif target > 0 and reached > target:
-        why = f"the cap of {cap} samples" if samples >= cap else "pilots that did not show the worst measurement"
+        if why is None:
+            why = f"the cap of {cap} samples" if samples >= cap else "pilots that did not show the worst measurement"
         warnings.warn(f"reached a worst relative standard error of {reached:.3g} > target {target:.3g} with "
                       f"{samples} samples (limited by {why}): the values are unbiased, only noisier than asked; "
                       "see meta['reached_rel_stderr']", TargetNotReachedWarning, stacklevel=3)

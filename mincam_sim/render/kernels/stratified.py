@@ -126,16 +126,17 @@ def stratified_estimates(scene, sensor, mincam: Mincam, regions: ApertureRegions
 class LaneValues:
     """Every lane's ``scale x weight x L`` of one stratified pass (per launch, float64) and, where the pass
     watched boxes, which lanes' paths met one (an ``mi.Bool`` per launch: a segment, shadow rays included,
-    crossing a box); ``traced`` lanes were traced (the others were taken from the pass it was paired with)."""
+    crossing a box); ``traced`` lanes were traced (the others were taken from the pass it was paired with).
+    Where only some (replicate, mixel) groups were traced (``groups``), the others' lanes hold NaN."""
 
     def __init__(self, n_mixels: int, replicates: int, counts: list[int], values: list[np.ndarray],
-                 touched: list | None, traced: int) -> None:
+                 touched: list | None, traced: int, groups: np.ndarray | None = None) -> None:
         self.n_mixels, self.replicates, self.counts = n_mixels, replicates, counts
-        self.values, self.touched, self.traced = values, touched, traced
+        self.values, self.touched, self.traced, self.groups = values, touched, traced, groups
 
     def estimates(self, by_stratum: bool = False) -> np.ndarray:
         """(replicates, n_mixels) estimates [W/m^2], or (replicates, n_mixels, n_strata) their parts; lanes
-        summed in float64 in a fixed order."""
+        summed in float64 in a fixed order; NaN for a group that was not traced (see ``groups``)."""
         per = sum(self.counts)
         rows = []
         for value in self.values:
@@ -153,7 +154,8 @@ def stratified_lanes(scene, sensor, mincam: Mincam, regions: ApertureRegions | R
                      counts: Sequence[int], seed: int, expansions: Sequence[float] = (1.0,), jitter: bool = True,
                      guide=None, max_depth: int | None = None, freeze: tuple | None = None,
                      watch: Sequence[tuple[np.ndarray, np.ndarray]] | None = None,
-                     pair: LaneValues | None = None, sobol: bool = True) -> LaneValues:
+                     pair: LaneValues | None = None, sobol: bool = True,
+                     groups: np.ndarray | None = None) -> LaneValues:
     """The lanes of :func:`stratified_estimates` (same parameters), with two more for a frame and its
     background traced as a pair.
 
@@ -167,6 +169,12 @@ def stratified_lanes(scene, sensor, mincam: Mincam, regions: ApertureRegions | R
         its lanes that met a box are traced here, and every other lane takes its value. A path that crosses
         none of the boxes meets the same surfaces, draws the same random numbers and casts the same shadow
         rays in both scenes, so its value is the same: the result equals a full pass bit for bit.
+    groups : (replicates, n_mixels) bool array, optional
+        Trace only the lanes of these (replicate, mixel) groups (None: all), the launches laid out as for all
+        ``replicates``: every traced lane draws what it draws in a full pass (the guided path's lane sampler),
+        so two calls on complementary groups give a full pass's values. The other groups' lanes hold NaN (or,
+        with ``pair``, the pair's values, NaN where the pair did not trace them). Needs the guided path; a
+        ``pair`` must have been traced on the same groups (or a superset).
     """
     counts = [int(c) for c in counts]
     check_strata(counts, expansions)
@@ -184,8 +192,15 @@ def stratified_lanes(scene, sensor, mincam: Mincam, regions: ApertureRegions | R
         packed = np.pad(packed, ((0, 0), (0, _mis_stride(n_regions, len(expansions)) - packed.shape[1])))
     coeffs = mi.Float(np.ascontiguousarray(packed.ravel(), dtype=np.float32))
     guided = guide is not None and max_depth is not None and guided_path.supports(max_depth)
-    if (watch is not None or pair is not None) and not guided:
-        raise ValueError("watch and pair need the guided path: a guide and a max_depth of 1 .. 5")
+    if (watch is not None or pair is not None or groups is not None) and not guided:
+        raise ValueError("watch, pair and groups need the guided path: a guide and a max_depth of 1 .. 5")
+    group_on = None
+    if groups is not None:
+        groups = np.asarray(groups, dtype=bool)
+        if groups.shape != (int(replicates), n):
+            raise ValueError(f"groups (which replicate of which mixel to trace) must have shape (replicates, "
+                             f"n_mixels) = ({int(replicates)}, {n}), got {groups.shape}")
+        group_on = groups.T.ravel()  # group g = mixel k * replicates + replicate r
     spheres = guided_path.opaque_spheres(guide) if guided else []
     boxes = [tuple(mi.Point3f(*(dr.opaque(mi.Float, float(x)) for x in corner)) for corner in box)
              for box in (watch or [])]
@@ -195,11 +210,16 @@ def stratified_lanes(scene, sensor, mincam: Mincam, regions: ApertureRegions | R
     for launch, g0 in enumerate(range(0, n_groups, groups_per_launch)):
         ng = min(groups_per_launch, n_groups - g0)
         value = None if pair is None else pair.values[launch].copy()
+        if value is None and group_on is not None:
+            value = np.full(ng * per, np.nan)
         # lane indices made by Dr.Jit, not mapped from numpy (whose alignment would make a frozen launch record)
         if pair is None or pair.touched is None:
             lanes = dr.arange(mi.UInt32, ng * per)
         else:
             lanes = dr.compress(pair.touched[launch])
+        if group_on is not None and not group_on[g0:g0 + ng].all() and dr.width(lanes):
+            keep = dr.gather(mi.Bool, mi.Bool(np.ascontiguousarray(group_on[g0:g0 + ng])), lanes // per)
+            lanes = dr.gather(mi.UInt32, lanes, dr.compress(keep))  # the lanes of the groups traced
         dr.make_opaque(lanes)
         shape = _LaunchShape(0 if guided else ng * per, tuple(counts), int(replicates), n,
                              tuple(float(e) for e in expansions), bool(jitter), int(max_depth) if guided else 0,
@@ -216,11 +236,17 @@ def stratified_lanes(scene, sensor, mincam: Mincam, regions: ApertureRegions | R
             else:
                 value[np.asarray(lanes, dtype=np.int64)] = out
         if touched is not None:
-            met = dr.zeros(mi.Bool, ng * per) | met  # no box (nothing differs): no lane met one
+            if dr.width(lanes) == ng * per:
+                met = dr.zeros(mi.Bool, ng * per) | met  # no box (nothing differs): no lane met one
+            else:  # a subset of the groups: the others' lanes met nothing (and are not traced by the pair)
+                full = dr.zeros(mi.Bool, ng * per)
+                if dr.width(lanes):
+                    dr.scatter(full, met, lanes)
+                met = full
             dr.eval(met)
             touched.append(met)
         values.append(value)
-    return LaneValues(n, int(replicates), counts, values, touched, traced)
+    return LaneValues(n, int(replicates), counts, values, touched, traced, groups)
 
 
 class _LaunchShape(NamedTuple):

@@ -23,7 +23,10 @@ per-replicate differences, so it includes that correlation.
   of the world for the frame and one back to the background (the run's meta ``static_geometry`` says which).
 
 A target noise is reached by pilots: the solver's own plan on up to 4 frames spread over the run, at the
-budget's rays, extrapolated by ``estimation.pilot_to_target`` (no recursion through the front door).
+budget's rays, extrapolated by ``estimation.pilot_to_target`` (no recursion through the front door). The
+stratified solver instead sizes every (frame, mixel) value itself (``StratifiedChange.allocate``, on by default):
+the budget's rays and replicates are each frame's pilot part, and a mixel gets the extra replicates its own pilot
+spread asks for at the target (``_StratifiedRun.allocate``), not the rays the worst value of the run needs.
 """
 
 from __future__ import annotations
@@ -57,6 +60,7 @@ from mincam_sim.render.kernels.mask_eval import mask_model_meta
 from mincam_sim.render.kernels.monte_carlo import (
     check_counts,
     derive_seed,
+    dominance_threshold,
     heavy_tailed,
     pilot_to_target,
     warn_target_missed,
@@ -83,6 +87,11 @@ RETRY_FACTOR = 4  # a frame whose replicates are heavy-tailed is measured again 
 SPLIT_MIN_TRIANGLES = 10_000  # static split by default from these static triangles (rebuilt: ~0.65 us a triangle)
 FREEZE_ALLOWANCE = 6  # recordings of a run's frozen launch (passes x buffer addresses) before it must replay
 DEFAULT_REPLICATES = 8
+ALLOCATION_MAX_FACTOR = 4  # per-mixel allocation: a value gets at most this many times the pilot's replicates
+ALLOCATION_SIGNIFICANCE = 4.0  # |dP| under this many pilot sigmas: the value is not sized (it gets the floor)
+ALLOCATION_PILOT_REPLICATES = 24  # per-mixel allocation, a budget naming no replicates: each frame's pilot part
+ALLOCATION_PILOT_SPP = 24 * 180  # ... and naming no spp: its rays per mixel per pass (180 per replicate)
+ALLOCATION_SIGMA = ("pilot", "independent", "pooled")  # where a per-mixel allocated value's sigma comes from
 # per frame, kept with the results
 INFO_COLUMNS = ("retried", "guided", "guide_spheres", "region_area_fraction", "rays_per_mixel")
 Updates = Mapping[str, np.ndarray]
@@ -112,8 +121,11 @@ class ChangeSolver(Solver):
     scenes: ClassVar[tuple[str, ...]] = ("world",)
     changes: ClassVar[bool] = True
 
-    def run(self, sim, frames, background, spp: int, seed: int, replicates: int, bg: np.ndarray) -> _Run:
-        """The per-frame machinery of one run at ``spp`` rays per pass (the background's estimates ``bg``)."""
+    def run(self, sim, frames, background, spp: int, seed: int, replicates: int, bg: np.ndarray,
+            target: float = 0.0, cap: int = MAX_SPP) -> _Run:
+        """The per-frame machinery of one run at ``spp`` rays per pass (the background's estimates ``bg``); a
+        solver that sizes each value itself aims at ``target`` (relative sigma of dP) with at most ``cap`` rays
+        per mixel per pass."""
         raise NotImplementedError
 
     def background_estimates(self, sim, spp: int, seed: int, replicates: int) -> tuple[int, np.ndarray]:
@@ -122,12 +134,20 @@ class ChangeSolver(Solver):
 
     def plan(self, sim, frames, budget: Budget, *, background=None, cache=None, show_progress: bool = False) -> Plan:
         background = {} if background is None else background
-        replicates = budget.replicates_or(DEFAULT_REPLICATES)
+        replicates = budget.replicates_or(self.default_replicates(budget))
         self._check(frames, background, budget.rays(), replicates, budget.target_rel_stderr)
         background = sim.complete_background(frames, background)
         spp, resolved = self._resolve_spp(sim, frames, background, budget, replicates)
         return ChangePlan(self, sim, frames, background, replace(budget, spp=spp), replicates, resolved,
                           show_progress)
+
+    def allocates(self, budget: Budget) -> bool:
+        """True if this solver sizes each (frame, mixel) value's replicates itself to the budget's target."""
+        return False
+
+    def default_replicates(self, budget: Budget) -> int:
+        """Replicates when the budget names none."""
+        return ALLOCATION_PILOT_REPLICATES if self.allocates(budget) else DEFAULT_REPLICATES
 
     def _check(self, frames, background, spp, replicates, target) -> None:
         """Refuse, in one line each, what a change run cannot honestly measure."""
@@ -146,6 +166,8 @@ class ChangeSolver(Solver):
         spp, target = budget.rays(), budget.target_rel_stderr
         if not target > 0 or not len(frames):
             return spp, {}
+        if self.allocates(budget):  # sized per mixel and frame by the run itself, from each frame's pilot part
+            return (budget.spp if budget.spp is not None else ALLOCATION_PILOT_SPP), {"target_rel_stderr": target}
         pilot_idx = np.unique(np.linspace(0, len(frames) - 1, min(4, len(frames))).astype(int))
         pilot_frames = [frames[i] for i in pilot_idx]
 
@@ -173,7 +195,7 @@ class PlainChange(ChangeSolver):
     def background_estimates(self, sim, spp, seed, replicates):
         return spp, sim.mincam_scene.fast_estimates(spp, replicates, seed)
 
-    def run(self, sim, frames, background, spp, seed, replicates, bg):
+    def run(self, sim, frames, background, spp, seed, replicates, bg, target=0.0, cap=MAX_SPP):
         return _PlainRun(sim, background, spp, seed, self.correlated, replicates, bg)
 
 
@@ -192,6 +214,22 @@ class StratifiedChange(ChangeSolver):
         Draw half the inter-reflection bounces toward spheres around the moving shapes
         (``mincam_sim.render.kernels.guided_path``; unbiased). Ignored at a ``max_depth`` the guided path does not
         cover.
+    allocate : bool
+        With a budget's ``target_rel_stderr``: size each (frame, mixel) value's replicates to the target from the
+        frame's own first ``replicates`` (the pilot part: the budget's spp and replicates, by default
+        ``ALLOCATION_PILOT_SPP`` and ``ALLOCATION_PILOT_REPLICATES``), up to ``ALLOCATION_MAX_FACTOR`` times them,
+        instead of every value at the rays the worst needs (``_StratifiedRun.allocate``; no pilot runs). Only on
+        the guided path (frames whose rays are not guided keep the pilot part). False: the pilot runs size the
+        whole run by its worst value, as before.
+    allocation_sigma : str
+        Where an allocated value's sigma comes from (the mean always pools all its replicates): ``"pilot"``
+        (default) the pilot's spread over sqrt(all its replicates), Stein's two-stage: for Gaussian replicates
+        (dP - true) / sigma is exactly Student's t with R0 - 1 degrees of freedom, and a sized value's sigma sits
+        near the target by construction; ``"independent"`` the spread of the replicates traced after the
+        decision only (every value gets at least half the pilot's count more), unbiased whatever the pilot drew,
+        but with fewer degrees of freedom (a noisier sigma); ``"pooled"`` the spread of all its replicates, pilot
+        included (biased low by a few percent: values whose pilot spread came out large get more replicates,
+        which dilute it).
     correlated : bool
         As ``ChangeSolver``.
     """
@@ -199,11 +237,28 @@ class StratifiedChange(ChangeSolver):
     strata_shares: Sequence[float] = STRATA_SHARES
     strata_expansions: Sequence[float] = STRATA_EXPANSIONS
     guide_bounces: bool = True
+    allocate: bool = True
+    allocation_sigma: str = "pilot"
     name: ClassVar[str] = "stratified_change"
+
+    def allocates(self, budget: Budget) -> bool:
+        return bool(self.allocate) and budget.target_rel_stderr > 0
+
+    def identity(self) -> dict:
+        # the allocation options at their defaults leave the identity of stores written before them as it was
+        # (a store of a target run before them has no replicate columns, and is refused for that)
+        out = super().identity()
+        for name, default in (("allocate", True), ("allocation_sigma", "pilot")):
+            if out.get(name) == default:
+                out.pop(name)
+        return out
 
     def _check(self, frames, background, spp, replicates, target) -> None:
         super()._check(frames, background, spp, replicates, target)
         self.shares()
+        if self.allocation_sigma not in ALLOCATION_SIGMA:
+            raise InputError(f"allocation_sigma (where an allocated value's sigma comes from) must be one of "
+                             f"{ALLOCATION_SIGMA}, got {self.allocation_sigma!r}")
 
     def shares(self) -> np.ndarray:
         """The shares as an array, after refusing (naming ``strata_shares`` / ``strata_expansions``, the fields
@@ -232,15 +287,18 @@ class StratifiedChange(ChangeSolver):
         return bg_spp, whole_aperture_estimates(sim.scene, sim.sensor, sim.mincam, replicates, bg_spp,
                                                 derive_seed(seed, "background"))
 
-    def run(self, sim, frames, background, spp, seed, replicates, bg):
-        return _StratifiedRun(sim, frames, background, spp, seed, self.correlated, replicates, self.shares(),
-                              tuple(self.strata_expansions), bool(self.guide_bounces), bg)
+    def run(self, sim, frames, background, spp, seed, replicates, bg, target=0.0, cap=MAX_SPP):
+        run = _StratifiedRun(sim, frames, background, spp, seed, self.correlated, replicates, self.shares(),
+                             tuple(self.strata_expansions), bool(self.guide_bounces), bg)
+        if self.allocate and target > 0:
+            run.allocate(float(target), int(cap), str(self.allocation_sigma))
+        return run
 
 
 class ChangePlan(Plan):
     """One change run at the budget's ``spp`` rays per pass (the target already resolved): the background traced
     once, then a row per frame (dP and P per mixel, then heavy-tailed and unseen flags per mixel and
-    ``INFO_COLUMNS``)."""
+    ``INFO_COLUMNS``, then, where replicates are allocated per mixel, the replicates traced per mixel)."""
 
     def __init__(self, solver: ChangeSolver, sim, frames, background, budget: Budget, replicates: int,
                  resolved: dict, show_progress: bool) -> None:
@@ -250,12 +308,14 @@ class ChangePlan(Plan):
         self.cap = budget.max_spp or MAX_SPP
         sim.update(background)
         self.bg_spp, self.bg = solver.background_estimates(sim, self.spp, self.seed, replicates)
-        self.run = solver.run(sim, frames, background, self.spp, self.seed, replicates, self.bg)
+        self.run = solver.run(sim, frames, background, self.spp, self.seed, replicates, self.bg, self.target or 0.0,
+                              self.cap)
         self.run.note_delta_movers(moving_shapes([background, *frames]))
         names = sim.mincam.names
         self.n_rows = len(frames)
         self.columns = ([f"dP_{m}" for m in names] + [f"P_{m}" for m in names]
-                        + [f"heavy_tailed_{m}" for m in names] + [f"unseen_{m}" for m in names] + list(INFO_COLUMNS))
+                        + [f"heavy_tailed_{m}" for m in names] + [f"unseen_{m}" for m in names] + list(INFO_COLUMNS)
+                        + ([f"replicates_{m}" for m in names] if self.run.per_mixel_replicates else []))
 
     def rows(self, pending: np.ndarray) -> Iterator[Row]:
         # one row per frame: dP and P, then the flags and info (no standard error of their own)
@@ -277,7 +337,11 @@ class ChangePlan(Plan):
         reached = worst_relative_stderr(values[:, :n], errors[:, :n], significance=3.0)
         meta["reached_rel_stderr"] = reached if np.isfinite(reached) else None
         meta["target_rel_stderr"] = self.target
-        warn_target_missed(reached, self.target, self.spp, self.cap)
+        alloc = meta.get("allocation")
+        warn_target_missed(reached, self.target, self.spp, self.cap,
+                           None if not alloc else
+                           f"per-mixel allocation: sigma's own noise, or values at the most replicates, "
+                           f"{alloc['max_replicates']}; see meta['allocation']")
         run.warn(meta)
         warn_unreached(Measurements(values[:, n:2 * n], errors[:, n:2 * n], names))
         dp = Measurements(values[:, :n], errors[:, :n], names, {**meta, "quantity": "dP = P(frame) - P(background)"})
@@ -294,8 +358,63 @@ class ChangePlan(Plan):
 
 
 def _unseen(diff: np.ndarray, changes: np.ndarray) -> np.ndarray:
-    """(n_mixels,) True where a frame changes a shape but every replicate of its dP is the same (no ray met it)."""
-    return changes & np.all(diff == diff[:1], axis=0)
+    """(n_mixels,) True where a frame changes a shape but every replicate of its dP is the same (no ray met it);
+    replicates not traced (NaN) left out."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return changes & (np.nanmax(diff, axis=0) == np.nanmin(diff, axis=0))
+
+
+def _heavy_tailed(diff: np.ndarray, pilot: int) -> np.ndarray:
+    """``heavy_tailed`` per mixel; where replicates were allocated per mixel (NaN where not traced), on the first
+    ``pilot`` replicates and, apart, on each mixel's replicates after them (3 or more), the latter from 8 on at
+    the threshold of the largest power of two not above their count (a threshold per count costs a Monte Carlo
+    quantile; the one of fewer replicates is higher: no more false alarms, a little less sensitive)."""
+    if not np.isnan(diff).any():
+        return heavy_tailed(diff)
+    flags = heavy_tailed(diff[:pilot])
+    for k, col in enumerate(diff[pilot:].T):
+        more = col[~np.isnan(col)]
+        if len(more) >= 3:
+            dev2 = (more - more.mean()) ** 2
+            total = dev2.sum()
+            count = len(more) if len(more) < 8 else 1 << (len(more).bit_length() - 1)
+            flags[k] |= total > 0 and dev2.max() / total > dominance_threshold(count)
+    return flags
+
+
+def pooled_mean_stderr(diff: np.ndarray, sigma_rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Per mixel (column of ``diff``, (R, n) replicates, NaN where not traced): the mean of the replicates
+    traced and its standard error, ``s / sqrt(R_k)`` with ``R_k`` the replicates traced and ``s`` the spread
+    (ddof 1) of those in ``sigma_rows`` ((R, n) bool; None: all traced)."""
+    traced = ~np.isnan(diff)
+    if sigma_rows is None and traced.all():  # every replicate traced: as a plain mean and spread
+        return diff.mean(0), diff.std(0, ddof=1) / np.sqrt(diff.shape[0])
+    count = traced.sum(axis=0)
+    mean = np.where(traced, diff, 0.0).sum(axis=0) / count
+    rows = traced if sigma_rows is None else traced & sigma_rows
+    k = rows.sum(axis=0)
+    centre = np.where(rows, diff, 0.0).sum(axis=0) / k
+    var = np.where(rows, (diff - centre) ** 2, 0.0).sum(axis=0) / (k - 1)
+    return mean, np.sqrt(var / count)
+
+
+def allocate_replicates(pilot: np.ndarray, target: float, floor: int, most: int,
+                        significance: float = ALLOCATION_SIGNIFICANCE) -> np.ndarray:
+    """(n,) replicates per mixel sized from its pilot replicates ``pilot`` (R0, n) of dP.
+
+    ``R_k = clip(ceil(R0 (s_k / target)^2), floor, most)`` with ``s_k`` the pilot's relative standard error of
+    the mean (its spread / sqrt(R0) / |mean|): the replicates at which the value's relative sigma is the target.
+    A value whose pilot mean is insignificant (``|mean| < significance x`` its standard error, zero spread
+    included: no ray met a change) is not sized: it gets ``floor``."""
+    r0 = pilot.shape[0]
+    mean = pilot.mean(axis=0)
+    err = pilot.std(axis=0, ddof=1) / np.sqrt(r0)
+    significant = (err > 0) & (np.abs(mean) >= significance * err)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        need = np.ceil(r0 * (err / np.abs(mean) / target) ** 2)
+    need = np.where(significant & np.isfinite(need), need, floor)
+    return np.clip(need, floor, most).astype(int)
 
 
 class _Run:
@@ -309,6 +428,8 @@ class _Run:
         self.replicates = replicates
         self.bg = bg
         self.fallbacks: dict[str, str] = {}
+        self.sigma_rows: np.ndarray | None = None  # the last frame's replicates whose spread gives sigma (None: all)
+        self.per_mixel_replicates = False  # replicates allocated per mixel: a column of them per mixel
 
     def note_delta_movers(self, moving) -> None:
         """Say it when a moving shape is glass or a mirror (a delta BSDF) whose redirected light is not guided:
@@ -332,20 +453,21 @@ class _Run:
 
     def rows(self, frames, todo, show_progress: bool):
         """(frame index, values, stderr, info) per frame of ``todo``: dP then P per mixel; then heavy-tailed and
-        unseen flags per mixel and ``INFO_COLUMNS``."""
+        unseen flags per mixel, ``INFO_COLUMNS`` and (allocated per mixel) the replicates traced per mixel."""
         n = len(self.r.mincam)
         for i in progress(todo, desc="frames", disable=not show_progress):
             i = int(i)
             diff, frame_v, frame_e, changes, info = self.frame(frames, i, self.replicates, "")
-            retried = bool((heavy_tailed(diff) | _unseen(diff, changes)).any())
+            retried = bool((_heavy_tailed(diff, self.replicates) | _unseen(diff, changes)).any())
             heavy = unseen = np.zeros(n, dtype=bool)
             if retried:
                 diff, frame_v, frame_e, changes, _ = self.frame(frames, i, RETRY_FACTOR * self.replicates, "retry")
-                heavy, unseen = heavy_tailed(diff), _unseen(diff, changes)
-            reps = diff.shape[0]
-            row_v = np.concatenate([diff.mean(0), frame_v])
-            row_e = np.concatenate([diff.std(0, ddof=1) / np.sqrt(reps), frame_e])
-            yield i, row_v, row_e, np.concatenate([heavy, unseen, [retried, *info]]).astype(float)
+                heavy, unseen = _heavy_tailed(diff, RETRY_FACTOR * self.replicates), _unseen(diff, changes)
+            mean, err = pooled_mean_stderr(diff, self.sigma_rows)
+            row_v = np.concatenate([mean, frame_v])
+            row_e = np.concatenate([err, frame_e])
+            reps = (~np.isnan(diff)).sum(axis=0) if self.per_mixel_replicates else []  # replicates traced per mixel
+            yield i, row_v, row_e, np.concatenate([heavy, unseen, [retried, *info], reps]).astype(float)
 
     def meta(self, info: np.ndarray) -> dict:
         """What the run did, from the per-frame info of every frame (this process's and a resumed store's)."""
@@ -422,9 +544,38 @@ class _StratifiedRun(_Run):
         self.split, self.static_geometry = self._split(sim, frames, background)
         self.recordings_at_start = self._recordings()
         self.frames_traced = 0
+        self.target, self.cap, self.allocation_sigma = 0.0, MAX_SPP, "pilot"
         if guided and not self.can_guide:
             self.fallbacks["depth"] = (f"bounces are not guided at max_depth {sim.mincam_scene.max_depth} (the "
                                        "guided path covers 1 .. 5): rays follow Mitsuba's path")
+
+    def allocate(self, target: float, cap: int, sigma: str) -> None:
+        """Size each (frame, mixel) value's replicates to ``target`` (relative sigma of dP), at most ``cap`` rays
+        per mixel per pass, its sigma from ``sigma`` (``StratifiedChange.allocation_sigma``).
+
+        Per frame, every mixel first gets the run's ``replicates`` (R0, the pilot part), frame and background
+        paired as always; from their spread each mixel's count ``R_k`` (:func:`allocate_replicates`, between the
+        floor ``R0 + extra_floor(R0)`` and :meth:`allocation_layout`); then only the replicates ``R0 .. R_k - 1``
+        of the mixels that need them are traced (background pass first, the scene being there, then the frame's,
+        paired the other way round). Launches are laid out for the most replicates, so a replicate draws the same
+        numbers whichever pass traces it. A value whose pilot |dP| is under ``ALLOCATION_SIGNIFICANCE`` pilot
+        sigmas gets the floor. The mean pools all ``R_k`` replicates; sigma, with ``"pilot"``, is the pilot's
+        spread over sqrt(R_k) (Stein's two-stage), with ``"independent"`` the spread of the replicates traced
+        after the decision only (unbiased: their number is fixed before they are drawn) over sqrt(R_k), with
+        ``"pooled"`` the spread of all of them."""
+        self.target, self.cap, self.allocation_sigma = target, cap, sigma
+        self.per_mixel_replicates = True
+
+    def extra_floor(self, replicates: int) -> int:
+        """Replicates every allocated value gets beyond the pilot's: half the pilot's (at least 2) when its sigma
+        comes from them alone, else none."""
+        return max(2, replicates // 2) if self.allocation_sigma == "independent" else 0
+
+    def allocation_layout(self, replicates: int) -> int:
+        """The most replicates an allocated value gets (the launch layout): ``ALLOCATION_MAX_FACTOR`` times the
+        pilot's, at most the cap's rays, at least the floor."""
+        most = min(ALLOCATION_MAX_FACTOR * replicates, int(self.cap) // max(1, sum(self.counts)))
+        return max(replicates + self.extra_floor(replicates), most)
 
     def _split(self, sim, frames, background) -> tuple[StaticSplit | None, str]:
         """The run's static / movers split (static geometry built once) and what the run's meta says of it, or
@@ -522,29 +673,69 @@ class _StratifiedRun(_Run):
         if self.pairs and guide is not None:
             watch = [watch_box(shapes[name]) for name in sorted(changed)]
             watch += [self.bg_boxes[name] for name in sorted(changed)]
-        lanes = stratified_lanes(self.split.scene if split else r.scene, r.sensor, r.mincam, regions,
-                                 replicates, self.counts, frame_seed, freeze=self._freeze_key(), watch=watch, **kw)
-        if self.split is None:
-            r.update(self.background)
-        else:
-            self.split.move(self.background_movers)
+        scene = self.split.scene if split else r.scene
+        allocating = self.target > 0 and guide is not None  # groups are traced on the guided path only
+        layout = self.allocation_layout(replicates) if allocating else replicates
+        pilot = None
+        if allocating:
+            pilot = np.zeros((layout, len(r.mincam)), dtype=bool)
+            pilot[:replicates] = True
+
+        def to_frame():
+            if self.split is None:
+                r.update({**self.background, **frames[i]})
+            else:
+                self.split.move(r.scene_updates({**self.background, **frames[i]}))
+
+        def to_background():
+            if self.split is None:
+                r.update(self.background)
+            else:
+                self.split.move(self.background_movers)
+
         bg_seed = frame_seed if self.correlated else derive_seed(self.seed, "stratified-background", i, purpose)
-        bg_lanes = stratified_lanes(self.split.scene if split else r.scene, r.sensor, r.mincam, regions,
-                                    replicates, self.counts, bg_seed, freeze=self._freeze_key(),
-                                    pair=lanes if watch is not None else None, **kw)
+        lanes = stratified_lanes(scene, r.sensor, r.mincam, regions, layout, self.counts, frame_seed,
+                                 freeze=self._freeze_key(), watch=watch, groups=pilot, **kw)
+        to_background()
+        bg_lanes = stratified_lanes(scene, r.sensor, r.mincam, regions, layout, self.counts, bg_seed,
+                                    freeze=self._freeze_key(), pair=lanes if watch is not None else None,
+                                    groups=pilot, **kw)
         diff = lanes.estimates() - bg_lanes.estimates()
+        traced = lanes.traced + bg_lanes.traced
+        self.sigma_rows = None
+        if allocating:
+            want = allocate_replicates(diff[:replicates], self.target, replicates + self.extra_floor(replicates),
+                                       layout)
+            rows = np.arange(layout)[:, None]
+            extra = (rows >= replicates) & (rows < want[None, :])
+            if self.allocation_sigma == "independent":
+                self.sigma_rows = extra
+            elif self.allocation_sigma == "pilot":  # Stein's two-stage: the pilot's spread, the mean of all
+                self.sigma_rows = np.broadcast_to(rows < replicates, extra.shape)
+            if extra.any():
+                # the scene holds the background now: its pass first (watching the boxes), then the frame's
+                bg_more = stratified_lanes(scene, r.sensor, r.mincam, regions, layout, self.counts, bg_seed,
+                                           freeze=self._freeze_key(), watch=watch, groups=extra, **kw)
+                to_frame()
+                more = stratified_lanes(scene, r.sensor, r.mincam, regions, layout, self.counts, frame_seed,
+                                        freeze=self._freeze_key(), pair=bg_more if watch is not None else None,
+                                        groups=extra, **kw)
+                to_background()
+                diff = np.where(extra, more.estimates() - bg_more.estimates(), diff)
+                traced += more.traced + bg_more.traced
+            self.allocated = want
         if not purpose:
             self.frames_traced += 1
             self._check_recordings()
         info = (float(guide is not None), 0.0 if guide is None else float(len(guide)),
-                float(np.mean(regions.area_fraction())), (lanes.traced + bg_lanes.traced) / len(r.mincam))
-        if replicates == self.bg.shape[0]:
+                float(np.mean(regions.area_fraction())), traced / len(r.mincam))
+        if replicates == self.bg.shape[0] and not np.isnan(diff).any():
             frame = self.bg + diff  # P(frame): the background traced once over the whole aperture, plus the change
             frame_v, frame_e = frame.mean(0), frame.std(0, ddof=1) / np.sqrt(replicates)
         else:  # the background and the change are independent estimates
-            frame_v = self.bg.mean(0) + diff.mean(0)
-            frame_e = np.hypot(self.bg.std(0, ddof=1) / np.sqrt(self.bg.shape[0]),
-                               diff.std(0, ddof=1) / np.sqrt(replicates))
+            mean, err = pooled_mean_stderr(diff, self.sigma_rows)
+            frame_v = self.bg.mean(0) + mean
+            frame_e = np.hypot(self.bg.std(0, ddof=1) / np.sqrt(self.bg.shape[0]), err)
         changes = np.full(len(r.mincam), bool(changed))
         return diff, frame_v, frame_e, changes, info
 
@@ -570,9 +761,24 @@ class _StratifiedRun(_Run):
         rest = info[np.all(np.isfinite(info), axis=1), 2 * n:]
         full = self.replicates * sum(counts)  # the frame pass's rays per mixel; the background traces <= these
         rays = float(rest[:, 4].mean()) if len(rest) else 2.0 * full
+        reps = rest[:, len(INFO_COLUMNS):]
+        allocation = None
+        if self.target > 0:
+            allocation = {
+                "target_rel_stderr": self.target, "pilot_replicates": self.replicates,
+                "floor_replicates": self.replicates + self.extra_floor(self.replicates),
+                "max_replicates": self.allocation_layout(self.replicates), "sigma_from": self.allocation_sigma,
+                "insignificant_rule": f"|dP| < {ALLOCATION_SIGNIFICANCE:g} pilot sigmas (or no spread): the floor",
+                "replicates_min": int(reps.min()) if reps.size else None,
+                "replicates_median": float(np.median(reps)) if reps.size else None,
+                "replicates_mean": float(reps.mean()) if reps.size else None,
+                "replicates_max": int(reps.max()) if reps.size else None,
+                "rays_per_frame_pass_per_replicate": int(sum(counts)),
+                "replicates_per_frame_and_mixel": reps.astype(int).tolist()}
         return {**super().meta(info), "strata_expansions": list(self.expansions), "strata_rays_per_replicate": counts,
+                "allocation": allocation,
                 "rays_per_mixel_per_frame": int(round(rays)),
-                "background_rays_share": (rays - full) / full,
+                "background_rays_share": None if allocation else (rays - full) / full,  # allocated: no one full pass
                 "paired_lanes_reused": bool(self.pairs), "launches": self.launches,
                 "static_geometry": self.static_geometry,
                 "moving_shapes": sorted(self.moving), "guide_bounces": bool(self.guided),
