@@ -167,3 +167,18 @@ def test_allocated_split_run_gives_the_one_scene_numbers():
         for a, b in ((two.dp, one.dp), (two.p, one.p)):
             np.testing.assert_array_equal(a.irradiance_w_m2, b.irradiance_w_m2)
             np.testing.assert_array_equal(a.stderr_w_m2, b.stderr_w_m2)
+
+
+def test_every_mixel_at_the_maximum_still_pools_per_mixel():
+    """A target no pilot part reaches: every mixel of every frame gets the maximum replicates (no replicate left
+    untraced), and the run still pools per mixel with the pilot's sigma (Stein), agreeing with the plain estimator."""
+    world, frames, bg = _world({}, (0.04, 0.02, 0.02))
+    fr = frames([(0.03, 0.02, 0.0)])
+    budget = ms.Budget(spp=128 * 16, replicates=16, seed=7, target_rel_stderr=1e-4)
+    with pytest.warns(UserWarning):  # the target is missed: said, not hidden
+        fast = world.measure_changes(fr, bg, ms.StratifiedChange(), budget).dp
+    reps = np.asarray(fast.meta["allocation"]["replicates_per_frame_and_mixel"])
+    assert np.all(reps == 64), reps
+    plain = world.measure_changes(fr, bg, ms.PlainChange(), ms.Budget(spp=1 << 16, replicates=16, seed=3)).dp
+    assert_close_mc(fast.irradiance_w_m2, plain.irradiance_w_m2, np.hypot(fast.stderr_w_m2, plain.stderr_w_m2),
+                    what="every mixel at the maximum vs plain")

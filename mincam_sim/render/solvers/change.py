@@ -729,7 +729,9 @@ class _StratifiedRun(_Run):
             self._check_recordings()
         info = (float(guide is not None), 0.0 if guide is None else float(len(guide)),
                 float(np.mean(regions.area_fraction())), traced / len(r.mincam))
-        if replicates == self.bg.shape[0] and not np.isnan(diff).any():
+        # per replicate only where the change's replicates pair with the background's (every mixel all of them,
+        # the spread taken over all): an allocated frame pools per mixel (every mixel may reach the maximum)
+        if self.sigma_rows is None and diff.shape[0] == self.bg.shape[0] and not np.isnan(diff).any():
             frame = self.bg + diff  # P(frame): the background traced once over the whole aperture, plus the change
             frame_v, frame_e = frame.mean(0), frame.std(0, ddof=1) / np.sqrt(replicates)
         else:  # the background and the change are independent estimates
