@@ -12,7 +12,7 @@ from mincam_sim.estimation.estimators import intrusion_position
 from mincam_sim.experiments.base import Experiment, ExperimentResult, PaperNumbers
 from mincam_sim.experiments.ground_truth import GroundTruthCamera
 from mincam_sim.experiments.layouts import intrusion_mincam
-from mincam_sim.experiments.pipeline import LocateOptions, locate_in_world
+from mincam_sim.experiments.pipeline import LocateOptions, figure_images, locate_in_world
 from mincam_sim.experiments.screen_calibration import (
     fit_calibration_1d,
     screen_sweep_1d,
@@ -24,6 +24,7 @@ from mincam_sim.experiments.tabletop_world import (
     DEFAULT_LIGHT_SIZE_M,
     DEFAULT_TABLE_ALBEDO,
     check_contrast,
+    check_spp_fraction,
     make_tabletop,
     placed_meshes,
     tabletop_world,
@@ -72,6 +73,10 @@ class IntrusionParams:
     ground_truth : {"object", "change"}
         The headline's ground truth: the centroid of the cars' part in the band as the ground-truth camera sees
         it (the paper's) or of the binary change there (with the shadow); both are reported.
+    spp_fraction : float
+        Share of the set-up's tabletop budget (``Setup.spp``) the race's dP spends, in (0, 1]. All of it: the
+        pair's positions are limited by this Monte Carlo noise (measured at the full budget, seed 0: its
+        position sigma is ~3x the sensor's, median over the scored frames; docs/experiments.md).
     """
 
     boundary_x_m: float = INTRUSION_BOUNDARY_X_M
@@ -89,8 +94,10 @@ class IntrusionParams:
     car_height_m: float = 0.035
     light_size_m: float = DEFAULT_LIGHT_SIZE_M
     ground_truth: str = "object"
+    spp_fraction: float = 1.0
 
     def __post_init__(self) -> None:
+        check_spp_fraction(self.spp_fraction)
         check_contrast(self.table_albedo, self.car_albedos, self.light_size_m, self.ground_truth, "car_albedos")
         if len(self.car_albedos) != 2:
             raise ValueError(f"car_albedos must list the two cars' albedos, got {list(self.car_albedos)}")
@@ -131,6 +138,7 @@ class Intrusion(Experiment):
     Params = IntrusionParams
     quick_overrides = {"calibration_positions": 26, "calibration_rel_stderr": 3e-3, "frame_rate_hz": 5.0}
     seed_offset = 0
+    version = 2  # 2: ground-truth images at 8 samples per pixel (the change-centroid diagnostics moved)
     study_metrics = ("avg_error_pct", "max_error_pct", "rms_error_pct", "noise_sigma_median_pct", "unscored_frames_pct",
                      "missed_frames", "false_alarm_frames")
     study_seconds = (60.0, 1200.0)
@@ -201,7 +209,7 @@ class Intrusion(Experiment):
         options = LocateOptions(predict, region=band, axis=1, extrapolated=outside,
                                 objects=scene.meshes, ground_truth=params.ground_truth,
                                 groups=self.cars_in_band(scene, camera, params.boundary_x_m, params.band_m),
-                                show_progress=show_progress)
+                                spp_fraction=params.spp_fraction, show_progress=show_progress)
         found = locate_in_world(world, camera, scene.frames, scene.background, setup, rng["readout"], options,
                                 truth_world)
         a = found.arrays
@@ -209,7 +217,7 @@ class Intrusion(Experiment):
                             out_dir / "intrusion_calibration.png", names=("y", "1-y"))
         chosen = found.example_frames()
         line = params.boundary_x_m
-        plot_overlays([found.images[i] for i in chosen],
+        plot_overlays(figure_images(truth_world, scene.frames, scene.background, chosen, setup),
                       [(np.array([line, a["predicted_m"][i]]), np.array([line, a["truth_m"][i]])) for i in chosen],
                       camera.half_extent_m, out_dir / "intrusion_frames.png", frame_numbers=chosen,
                       boundary_x_m=line, title="intrusion at the finish line", field_m=setup.field_m)
