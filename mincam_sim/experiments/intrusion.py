@@ -12,7 +12,7 @@ from mincam_sim.estimation.estimators import intrusion_position
 from mincam_sim.experiments.base import Experiment, ExperimentResult, PaperNumbers
 from mincam_sim.experiments.ground_truth import GroundTruthCamera
 from mincam_sim.experiments.layouts import intrusion_mincam
-from mincam_sim.experiments.pipeline import LocateOptions, figure_images, locate_in_world
+from mincam_sim.experiments.pipeline import LocateOptions, locate_in_world
 from mincam_sim.experiments.screen_calibration import (
     fit_calibration_1d,
     screen_sweep_1d,
@@ -138,7 +138,6 @@ class Intrusion(Experiment):
     Params = IntrusionParams
     quick_overrides = {"calibration_positions": 26, "calibration_rel_stderr": 3e-3, "frame_rate_hz": 5.0}
     seed_offset = 0
-    version = 2  # 2: ground-truth images at 8 samples per pixel (the change-centroid diagnostics moved)
     study_metrics = ("avg_error_pct", "max_error_pct", "rms_error_pct", "noise_sigma_median_pct", "unscored_frames_pct",
                      "missed_frames", "false_alarm_frames")
     study_seconds = (60.0, 1200.0)
@@ -217,7 +216,7 @@ class Intrusion(Experiment):
                             out_dir / "intrusion_calibration.png", names=("y", "1-y"))
         chosen = found.example_frames()
         line = params.boundary_x_m
-        plot_overlays(figure_images(truth_world, scene.frames, scene.background, chosen, setup),
+        plot_overlays([found.images[i] for i in chosen],
                       [(np.array([line, a["predicted_m"][i]]), np.array([line, a["truth_m"][i]])) for i in chosen],
                       camera.half_extent_m, out_dir / "intrusion_frames.png", frame_numbers=chosen,
                       boundary_x_m=line, title="intrusion at the finish line", field_m=setup.field_m)

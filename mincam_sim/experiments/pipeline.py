@@ -20,13 +20,7 @@ from mincam_sim.progress import progress
 from mincam_sim.render.simulation import Simulation
 from mincam_sim.render.solvers import PlainChange, StratifiedChange
 
-#: Ground-truth camera samples per pixel of the images the change centroids, signed centroids and net-change
-#: fractions are taken from (the headline's object centroid is geometric: no samples). Frame and background share
-#: the seed, so the noise of pixels the toy does not reach cancels in their difference; measured on the full
-#: tabletop runs (seed 0, 300 / 307 frames), 8 against 32 moves those diagnostics by about their own spread
-#: over camera seeds at 32 (docs/experiments.md), at a quarter of the samples.
-GROUND_TRUTH_SPP = 8
-FIGURE_SPP = 32  # camera samples per pixel of the few frames drawn in the figures (drawn, not measured)
+GROUND_TRUTH_SPP = 32  # camera samples per pixel
 GROUND_TRUTH_THRESHOLD = 0.02  # binary detection: |change| > this fraction of the brightest background pixel
 STRATIFIED_SHARE = 128  # the stratified dP estimator spends the plain budget / this per pass
 
@@ -182,18 +176,6 @@ def dp_rays_per_pass(setup: Setup, spp_fraction: float = 1.0) -> int:
     check_spp_fraction(spp_fraction)
     spp = int(setup.tabletop_spp * spp_fraction)
     return spp // STRATIFIED_SHARE if setup.dp_solver == "stratified_change" else spp
-
-
-def figure_images(sim: Simulation, frames: Sequence[dict], background: dict, indices, setup: Setup) -> list:
-    """The ground-truth camera's images of the frames ``indices`` at ``FIGURE_SPP`` samples per pixel, for the
-    figures (drawn with more samples than the measured images, which only feed centroids); the world is left
-    at ``background``."""
-    images = []
-    for i in indices:
-        sim.update(frames[int(i)])
-        images.append(sim.camera_image(spp=FIGURE_SPP, seed=setup.seed))
-    sim.update(background)
-    return images
 
 
 def _check_ground_truth(ground_truth: str, objects, frames: Sequence[dict]) -> None:

@@ -13,7 +13,7 @@ from mincam_sim.estimation.estimators import track_4
 from mincam_sim.experiments.base import Experiment, ExperimentResult, PaperNumbers
 from mincam_sim.experiments.ground_truth import GroundTruthCamera
 from mincam_sim.experiments.layouts import tracking_mincam
-from mincam_sim.experiments.pipeline import LocateOptions, figure_images, locate_in_world
+from mincam_sim.experiments.pipeline import LocateOptions, locate_in_world
 from mincam_sim.experiments.screen_calibration import (
     fit_calibration_2d,
     screen_sweep_2d,
@@ -136,7 +136,7 @@ class Tracking(Experiment):
     quick_overrides = {"toys": ("robot", "chick"), "frames_per_toy": 8, "calibration_grid": 9,
                        "calibration_rel_stderr": 3e-3}
     seed_offset = 1
-    version = 2  # 2: a quarter of the tabletop budget; ground-truth images at 8 samples per pixel
+    version = 2  # 2: its dP at a quarter of the tabletop budget
     study_version = 2  # its dP at a quarter of the tabletop budget
     study_metrics = ("avg_error_pct", "max_error_pct", "rms_error_pct", "noise_sigma_median_pct", "unscored_frames_pct",
                      "missed_frames", "false_alarm_frames")
@@ -200,8 +200,7 @@ class Tracking(Experiment):
         plot_calibration_2d(cal["true_m"], cal["observed"], calibration, out_dir / "tracking_calibration.png")
         plot_tracks(predicted, truth, scene.toy_of_frame, out_dir / "tracking_paths.png")
         chosen = found.example_frames()
-        plot_overlays(figure_images(truth_world, scene.frames, scene.background, chosen, setup),
-                      [(predicted[i], truth[i]) for i in chosen],
+        plot_overlays([found.images[i] for i in chosen], [(predicted[i], truth[i]) for i in chosen],
                       camera.half_extent_m, out_dir / "tracking_frames.png", frame_numbers=chosen,
                       title="tracking wind-up toys", field_m=setup.field_m)
         np.savez(out_dir / "tracking_data.npz", **a)
