@@ -75,8 +75,8 @@ class IntrusionParams:
         it (the paper's) or of the binary change there (with the shadow); both are reported.
     spp_fraction : float
         Share of the set-up's tabletop budget (``Setup.spp``) the race's dP spends, in (0, 1]. All of it: the
-        pair's positions are limited by this Monte Carlo noise (measured at the full budget, seed 0: its
-        position sigma is ~3x the sensor's, median over the scored frames; docs/experiments.md).
+        pair's positions are limited by this Monte Carlo noise (full mode, seed 0, median over the scored frames:
+        its position sigma is 3.2x the sensor's at the whole budget, 8.9x at a quarter; docs/experiments.md).
     """
 
     boundary_x_m: float = INTRUSION_BOUNDARY_X_M

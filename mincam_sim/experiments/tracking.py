@@ -77,9 +77,9 @@ class TrackingParams:
         paper's definition) or the centroid of the binary change (object and shadow); both are reported.
     spp_fraction : float
         Share of the set-up's tabletop budget (``Setup.spp``) the toys' dP spends, in (0, 1]. A quarter: the
-        sensor's noise dominates the cross's positions (measured at the full budget, seed 0: the Monte Carlo
-        position sigma is 0.2x the sensor's, median over the scored frames; 0.4x at a quarter, which adds ~7 %
-        to the total; docs/experiments.md).
+        sensor's noise dominates the cross's positions on the default grey table (full mode, seed 0, median over
+        the scored frames: the Monte Carlo position sigma is 0.20x the sensor's at the whole budget, 0.39x at a
+        quarter, which adds 7 % to the total; on the dark table 0.29x and 0.65x, +19 %; docs/experiments.md).
     """
 
     toys: tuple[str, ...] = ("robot", "chick", "frog")
