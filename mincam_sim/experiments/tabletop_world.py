@@ -41,7 +41,8 @@ def check_contrast(table_albedo: float, object_albedos, light_size_m: float, gro
 
 def check_spp_fraction(spp_fraction: float) -> None:
     """``ValueError`` naming ``spp_fraction`` unless it is a share of the set-up's tabletop budget, in (0, 1]."""
-    if not (isinstance(spp_fraction, int | float) and np.isfinite(spp_fraction) and 0 < spp_fraction <= 1):
+    number = isinstance(spp_fraction, int | float) and not isinstance(spp_fraction, bool)
+    if not (number and np.isfinite(spp_fraction) and 0 < spp_fraction <= 1):
         raise ValueError(f"spp_fraction must be in (0, 1] (the share of Setup.spp this experiment's dP spends), "
                          f"got {spp_fraction!r}")
 

@@ -156,7 +156,7 @@ def test_tabletop_budget_defaults_are_the_measured_ones():
     here must come with a new measurement of the tables' spread."""
     assert dp_rays_per_pass(Setup(), IntrusionParams().spp_fraction) == 65_536
     assert dp_rays_per_pass(Setup(), TrackingParams().spp_fraction) == 16_384
-    for bad in (0.0, -0.5, 1.5, float("nan")):
+    for bad in (0.0, -0.5, 1.5, float("nan"), True):
         with pytest.raises(ValueError, match="spp_fraction"):
             TrackingParams(spp_fraction=bad)
 
