@@ -24,6 +24,7 @@ from mincam_sim.experiments.tabletop_world import (
     DEFAULT_LIGHT_SIZE_M,
     DEFAULT_TABLE_ALBEDO,
     check_contrast,
+    check_spp_fraction,
     make_tabletop,
     placed_meshes,
     tabletop_world,
@@ -72,6 +73,10 @@ class IntrusionParams:
     ground_truth : {"object", "change"}
         The headline's ground truth: the centroid of the cars' part in the band as the ground-truth camera sees
         it (the paper's) or of the binary change there (with the shadow); both are reported.
+    spp_fraction : float
+        Share of the set-up's tabletop budget (``Setup.spp``) the race's dP spends, in (0, 1]. All of it: the
+        pair's positions are limited by this Monte Carlo noise (full mode, seed 0, median over the scored frames:
+        its position sigma is 3.2x the sensor's at the whole budget, 8.9x at a quarter; docs/experiments.md).
     """
 
     boundary_x_m: float = INTRUSION_BOUNDARY_X_M
@@ -89,8 +94,10 @@ class IntrusionParams:
     car_height_m: float = 0.035
     light_size_m: float = DEFAULT_LIGHT_SIZE_M
     ground_truth: str = "object"
+    spp_fraction: float = 1.0
 
     def __post_init__(self) -> None:
+        check_spp_fraction(self.spp_fraction)
         check_contrast(self.table_albedo, self.car_albedos, self.light_size_m, self.ground_truth, "car_albedos")
         if len(self.car_albedos) != 2:
             raise ValueError(f"car_albedos must list the two cars' albedos, got {list(self.car_albedos)}")
@@ -201,7 +208,7 @@ class Intrusion(Experiment):
         options = LocateOptions(predict, region=band, axis=1, extrapolated=outside,
                                 objects=scene.meshes, ground_truth=params.ground_truth,
                                 groups=self.cars_in_band(scene, camera, params.boundary_x_m, params.band_m),
-                                show_progress=show_progress)
+                                spp_fraction=params.spp_fraction, show_progress=show_progress)
         found = locate_in_world(world, camera, scene.frames, scene.background, setup, rng["readout"], options,
                                 truth_world)
         a = found.arrays

@@ -14,6 +14,7 @@ from mincam_sim.estimation.estimators import detect_change
 from mincam_sim.estimation.metrics import error_rates
 from mincam_sim.experiments.ground_truth import GroundTruthCamera
 from mincam_sim.experiments.setup import Setup
+from mincam_sim.experiments.tabletop_world import check_spp_fraction
 from mincam_sim.model.readout import propagate_sigma, read_out
 from mincam_sim.progress import progress
 from mincam_sim.render.simulation import Simulation
@@ -82,6 +83,8 @@ class LocateOptions:
         The ground truth of the headline numbers.
     groups : list of str, optional
         One label per frame (which toy or car it shows): splits the statistics.
+    spp_fraction : float
+        Share of the set-up's tabletop budget (``Setup.tabletop_spp``) this experiment's dP spends, in (0, 1].
     show_progress : bool
     """
 
@@ -92,17 +95,19 @@ class LocateOptions:
     objects: Sequence[list[tuple[np.ndarray, np.ndarray]]] | None = None
     ground_truth: str = "object"
     groups: Sequence[str] | None = None
+    spp_fraction: float = 1.0
     show_progress: bool = False
 
 
 def locate_in_world(sim: Simulation, camera: GroundTruthCamera, frames: Sequence[dict], background: dict,
                     setup: Setup, rng: np.random.Generator, options: LocateOptions,
                     truth_sim: Simulation | None = None) -> Located:
-    """Render dP of every frame (``setup.dp_solver``: the stratified solver with the plain budget
-    ``setup.tabletop_spp`` / ``STRATIFIED_SHARE`` rays per pass, or the plain correlated one with it), read it
-    out, detect, predict positions with ``options.predict(change_dn, min_total_dn)``, propagate the noise, and
-    compare with the ground-truth camera of ``truth_sim`` (a second simulation of the same scene, so that dP and
-    the ground truth share no mutable scene; default: ``sim`` itself).
+    """Render dP of every frame (``setup.dp_solver``: the stratified solver with ``options.spp_fraction`` of the
+    plain budget ``setup.tabletop_spp``, / ``STRATIFIED_SHARE``, rays per pass, or the plain correlated one with
+    it: :func:`dp_rays_per_pass`), read it out, detect, predict positions with
+    ``options.predict(change_dn, min_total_dn)``, propagate the noise, and compare with the ground-truth camera
+    of ``truth_sim`` (a second simulation of the same scene, so that dP and the ground truth share no mutable
+    scene; default: ``sim`` itself).
 
     ``min_total_dn`` is the detection threshold: a ratio estimator (Eq. 4 / Eq. 7) gives NaN (not a position) where
     its denominator, a sum of mixel changes, is within that of zero, as when an object's brightening and its
@@ -129,8 +134,7 @@ def locate_in_world(sim: Simulation, camera: GroundTruthCamera, frames: Sequence
     o = options
     ground_truth, objects, extrapolated, groups = o.ground_truth, o.objects, o.extrapolated, o.groups
     _check_ground_truth(ground_truth, objects, frames)
-    spp = setup.tabletop_spp
-    rays = spp // STRATIFIED_SHARE if setup.dp_solver == "stratified_change" else spp
+    rays = dp_rays_per_pass(setup, o.spp_fraction)
     seen = _observe(sim, frames, background, setup, rng, o.predict, rays, o.show_progress)
     truths = _ground_truths(sim if truth_sim is None else truth_sim, camera, frames, background, setup, o)
     truth = truths.by_name[ground_truth]
@@ -162,6 +166,16 @@ def locate_in_world(sim: Simulation, camera: GroundTruthCamera, frames: Sequence
               "sensor_sigma_m": seen.sigma_sensor, "change_dn": seen.change, "dP_w_m2": seen.dp.irradiance_w_m2,
               "dP_stderr_w_m2": seen.dp.stderr_w_m2}
     return Located(summary, arrays, truths.images, truths.background_image)
+
+
+def dp_rays_per_pass(setup: Setup, spp_fraction: float = 1.0) -> int:
+    """Rays per mixel per pass of a tabletop experiment's dP: ``spp_fraction`` of the set-up's plain-estimator
+    budget ``setup.tabletop_spp`` [samples per mixel per frame], divided by ``STRATIFIED_SHARE`` for the
+    stratified solver (the plain solver traces it as it is). The stratified solver traces the paired background
+    lanes on top of these (``rays_per_mixel_per_frame`` in the results counts both)."""
+    check_spp_fraction(spp_fraction)
+    spp = int(setup.tabletop_spp * spp_fraction)
+    return spp // STRATIFIED_SHARE if setup.dp_solver == "stratified_change" else spp
 
 
 def _check_ground_truth(ground_truth: str, objects, frames: Sequence[dict]) -> None:

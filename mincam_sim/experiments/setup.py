@@ -52,7 +52,8 @@ class Setup:
         Radiance of the square area light over the table [W m^-2 sr^-1].
     spp : int
         Plain-estimator samples per mixel per frame on the tabletop (halved in quick mode); the stratified
-        estimator spends ``spp / 128`` rays per pass for the same noise (:mod:`.pipeline`).
+        estimator traces ``spp / 128`` rays per mixel per pass (:mod:`.pipeline`), times each tabletop
+        experiment's ``spp_fraction`` (intrusion 1, tracking 1/4: the share its numbers need).
     dp_solver : {"stratified_change", "plain_change"}
         The change solver that renders frame changes dP (both unbiased; "plain_change" is the reference).
     camera_px : int
@@ -74,7 +75,8 @@ class Setup:
     exposure_fill: float = 0.7
     screen_resolution: tuple[int, int] = DEFAULT_SCREEN_RESOLUTION
     table_light_radiance_w_m2_sr: float = 20.0
-    spp: int = 1 << 23  # plain-estimator samples per mixel per frame on the tabletop (quick mode: half)
+    spp: int = 1 << 23  # plain-estimator samples per mixel per frame on the tabletop (quick mode: half), times
+    # each experiment's spp_fraction
     dp_solver: str = "stratified_change"  # rays where the change is, or "plain_change" (the reference)
     camera_px: int = 160
     seed: int = 0

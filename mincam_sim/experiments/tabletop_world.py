@@ -39,6 +39,14 @@ def check_contrast(table_albedo: float, object_albedos, light_size_m: float, gro
                          f"change's centroid, with the shadow), got {ground_truth!r}")
 
 
+def check_spp_fraction(spp_fraction: float) -> None:
+    """``ValueError`` naming ``spp_fraction`` unless it is a share of the set-up's tabletop budget, in (0, 1]."""
+    number = isinstance(spp_fraction, int | float) and not isinstance(spp_fraction, bool)
+    if not (number and np.isfinite(spp_fraction) and 0 < spp_fraction <= 1):
+        raise ValueError(f"spp_fraction must be in (0, 1] (the share of Setup.spp this experiment's dP spends), "
+                         f"got {spp_fraction!r}")
+
+
 def make_tabletop(setup: Setup, toys: Mapping[str, trimesh.Trimesh], rng: np.random.Generator,
                   table_albedo: float = DEFAULT_TABLE_ALBEDO,
                   light_size_m: float = DEFAULT_LIGHT_SIZE_M) -> Tabletop:

@@ -9,6 +9,9 @@ import pytest
 from conftest import Z
 
 from mincam_sim.experiments import EXPERIMENTS, Setup, reproduce
+from mincam_sim.experiments.intrusion import IntrusionParams
+from mincam_sim.experiments.pipeline import STRATIFIED_SHARE, dp_rays_per_pass
+from mincam_sim.experiments.tracking import TrackingParams
 
 
 @pytest.fixture(scope="module")
@@ -131,6 +134,31 @@ def test_statistics_a_reader_needs(run, name):
     for key in ("frames", "n", "unscored_frames", "ground_truth_frames", "extrapolated_frames"):
         assert sum(g[key] for g in groups) == r[key], key
     assert r["unscored_frames"] == r["missed_frames"] + r["no_position_frames"]
+
+
+def test_tabletop_dp_spends_the_setups_budget(run):
+    """Each tabletop experiment's dP traces its share of the set-up's budget, as results.json records it: its
+    ``spp_fraction`` of ``Setup.tabletop_spp`` / ``STRATIFIED_SHARE`` rays per mixel per pass, and, with the
+    paired background lanes, at least that and at most twice it per frame (quick mode: half the full budget)."""
+    _, results = run
+    setup = Setup(quick=True)
+    assert setup.tabletop_spp == Setup().spp // 2
+    for name in ("intrusion", "tracking"):
+        r = results[name]
+        per_pass = int(setup.tabletop_spp * r["params"]["spp_fraction"]) // STRATIFIED_SHARE
+        assert r["spp_per_mixel_per_frame"] == per_pass == dp_rays_per_pass(setup, r["params"]["spp_fraction"])
+        assert per_pass <= r["rays_per_mixel_per_frame"] <= 2 * per_pass, name
+
+
+def test_tabletop_budget_defaults_are_the_measured_ones():
+    """The defaults docs/experiments.md measured (full mode: 65,536 rays per mixel per pass for the race, whose
+    positions are limited by this Monte Carlo noise; 16,384 for the toys, limited by the sensor's): a change
+    here must come with a new measurement of the tables' spread."""
+    assert dp_rays_per_pass(Setup(), IntrusionParams().spp_fraction) == 65_536
+    assert dp_rays_per_pass(Setup(), TrackingParams().spp_fraction) == 16_384
+    for bad in (0.0, -0.5, 1.5, float("nan"), True):
+        with pytest.raises(ValueError, match="spp_fraction"):
+            TrackingParams(spp_fraction=bad)
 
 
 def test_speed_reports_the_display_timing_beside_the_ideal(run):
