@@ -43,7 +43,11 @@ from mincam_sim.frames import FrameSink, MemorySink, collect
 from mincam_sim.measurements import Measurements
 from mincam_sim.model.optics import Mincam
 from mincam_sim.render import backend
-from mincam_sim.render.kernels.change_geometry import change_points_of, delta_light_spheres, delta_surfaces
+from mincam_sim.render.kernels.change_geometry import (
+    change_points_each,
+    delta_light_spheres,
+    delta_surfaces,
+)
 from mincam_sim.render.kernels.change_region import ApertureRegions, mixel_regions
 from mincam_sim.render.kernels.guided_path import MAX_GUIDES, guide_spheres, spheres_of
 from mincam_sim.render.kernels.map_tracing import FRAME_CHUNK_BYTES, check_radiance
@@ -180,6 +184,7 @@ class Simulation:
         self._as_built: dict[str, object] = {}  # each updated parameter's value (world coordinates) before updates
         self._last_set: dict[str, np.ndarray] = {}  # the last numpy value each parameter was set to
         self.revisions: dict[str, int] = {}  # how often each parameter was changed (who replays a scene checks it)
+        self._traversals: dict = {}  # mi.traverse of the objects buffers_key reads (read afresh every call)
 
     def _require_world(self, what: str) -> None:
         if self.kind != "world":
@@ -292,7 +297,7 @@ class Simulation:
         names = {key.split(".", 1)[0] for key in self._as_built}
         shapes = self.shapes_by_id
         objects = [shapes[name] for name in sorted(names) if name in shapes]
-        return buffers_key(objects if len(objects) == len(names) else [self.scene])
+        return buffers_key(objects if len(objects) == len(names) else [self.scene], self._traversals)
 
     def world_value(self, key: str):
         """Parameter ``key`` as :meth:`update` takes it back, in world coordinates: positions (``to_world``
@@ -327,8 +332,9 @@ class Simulation:
         own and its mirror images' bounding rectangle), or ``[whole aperture]`` if a change is unbounded."""
         scene = self.scene if scene is None else scene
         points, reasons = {}, []
-        for name in sorted(moving):
-            points[name], why = change_points_of(scene, [name], self._mirrors)
+        names = sorted(moving)
+        for name, (p, why) in zip(names, change_points_each(scene, [[n] for n in names], self._mirrors), strict=True):
+            points[name] = p
             if why:
                 reasons.append(why)
         if reasons:

@@ -167,6 +167,43 @@ def watch_box(shape) -> tuple[np.ndarray, np.ndarray]:
     return lo - margin, hi + margin
 
 
+def static_box(scene, moving) -> tuple[np.ndarray, np.ndarray] | None:
+    """The bounding box (scene coordinates [m]) of every shape not named in ``moving``, or None if there is none."""
+    los, his = [], []
+    for shape in scene.shapes():
+        if shape.id() not in moving:
+            box = shape.bbox()
+            los.append(np.array(box.min, dtype=float).ravel())
+            his.append(np.array(box.max, dtype=float).ravel())
+    if not los:
+        return None
+    return np.min(los, axis=0), np.max(his, axis=0)
+
+
+def merge_parked(boxes: list, keep_clear: tuple[np.ndarray, np.ndarray] | None) -> list:
+    """``boxes`` (watch boxes, (lo, hi) [m]) with those that lie wholly outside ``keep_clear`` (the static
+    shapes' box) replaced by one box holding them all, where that box stays outside it too (else unchanged).
+
+    Parked background places (a mover put far away) are watched to pair a frame's lanes with its background's:
+    one box instead of many costs each path segment fewer box tests. A lane whose path crosses the merged box
+    but none of the boxes it holds is traced again in the paired pass rather than copied, which gives the value
+    a full pass gives (see :func:`.stratified.stratified_lanes`): the numbers do not change, only the work."""
+    if keep_clear is None or len(boxes) < 2:
+        return list(boxes)
+    lo_c, hi_c = keep_clear
+
+    def outside(lo, hi):
+        return bool(np.any(hi < lo_c) or np.any(lo > hi_c))
+
+    parked = [b for b in boxes if outside(*b)]
+    if len(parked) < 2:
+        return list(boxes)
+    merged = (np.min([b[0] for b in parked], axis=0), np.max([b[1] for b in parked], axis=0))
+    if not outside(*merged):
+        return list(boxes)
+    return [b for b in boxes if not outside(*b)] + [merged]
+
+
 def emitters_among(scene, names) -> bool:
     """True if one of the named shapes emits light (its sampling tables are rebuilt when it moves, at
     addresses a frozen launch cannot see: such runs are traced unfrozen)."""
@@ -197,27 +234,50 @@ def change_points_of(scene, moving, mirrors: DeltaSurfaces | None = None) -> tup
     """Corner points whose hull holds the moving shapes and their shadow volumes [m] (from the lights and their
     images in planar mirrors), or None and why the change is unbounded (an environment light, a moving emitter,
     an emitter of a kind not bounded here, or a moved parameter that belongs to no shape)."""
+    return change_points_each(scene, [moving], mirrors)[0]
+
+
+def change_points_each(scene, groups, mirrors: DeltaSurfaces | None = None) -> list[tuple[np.ndarray | None, str]]:
+    """:func:`change_points_of` of each group of moving shapes names in ``groups``, the scene's lights, their
+    mirror images and its bounding box read once for all (the same numbers as a call per group)."""
     shapes = {s.id(): s for s in scene.shapes()}
-    for name in moving:
-        if name not in shapes:
-            return None, (f"'{name}' is not a shape (a moving light or another parameter): its change reaches "
-                          "anywhere")
-        if shapes[name].is_emitter():
-            return None, f"'{name}' is an emitting shape: the light it moves reaches anywhere"
-    lights, why = light_bounds(scene)
-    if lights is None:
-        return None, why
 
     def box(shape):
         bb = shape.bbox()
         return np.array(bb.min, dtype=float), np.array(bb.max, dtype=float)
 
-    objects = [box(shapes[name]) for name in sorted(moving)]
-    boxes, directions = lights
-    boxes = boxes + [box(s) for s in scene.shapes() if s.is_emitter()]
-    if mirrors is not None:
-        boxes, directions = mirrors.with_images(boxes, directions)
-    return change_points(objects, boxes, box(scene), directions), ""
+    shared = None
+    out = []
+    for moving in groups:
+        why = ""
+        for name in moving:
+            if name not in shapes:
+                why = (f"'{name}' is not a shape (a moving light or another parameter): its change reaches "
+                       "anywhere")
+                break
+            if shapes[name].is_emitter():
+                why = f"'{name}' is an emitting shape: the light it moves reaches anywhere"
+                break
+        if why:
+            out.append((None, why))
+            continue
+        if shared is None:
+            lights, why = light_bounds(scene)
+            if lights is None:
+                shared = (None, why)
+            else:
+                boxes, directions = lights
+                boxes = boxes + [box(s) for s in scene.shapes() if s.is_emitter()]
+                if mirrors is not None:
+                    boxes, directions = mirrors.with_images(boxes, directions)
+                shared = ((boxes, directions, box(scene)), "")
+        if shared[0] is None:
+            out.append(shared)
+            continue
+        boxes, directions, scene_box = shared[0]
+        objects = [box(shapes[name]) for name in sorted(moving)]
+        out.append((change_points(objects, boxes, scene_box, directions), ""))
+    return out
 
 
 def light_bounds(scene) -> tuple[tuple[list, list] | None, str]:

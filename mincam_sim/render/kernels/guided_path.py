@@ -76,19 +76,31 @@ def guide_spheres(point_sets: list[np.ndarray], merge_ratio: float = 8.0,
     """
     groups = [np.asarray(p, dtype=float).reshape(-1, 3) for p in point_sets if p is not None and np.size(p)]
     spheres = [guide_sphere(g) for g in groups]
+    # every pair's merged sphere at once: the same numbers as guide_sphere of the two groups' points together (a
+    # box's corners are exact minima and maxima; each point's squared distance is summed over x, y, z in that
+    # order; the largest is the largest of either group's)
     while len(groups) > 1:
-        best, best_ratio = None, np.inf
-        for a in range(len(groups)):
-            for b in range(a + 1, len(groups)):
-                merged = guide_sphere(np.concatenate([groups[a], groups[b]]))
-                ratio = merged[1] ** 3 / (spheres[a][1] ** 3 + spheres[b][1] ** 3)
-                if ratio < best_ratio:
-                    best, best_ratio = (a, b, merged), ratio
+        n = len(groups)
+        lo = np.array([g.min(axis=0) for g in groups])
+        hi = np.array([g.max(axis=0) for g in groups])
+        centres = 0.5 * (np.minimum(lo[:, None], lo[None, :]) + np.maximum(hi[:, None], hi[None, :]))  # (n, n, 3)
+        points = np.concatenate(groups)
+        starts = np.cumsum([0] + [len(g) for g in groups[:-1]])
+        d = points[:, None, :] - centres[np.repeat(np.arange(n), [len(g) for g in groups])]  # (points, n, 3)
+        d2 = d * d
+        # each group's farthest point from the centre of every pair it is in, then the farther of the two groups
+        far = np.maximum.reduceat((d2[..., 0] + d2[..., 1]) + d2[..., 2], starts, axis=0)  # (n, n)
+        far2 = np.maximum(far, far.T)
+        radius = np.maximum(np.sqrt(far2), 1e-6)
+        own3 = np.array([s[1] for s in spheres]) ** 3
+        ratio = radius ** 3 / (own3[:, None] + own3[None, :])
+        a_idx, b_idx = np.triu_indices(n, 1)  # (a, b) with a < b, row by row: the first best, as a loop over pairs
+        pick = int(np.argmin(ratio[a_idx, b_idx]))
+        a, b, best_ratio = int(a_idx[pick]), int(b_idx[pick]), float(ratio[a_idx[pick], b_idx[pick]])
         if best_ratio > merge_ratio and len(groups) <= max(1, int(max_spheres)):
             break
-        a, b, merged = best
         groups[a] = np.concatenate([groups[a], groups[b]])
-        spheres[a] = merged
+        spheres[a] = (centres[a, b].copy(), float(radius[a, b]))
         del groups[b], spheres[b]
     return spheres
 

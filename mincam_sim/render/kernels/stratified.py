@@ -332,7 +332,7 @@ def _launch(scene, sensor, coeffs, seed, g0, lanes, spheres, boxes, shape: _Laun
     return scale * weight * radiance, met
 
 
-def buffers_key(objects) -> tuple:
+def buffers_key(objects, traversals: dict | None = None) -> tuple:
     """Where the parameters of Mitsuba ``objects`` (the shapes a run moves, or the whole scene) live now: the
     address and width of every evaluated array (vertex positions and normals, textures, ...) and the value of
     every scalar. A frozen launch replays only with the key it was recorded with.
@@ -342,13 +342,16 @@ def buffers_key(objects) -> tuple:
     inputs). After a vertex update Dr.Jit's allocator hands out one of two addresses in turn, so a replay
     keyed on the launch alone read the previous frame's vertices every other frame. Keyed on the addresses
     as well, a moving mesh makes a recording per address, each replayed only while its address holds the
-    current values."""
+    current values.
+
+    ``traversals``, a dict the caller keeps (with the objects' lifetime), holds each object's ``mi.traverse``
+    between calls; every parameter is still read as it is now."""
     import drjit as dr
 
     mi = backend.mitsuba()
     parts = []
     for obj in objects:
-        params = mi.traverse(obj)
+        params = _traversal(mi, obj, traversals)
         for key in params.keys():
             value = params[key]
             if dr.is_tensor_v(value) and dr.is_jit_v(value):
@@ -361,6 +364,20 @@ def buffers_key(objects) -> tuple:
             else:
                 parts.append((key, repr(value)))
     return tuple(parts)
+
+
+def _traversal(mi, obj, kept: dict | None):
+    """``mi.traverse(obj)``, kept in ``kept`` (the caller's, so that it lives no longer than the objects do)
+    when given: an object's keys are fixed once it exists, and reading a key reads the object's current value
+    (Mitsuba's ``SceneParameters`` looks it up on every read), so a kept traversal gives the addresses and values
+    of now, never those of when it was made. The object is held with it, so its ``id`` is not reused while the
+    entry lives."""
+    if kept is None:
+        return mi.traverse(obj)
+    entry = kept.get(id(obj))
+    if entry is None or entry[0] is not obj:
+        entry = kept[id(obj)] = (obj, mi.traverse(obj))
+    return entry[1]
 
 
 _FROZEN: OrderedDict[int, tuple] = OrderedDict()

@@ -51,7 +51,9 @@ from mincam_sim.render.kernels.change_geometry import (
     emitters_among,
     face_planes,
     light_bounds,
+    merge_parked,
     moving_shapes,
+    static_box,
     watch_box,
 )
 from mincam_sim.render.kernels.change_region import ApertureRegions, mover_regions
@@ -522,6 +524,7 @@ class _StratifiedRun(_Run):
         super().__init__(sim, background, spp, seed, correlated, replicates, bg)
         check_strata([1] * len(shares), expansions)
         self.expansions, self.guided = expansions, guided
+        self.traversals: dict = {}  # the split copies' mi.traverse, kept for buffers_key over the run
         per_rep = -(-int(spp) // replicates)
         self.counts = [max(1, int(round(per_rep * s / shares.sum()))) for s in shares]
         self.moving = moving_shapes([background, *frames])
@@ -538,6 +541,8 @@ class _StratifiedRun(_Run):
         # a path that crosses no moving shape's box (in either place) is the same path in both passes
         self.pairs = (sim.pair_lanes and correlated and self.can_guide and not lights_move
                       and set(self.bg_boxes) == self.moving)
+        # background places outside the static shapes' box (parked movers) watched as one box (same numbers)
+        self.keep_clear = static_box(sim.scene, self.moving) if self.pairs else None
         self.freeze = sim.freeze_launches and not lights_move
         self.launches = ("frozen" if self.freeze else
                          "traced" + (": a moving shape emits light" if sim.freeze_launches else ""))
@@ -672,7 +677,7 @@ class _StratifiedRun(_Run):
         watch = None
         if self.pairs and guide is not None:
             watch = [watch_box(shapes[name]) for name in sorted(changed)]
-            watch += [self.bg_boxes[name] for name in sorted(changed)]
+            watch += merge_parked([self.bg_boxes[name] for name in sorted(changed)], self.keep_clear)
         scene = self.split.scene if split else r.scene
         allocating = self.target > 0 and guide is not None  # groups are traced on the guided path only
         layout = self.allocation_layout(replicates) if allocating else replicates
@@ -720,7 +725,8 @@ class _StratifiedRun(_Run):
                 more = stratified_lanes(scene, r.sensor, r.mincam, regions, layout, self.counts, frame_seed,
                                         freeze=self._freeze_key(), pair=bg_more if watch is not None else None,
                                         groups=extra, **kw)
-                to_background()
+                # the scene stays at the frame: the next frame (or a retry) sets every moving parameter before it
+                # reads or traces anything, and the run's result restores the background (one update less)
                 diff = np.where(extra, more.estimates() - bg_more.estimates(), diff)
                 traced += more.traced + bg_more.traced
             self.allocated = want
@@ -744,7 +750,8 @@ class _StratifiedRun(_Run):
     def _freeze_key(self) -> tuple | None:
         if not self.freeze:
             return None
-        return self.r.buffers_key() + (() if self.split is None else buffers_key(list(self.split.copies.values())))
+        return self.r.buffers_key() + (() if self.split is None else
+                                       buffers_key(list(self.split.copies.values()), self.traversals))
 
     def _check_recordings(self) -> None:
         """Trace instead of replaying once the frozen launch keeps recording (the moving meshes' buffers land at
