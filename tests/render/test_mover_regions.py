@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import trimesh
 from conftest import assert_close_mc
-from front import changes
+from front import changes, tilted_table_world
 
 import mincam_sim as ms
 from mincam_sim import Pose
@@ -144,14 +144,7 @@ def test_the_solver_samples_per_mover_rectangles_and_one_mover_keeps_the_nested_
 @pytest.fixture(scope="module")
 def still():
     """A tilted mincam over a textured table (a change-free scene: P itself is checked)."""
-    cam = cross_layout(center=Pose((0.0, 0.0, 0.3), (0.1, 0.05, -1.0), (0.0, 1.0, 0.0)))
-    rng = np.random.default_rng(3)
-    elements = {
-        "table": sd.textured_plane(np.clip(0.4 + 0.2 * rng.standard_normal((16, 16)), 0, 1), 1.0, 1.0,
-                                   Pose((0, 0, 0), (0, 0, 1)).matrix()),
-        "light": sd.area_light(0.4, 0.4, Pose((0.1, 0, 1.0), (0, 0, -1)).matrix(), 10.0),
-    }
-    return ms.Simulation(cam, world=elements)
+    return tilted_table_world()
 
 
 RECTANGLE_SETS = {

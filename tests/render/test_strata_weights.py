@@ -8,13 +8,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import assert_close_mc
+from front import tilted_table_world
 
-import mincam_sim as ms
-from mincam_sim import Pose
-from mincam_sim.model.optics import cross_layout
 from mincam_sim.render.kernels.change_region import ApertureRegions
 from mincam_sim.render.kernels.stratified import stratified_estimates
-from mincam_sim.render.scene import scene_dicts as sd
 from mincam_sim.render.solvers.change import STRATA_EXPANSIONS
 
 REPLICATES = 16
@@ -22,14 +19,7 @@ REPLICATES = 16
 
 @pytest.fixture(scope="module")
 def world():
-    cam = cross_layout(center=Pose((0.0, 0.0, 0.3), (0.1, 0.05, -1.0), (0.0, 1.0, 0.0)))
-    rng = np.random.default_rng(3)
-    elements = {
-        "table": sd.textured_plane(np.clip(0.4 + 0.2 * rng.standard_normal((16, 16)), 0, 1), 1.0, 1.0,
-                                   Pose((0, 0, 0), (0, 0, 1)).matrix()),
-        "light": sd.area_light(0.4, 0.4, Pose((0.1, 0, 1.0), (0, 0, -1)).matrix(), 10.0),
-    }
-    return ms.Simulation(cam, world=elements)
+    return tilted_table_world()
 
 
 def _regions(world, base, slope=(0.0, 0.0, 0.0, 0.0)) -> ApertureRegions:

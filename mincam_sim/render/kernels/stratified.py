@@ -524,14 +524,7 @@ def _stratum_sample(dr, mi, c, x_d, y_d, v, pick, stratum, expansions, rays):
         inner = [outer[0], outer[1], outer[0], outer[1]] if s == 0 else list(rects[s - 1])
         return inner, outer
 
-    def strips(inner, outer):
-        ix0, iy0, ix1, iy1 = inner
-        ox0, oy0, ox1, oy1 = outer
-        # bottom, top strips, then left and right of the inner rectangle
-        return ((ox1 - ox0) * (iy0 - oy0), (ox1 - ox0) * (oy1 - iy1), (ix0 - ox0) * (iy1 - iy0),
-                (ox1 - ix1) * (iy1 - iy0))
-
-    areas = [sum(strips(*bounds(s))) for s in range(n_strata)]
+    areas = [sum(_ring_strips(*bounds(s))) for s in range(n_strata)]
     outermost = mi.UInt32(0)
     for s in range(n_strata):
         outermost = dr.select(areas[s] > 0.0, s, outermost)
@@ -552,18 +545,34 @@ def _stratum_sample(dr, mi, c, x_d, y_d, v, pick, stratum, expansions, rays):
         b_inner, b_outer = bounds(s)
         inner = [dr.select(sel, a, b) for a, b in zip(b_inner, inner, strict=True)]
         outer = [dr.select(sel, a, b) for a, b in zip(b_outer, outer, strict=True)]
+    a0, a1, a2, a3 = _ring_strips(inner, outer)
+    area = a0 + a1 + a2 + a3
+    x0, y0, x1, y1 = _picked_strip(dr, inner, outer, (a0, a1, a2, a3), pick * area)
+    aperture = mi.Point2f(x0 + (x1 - x0) * v.x, y0 + (y1 - y0) * v.y)
+    return aperture, area * own_rays / sharing
+
+
+def _ring_strips(inner, outer):
+    """Areas of the bottom, top, left and right strips of the ring between ``inner`` and ``outer`` (rectangles
+    ``(x0, y0, x1, y1)``, ``inner`` within ``outer``)."""
+    ix0, iy0, ix1, iy1 = inner
+    ox0, oy0, ox1, oy1 = outer
+    return ((ox1 - ox0) * (iy0 - oy0), (ox1 - ox0) * (oy1 - iy1), (ix0 - ox0) * (iy1 - iy0),
+            (ox1 - ix1) * (iy1 - iy0))
+
+
+def _picked_strip(dr, inner, outer, strip_areas, t):
+    """``(x0, y0, x1, y1)`` of the strip of the ring between ``inner`` and ``outer`` (bottom, top, left, right
+    of the inner rectangle, with areas ``strip_areas``) in which ``t`` (in [0, ring area)) falls."""
     ox0, oy0, ox1, oy1 = outer
     ix0, iy0, ix1, iy1 = inner
-    a0, a1, a2, a3 = strips(inner, outer)
-    area = a0 + a1 + a2 + a3
-    t = pick * area
+    a0, a1, a2, _ = strip_areas
     first, second, third = t < a0, t < a0 + a1, t < a0 + a1 + a2
     x0 = dr.select(first | second | third, ox0, ix1)
     x1 = dr.select(first | second, ox1, dr.select(third, ix0, ox1))
     y0 = dr.select(first, oy0, dr.select(second, iy1, iy0))
     y1 = dr.select(first, iy0, dr.select(second, oy1, iy1))
-    aperture = mi.Point2f(x0 + (x1 - x0) * v.x, y0 + (y1 - y0) * v.y)
-    return aperture, area * own_rays / sharing
+    return x0, y0, x1, y1
 
 
 def _mis_sample(dr, mi, regions, alloc, x_d, y_d, v, pick, stratum, sub, expansions, rays):
@@ -604,13 +613,6 @@ def _mis_sample(dr, mi, regions, alloc, x_d, y_d, v, pick, stratum, sub, expansi
         return [dr.clip(x, 0.0, 1.0) for x in (mid_x - scale * half_x, mid_y - scale * half_y,
                                               mid_x + scale * half_x, mid_y + scale * half_y)]
 
-    def strips(inner, outer):
-        """Areas of the ring's bottom, top, left and right strips (``inner`` within ``outer``)."""
-        ix0, iy0, ix1, iy1 = inner
-        ox0, oy0, ox1, oy1 = outer
-        return ((ox1 - ox0) * (iy0 - oy0), (ox1 - ox0) * (oy1 - iy1), (ix0 - ox0) * (iy1 - iy0),
-                (ox1 - ix1) * (iy1 - iy0))
-
     def stratum_of(rect, e):
         """(inner, outer) rectangles of stratum ``e`` of ``rect``: the first one is a ring around its corner."""
         outer = scaled(rect, expansions[e])
@@ -628,17 +630,10 @@ def _mis_sample(dr, mi, regions, alloc, x_d, y_d, v, pick, stratum, sub, expansi
         e_inner, e_outer = stratum_of(own_rect, e)
         inner = [dr.select(stratum == e, a, b) for a, b in zip(e_inner, inner, strict=True)]
         outer = [dr.select(stratum == e, a, b) for a, b in zip(e_outer, outer, strict=True)]
-    a0, a1, a2, a3 = strips(inner, outer)
+    a0, a1, a2, a3 = _ring_strips(inner, outer)
     area = a0 + a1 + a2 + a3
     sampled = (sub < len(regions)) & (stratum < len(expansions)) & own_ok & (area > 0.0)
-    ox0, oy0, ox1, oy1 = outer
-    ix0, iy0, ix1, iy1 = inner
-    t = pick * area
-    first, second, third = t < a0, t < a0 + a1, t < a0 + a1 + a2
-    x0 = dr.select(first | second | third, ox0, ix1)
-    x1 = dr.select(first | second, ox1, dr.select(third, ix0, ox1))
-    y0 = dr.select(first, oy0, dr.select(second, iy1, iy0))
-    y1 = dr.select(first, iy0, dr.select(second, oy1, iy1))
+    x0, y0, x1, y1 = _picked_strip(dr, inner, outer, (a0, a1, a2, a3), pick * area)
     x0, y0 = dr.select(sampled, x0, zero), dr.select(sampled, y0, zero)
     x1, y1 = dr.select(sampled, x1, one), dr.select(sampled, y1, one)
     px, py = x0 + (x1 - x0) * v.x, y0 + (y1 - y0) * v.y
@@ -652,7 +647,7 @@ def _mis_sample(dr, mi, regions, alloc, x_d, y_d, v, pick, stratum, sub, expansi
         for e in range(len(expansions)):
             outer_e = boxes[e]
             inner_e = [outer_e[0], outer_e[1], outer_e[0], outer_e[1]] if e == 0 else boxes[e - 1]
-            ring = sum(strips(inner_e, outer_e))
+            ring = sum(_ring_strips(inner_e, outer_e))
             in_outer = (px >= outer_e[0]) & (px <= outer_e[2]) & (py >= outer_e[1]) & (py <= outer_e[3])
             inside = in_outer & ~inside_prev
             inside_prev = in_outer

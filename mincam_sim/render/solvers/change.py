@@ -34,7 +34,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
-from typing import ClassVar
+from typing import ClassVar, NamedTuple
 
 import numpy as np
 
@@ -99,6 +99,15 @@ INFO_COLUMNS = ("retried", "guided", "guide_spheres", "region_area_fraction", "r
 Updates = Mapping[str, np.ndarray]
 
 
+class Target(NamedTuple):
+    """What a solver that sizes each (frame, mixel) value itself aims at."""
+
+    rel_stderr: float = 0.0  # relative standard error of dP (0: none; the counts as given)
+    max_spp: int = MAX_SPP  # rays per mixel per pass at most
+
+
+NO_TARGET = Target()
+
 class FallbackWarning(UserWarning):
     """The stratified estimator could not bound a change (a moving emitter or light, an environment light, a
     parameter of no shape) or guide its bounces, and fell back to a costlier, still unbiased, sampling."""
@@ -124,10 +133,9 @@ class ChangeSolver(Solver):
     changes: ClassVar[bool] = True
 
     def run(self, sim, frames, background, spp: int, seed: int, replicates: int, bg: np.ndarray,
-            target: float = 0.0, cap: int = MAX_SPP) -> _Run:
+            target: Target = NO_TARGET) -> _Run:
         """The per-frame machinery of one run at ``spp`` rays per pass (the background's estimates ``bg``); a
-        solver that sizes each value itself aims at ``target`` (relative sigma of dP) with at most ``cap`` rays
-        per mixel per pass."""
+        solver that sizes each value itself aims at ``target``."""
         raise NotImplementedError
 
     def background_estimates(self, sim, spp: int, seed: int, replicates: int) -> tuple[int, np.ndarray]:
@@ -197,7 +205,7 @@ class PlainChange(ChangeSolver):
     def background_estimates(self, sim, spp, seed, replicates):
         return spp, sim.mincam_scene.fast_estimates(spp, replicates, seed)
 
-    def run(self, sim, frames, background, spp, seed, replicates, bg, target=0.0, cap=MAX_SPP):
+    def run(self, sim, frames, background, spp, seed, replicates, bg, target=NO_TARGET):
         return _PlainRun(sim, background, spp, seed, self.correlated, replicates, bg)
 
 
@@ -289,11 +297,11 @@ class StratifiedChange(ChangeSolver):
         return bg_spp, whole_aperture_estimates(sim.scene, sim.sensor, sim.mincam, replicates, bg_spp,
                                                 derive_seed(seed, "background"))
 
-    def run(self, sim, frames, background, spp, seed, replicates, bg, target=0.0, cap=MAX_SPP):
+    def run(self, sim, frames, background, spp, seed, replicates, bg, target=NO_TARGET):
         run = _StratifiedRun(sim, frames, background, spp, seed, self.correlated, replicates, self.shares(),
                              tuple(self.strata_expansions), bool(self.guide_bounces), bg)
-        if self.allocate and target > 0:
-            run.allocate(float(target), int(cap), str(self.allocation_sigma))
+        if self.allocate and target.rel_stderr > 0:
+            run.allocate(float(target.rel_stderr), int(target.max_spp), str(self.allocation_sigma))
         return run
 
 
@@ -310,8 +318,8 @@ class ChangePlan(Plan):
         self.cap = budget.max_spp or MAX_SPP
         sim.update(background)
         self.bg_spp, self.bg = solver.background_estimates(sim, self.spp, self.seed, replicates)
-        self.run = solver.run(sim, frames, background, self.spp, self.seed, replicates, self.bg, self.target or 0.0,
-                              self.cap)
+        self.run = solver.run(sim, frames, background, self.spp, self.seed, replicates, self.bg,
+                              Target(self.target or 0.0, self.cap))
         self.run.note_delta_movers(moving_shapes([background, *frames]))
         names = sim.mincam.names
         self.n_rows = len(frames)
