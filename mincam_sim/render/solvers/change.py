@@ -532,7 +532,6 @@ class _StratifiedRun(_Run):
         super().__init__(sim, background, spp, seed, correlated, replicates, bg)
         check_strata([1] * len(shares), expansions)
         self.expansions, self.guided = expansions, guided
-        self.traversals: dict = {}  # the split copies' mi.traverse, kept for buffers_key over the run
         per_rep = -(-int(spp) // replicates)
         self.counts = [max(1, int(round(per_rep * s / shares.sum()))) for s in shares]
         self.moving = moving_shapes([background, *frames])
@@ -554,6 +553,7 @@ class _StratifiedRun(_Run):
         self.freeze = sim.freeze_launches and not lights_move
         self.launches = ("frozen" if self.freeze else
                          "traced" + (": a moving shape emits light" if sim.freeze_launches else ""))
+        self.traversals: dict = {}  # the split copies' mi.traverse, kept for buffers_key over the run
         self.split, self.static_geometry = self._split(sim, frames, background)
         self.recordings_at_start = self._recordings()
         self.frames_traced = 0
@@ -651,12 +651,21 @@ class _StratifiedRun(_Run):
     def frame(self, frames, i: int, replicates: int, purpose: str):
         r = self.r
         changed = changed_shapes(frames[i], self.background)
-        if self.split is not None:  # the world scene stays at the background; the movers scene moves
-            self.split.move(r.scene_updates({**self.background, **frames[i]}))
-            each, guide, why = r.change_reach_each(changed, scene=self.split.view)
-        else:
-            r.update({**self.background, **frames[i]})
-            each, guide, why = r.change_reach_each(changed)
+
+        def to_frame():  # split: the world scene stays at the background; the movers scene moves
+            if self.split is None:
+                r.update({**self.background, **frames[i]})
+            else:
+                self.split.move(r.scene_updates({**self.background, **frames[i]}))
+
+        def to_background():
+            if self.split is None:
+                r.update(self.background)
+            else:
+                self.split.move(self.background_movers)
+
+        to_frame()
+        each, guide, why = r.change_reach_each(changed, scene=None if self.split is None else self.split.view)
         for reason in why:
             self.note_fallback(next(iter(sorted(changed))), reason)
         # a rectangle per mover and per mover's background place, where a mixel sees two or more apart; else the
@@ -693,26 +702,17 @@ class _StratifiedRun(_Run):
         if allocating:
             pilot = np.zeros((layout, len(r.mincam)), dtype=bool)
             pilot[:replicates] = True
-
-        def to_frame():
-            if self.split is None:
-                r.update({**self.background, **frames[i]})
-            else:
-                self.split.move(r.scene_updates({**self.background, **frames[i]}))
-
-        def to_background():
-            if self.split is None:
-                r.update(self.background)
-            else:
-                self.split.move(self.background_movers)
-
         bg_seed = frame_seed if self.correlated else derive_seed(self.seed, "stratified-background", i, purpose)
-        lanes = stratified_lanes(scene, r.sensor, r.mincam, regions, layout, self.counts, frame_seed,
-                                 freeze=self._freeze_key(), watch=watch, groups=pilot, **kw)
+
+        def trace(seed, groups, first=None):
+            """One pass over the scene as it stands: watching the boxes, or paired to the ``first`` pass."""
+            pairing = {"watch": watch} if first is None else {"pair": first if watch is not None else None}
+            return stratified_lanes(scene, r.sensor, r.mincam, regions, layout, self.counts, seed,
+                                    freeze=self._freeze_key(), groups=groups, **pairing, **kw)
+
+        lanes = trace(frame_seed, pilot)
         to_background()
-        bg_lanes = stratified_lanes(scene, r.sensor, r.mincam, regions, layout, self.counts, bg_seed,
-                                    freeze=self._freeze_key(), pair=lanes if watch is not None else None,
-                                    groups=pilot, **kw)
+        bg_lanes = trace(bg_seed, pilot, first=lanes)
         diff = lanes.estimates() - bg_lanes.estimates()
         traced = lanes.traced + bg_lanes.traced
         self.sigma_rows = None
@@ -727,17 +727,13 @@ class _StratifiedRun(_Run):
                 self.sigma_rows = np.broadcast_to(rows < replicates, extra.shape)
             if extra.any():
                 # the scene holds the background now: its pass first (watching the boxes), then the frame's
-                bg_more = stratified_lanes(scene, r.sensor, r.mincam, regions, layout, self.counts, bg_seed,
-                                           freeze=self._freeze_key(), watch=watch, groups=extra, **kw)
+                bg_more = trace(bg_seed, extra)
                 to_frame()
-                more = stratified_lanes(scene, r.sensor, r.mincam, regions, layout, self.counts, frame_seed,
-                                        freeze=self._freeze_key(), pair=bg_more if watch is not None else None,
-                                        groups=extra, **kw)
+                more = trace(frame_seed, extra, first=bg_more)
                 # the scene stays at the frame: the next frame (or a retry) sets every moving parameter before it
                 # reads or traces anything, and the run's result restores the background (one update less)
                 diff = np.where(extra, more.estimates() - bg_more.estimates(), diff)
                 traced += more.traced + bg_more.traced
-            self.allocated = want
         if not purpose:
             self.frames_traced += 1
             self._check_recordings()
