@@ -386,7 +386,8 @@ def _grid_mincam(n: int, height_m: float):
 
 
 def _cost_point(n_mixels: int = 4, table_triangles: int = 2, n_movers: int = 1, n_frames: int = 16,
-                spp: int = 1 << 14, target: float = 0.0, pilot_spp: int = 4320, pilot_replicates: int = 24) -> dict:
+                spp: int = 1 << 14, target: float = 0.0, pilot_spp: int = 4320, pilot_replicates: int = 24,
+                split_static: bool | None = None) -> dict:
     """One point of the cost curves: the stratified and the plain estimator on the same frames at the same rays
     per pass; frames/s and the rays per mixel per frame each needs for <= 1 % worst relative sigma of dP
     (extrapolated with sigma ~ rays^-1/2 and time ~ rays from the measured run). 16 frames: a run's one-off
@@ -397,7 +398,10 @@ def _cost_point(n_mixels: int = 4, table_triangles: int = 2, n_movers: int = 1, 
     (``pilot_spp`` rays per pass in its ``pilot_replicates``): measured, not extrapolated, under the key
     ``stratified_allocated`` (rays as traced, worst sigma reached, seconds per frame); and the uniform estimator
     at the rays its extrapolation gives for 1 %, measured (``stratified_at_1pct_measured``). Both are warmed up
-    over every frame first (kernels, recordings, heavy-tail thresholds: one-off costs of a long video)."""
+    over every frame first (kernels, recordings, heavy-tail thresholds: one-off costs of a long video).
+
+    ``split_static`` (True / False) forces the static split on or off (None: the solver's own rule). Every point
+    also times the static scene's ray casts alone (``ray_cast_ns``): what a ray costs Embree on this table."""
     import trimesh
 
     from mincam_sim import Budget, PlainChange, Simulation, StratifiedChange, cross_layout
@@ -430,9 +434,14 @@ def _cost_point(n_mixels: int = 4, table_triangles: int = 2, n_movers: int = 1, 
     frames = [{k: v for j, (cx, cy) in enumerate(centres)
                for k, v in vertex_update(f"toy{j}", toy.vertices + [cx + x, cy, 0.0]).items()} for x in xs]
     world = Simulation(cam, world=elements)
-    out = {"n_mixels": len(cam), "table_triangles": int(len(faces)), "n_movers": n_movers, "spp": spp}
+    if split_static is not None:
+        world.split_static = split_static
+    out = {"n_mixels": len(cam), "table_triangles": int(len(faces)), "n_movers": n_movers, "spp": spp,
+           "split_static": split_static, "ray_cast_ns": _ray_cast_ns(world, height)}
     for estimator, solver in (("stratified", StratifiedChange()), ("plain", PlainChange())):
-        world.measure_changes(frames[:1], background, solver, Budget(spp=1 << 10, replicates=16, seed=1))  # warm-up
+        # warm-up at the timed launch size, over enough frames that the frozen launches record every buffer
+        # address a moving mesh alternates between: the timed run then pays what a long video pays per frame
+        world.measure_changes(frames[:3], background, solver, Budget(spp=spp, replicates=16, seed=1))
         t = time.perf_counter()
         ch = world.measure_changes(frames, background, solver, Budget(spp=spp, replicates=16, seed=2))
         seconds = time.perf_counter() - t
@@ -486,6 +495,31 @@ def _cost_point(n_mixels: int = 4, table_triangles: int = 2, n_movers: int = 1, 
     return out
 
 
+def _ray_cast_ns(world, height_m: float, n_rays: int = 1 << 20) -> float:
+    """Nanoseconds per ray of ``n_rays`` incoherent rays cast from the mincam's height at the table (the world's
+    scene, movers parked; median of 5 after a warm-up): the acceleration structure's own cost per ray."""
+    import drjit as dr
+
+    from mincam_sim.render import backend
+
+    mi = backend.mitsuba()
+    rng = np.random.default_rng(0)
+    origin = mi.Point3f(*(mi.Float(v) for v in (rng.uniform(-0.3, 0.3, n_rays), rng.uniform(-0.3, 0.3, n_rays),
+                                                np.full(n_rays, height_m))))
+    direction = mi.Vector3f(*(mi.Float(v) for v in (rng.uniform(-0.3, 0.3, n_rays), rng.uniform(-0.3, 0.3, n_rays),
+                                                    -np.ones(n_rays))))
+    ray = mi.Ray3f(origin, dr.normalize(direction))
+    dr.eval(ray)
+    times = []
+    for _ in range(6):
+        t = time.perf_counter()
+        hit = world.scene.ray_intersect_preliminary(ray)
+        dr.eval(hit.t)
+        dr.sync_thread()
+        times.append(time.perf_counter() - t)
+    return float(1e9 * np.median(times[1:]) / n_rays)
+
+
 def _cost_point_alone(**kw) -> dict:
     """:func:`_cost_point` in a process of its own: scenes built before (a million-triangle table) must not slow
     the points after them (in one process the same 4-mixel point read 60 and 5 frames/s)."""
@@ -507,6 +541,8 @@ def bench_cost_curves() -> dict:
     curves = {
         "mixels": [_cost_point_alone(n_mixels=n, target=ALLOCATED_TARGET) for n in (4, 16, 64)],
         "triangles": [_cost_point_alone(table_triangles=t) for t in (1_000, 100_000, 1_000_000)],
+        # the static split forced on the 1 k table: what tracing two scenes costs where rebuilding is cheap
+        "triangles_split_forced": [_cost_point_alone(table_triangles=1_000, split_static=True)],
         "movers": [_cost_point_alone(n_movers=m, target=ALLOCATED_TARGET) for m in (1, 2, 8)],
     }
     maps = []
