@@ -49,11 +49,12 @@ from mincam_sim.render.kernels.change_geometry import (
     delta_surfaces,
 )
 from mincam_sim.render.kernels.change_region import ApertureRegions, mixel_regions
+from mincam_sim.render.kernels.frozen import recordings
 from mincam_sim.render.kernels.guided_path import MAX_GUIDES, guide_spheres, spheres_of
 from mincam_sim.render.kernels.map_tracing import FRAME_CHUNK_BYTES, check_radiance
 from mincam_sim.render.kernels.stratified import buffers_key
 from mincam_sim.render.scene.gltf_files import GLTF_SUFFIXES, GltfFile
-from mincam_sim.render.scene.mincam_scene import CAMERA_KEY, SENSOR_KEY, MincamScene
+from mincam_sim.render.scene.mincam_scene import CAMERA_KEY, SENSOR_KEY, MincamScene, camera_render
 from mincam_sim.render.scene.scene_dicts import mincam_body_shapes
 from mincam_sim.render.scene.scene_files import SceneFile, check_parameters, in_metres
 from mincam_sim.render.scene.updates import removal_updates
@@ -70,6 +71,7 @@ from mincam_sim.storage.identity import display_frames_identity, fingerprint, sc
 
 Updates = Mapping[str, np.ndarray]
 DEFAULT_SOLVERS = {"display": ResponseMap, "world": Aperture}  # Simulation.measure's solver by scene kind
+CAMERA_FREEZE_ALLOWANCE = 6  # recordings of the camera render before it must replay (else: traced)
 DEFAULT_MAX_DEPTH = 3  # world scenes without a given depth or a file's integrator: one inter-reflection
 MAX_FILE_DEPTH = 16  # a file's unbounded (-1) or longer max_depth is taken as this
 
@@ -182,6 +184,7 @@ class Simulation:
         self._content_key: str | None = None
         self._content_key = self._content_fingerprint()  # before any update: the scene as built
         self._as_built: dict[str, object] = {}  # each updated parameter's value (world coordinates) before updates
+        self._camera_frozen_images, self._camera_traced = 0, False  # camera renders replayed, or traced from now
         self._last_set: dict[str, np.ndarray] = {}  # the last numpy value each parameter was set to
         self.revisions: dict[str, int] = {}  # how often each parameter was changed (who replays a scene checks it)
         self._traversals: dict = {}  # mi.traverse of the objects buffers_key reads (read afresh every call)
@@ -358,7 +361,26 @@ class Simulation:
     def camera_image(self, spp: int = 64, seed: int = 0) -> np.ndarray:
         """The ground-truth camera's image [W m^-2 sr^-1], row 0 at the top (world scenes)."""
         self._require_world("ground-truth cameras")
-        return self.mincam_scene.camera_image(spp, seed)
+        key = self._camera_freeze_key()
+        image = self.mincam_scene.camera_image(spp, seed, freeze=key)
+        if key is not None:
+            self._camera_frozen_images += 1
+            recorded = recordings(self.mincam_scene.fast_scene, camera_render)
+            if recorded > CAMERA_FREEZE_ALLOWANCE + self._camera_frozen_images // 4:
+                self._camera_traced = True  # every image records anew (a shape moved by a changing transform)
+        return image
+
+    def _camera_freeze_key(self) -> tuple | None:
+        """The key of a frozen camera render (:meth:`buffers_key`), or None (trace) off LLVM, once the images
+        kept recording instead of replaying, or where an updated object emits light or is not a shape (an
+        emitter's sampling tables are rebuilt where a replay cannot see them)."""
+        if not self.freeze_launches or self._camera_traced:
+            return None
+        names = {key.split(".", 1)[0] for key in self._as_built}
+        shapes = self.shapes_by_id
+        if any(name not in shapes or shapes[name].emitter() is not None for name in names):
+            return None
+        return self.buffers_key()
 
     # ------------------------------------------------------------------------------------------ identity
     def _content_fingerprint(self) -> str:

@@ -1,7 +1,7 @@
 """Frozen launches of the stratified world estimator (``dr.freeze``): every replayed frame equals the traced
 one bit for bit on moving geometry (vertex updates and transforms, frame and background passes as
 ``measure_changes`` runs them), a new budget or a new scene records afresh instead of replaying a stale kernel,
-and a moving light is traced unfrozen."""
+and a moving light is traced unfrozen; the same for the ground-truth camera's images."""
 
 from __future__ import annotations
 
@@ -13,10 +13,12 @@ from front import changes, estimates
 import mincam_sim as ms
 from mincam_sim import Pose, cross_layout
 from mincam_sim.render import backend
+from mincam_sim.render.kernels import frozen as frozen_functions
 from mincam_sim.render.kernels import stratified as st
 from mincam_sim.render.kernels.change_geometry import changed_shapes
 from mincam_sim.render.scene import scene_dicts as sd
 from mincam_sim.render.scene.elements import transform_update
+from mincam_sim.render.scene.mincam_scene import camera_render as render_function
 from mincam_sim.render.scene.updates import vertex_update
 from mincam_sim.render.solvers.change import STRATA_EXPANSIONS
 
@@ -32,9 +34,10 @@ def _sphere_matrix(x_m: float, y_m: float) -> np.ndarray:
     return m
 
 
-def _world(extra: bool = False, moving_light: bool = False, ball: bool = True):
+def _world(extra: bool = False, moving_light: bool = False, ball: bool = True, camera: bool = False):
     """A textured table under an area light, a box moved by its vertices and (``ball``) a sphere moved by its
-    transform (``extra``: one more static shape, so the scene has another shape count)."""
+    transform (``extra``: one more static shape, so the scene has another shape count; ``camera``: a 24 x 24
+    ground-truth camera looking down from the mincam)."""
     cam = cross_layout(center=Pose((0.0, 0.0, 0.5), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)))
     table = np.clip(0.4 + 0.1 * np.random.default_rng(0).standard_normal((32, 32)), 0, 1)
     elements = {
@@ -46,7 +49,9 @@ def _world(extra: bool = False, moving_light: bool = False, ball: bool = True):
     }
     if extra:
         elements["post"] = sd.mesh_object("post", TOY.vertices * 0.5 + [0.3, 0.3, 0.0], TOY.faces, 0.5)
-    world = ms.Simulation(cam, world=elements)
+    view = sd.pinhole_camera(Pose((0.0, 0.0, 0.5), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)).matrix(), 40.0, 24, 24,
+                             spp=8) if camera else None
+    world = ms.Simulation(cam, world=elements, camera=view)
     xs = np.linspace(-0.1, 0.1, 5)
     frames = [{**vertex_update("toy", TOY.vertices + [x, 0.02 * np.sin(20 * x), 0.0]),
                **(transform_update("ball", _sphere_matrix(-x, 0.08)) if ball else {})} for x in xs]
@@ -134,6 +139,67 @@ def test_a_moving_light_is_traced_unfrozen():
     world.freeze_launches = False
     dp2, _ = changes(world, frames[:2], background, spp=320, seed=1, solver=ms.StratifiedChange())
     assert np.array_equal(dp.irradiance_w_m2, dp2.irradiance_w_m2)
+
+
+def _camera_images(world, frames, background, freeze: bool) -> list[np.ndarray]:
+    """The camera's image as built (no update yet: the first move then puts the vertices in a new buffer),
+    at the background, at every frame and back at the background."""
+    world.freeze_launches = freeze
+    out = [world.camera_image(spp=8, seed=3)]
+    background = world.complete_background(frames, background)  # a moved light back where it was built
+    for frame in [background, *frames, background]:
+        world.update({**background, **frame})
+        out.append(world.camera_image(spp=8, seed=3))
+    return out
+
+
+@pytest.mark.parametrize("ball", [False, True], ids=["vertices", "vertices and a transform"])
+def test_frozen_camera_images_equal_the_traced_ones_bit_for_bit_on_moving_geometry(ball):
+    """The ground-truth camera's images, replayed from recordings keyed on the moved objects' buffers, equal
+    the traced ones bit for bit: from the scene as built (whose first move reallocates the vertices), frame
+    after frame, back at the background, and again; a mesh moved by its vertices replays (a few recordings), a
+    transform records per value."""
+    images = {}
+    for label, freeze in (("traced", False), ("frozen", True)):
+        world, frames, background = _world(ball=ball, camera=True)  # each run from a scene just built
+        images[label] = _camera_images(world, frames, background, freeze=freeze)
+        if freeze:
+            images["again"] = _camera_images(world, frames, background, freeze=True)
+            recorded = frozen_functions.recordings(world.mincam_scene.fast_scene, render_function)
+    for a, b in zip(images["traced"], images["frozen"], strict=True):
+        assert np.array_equal(a, b)
+    assert all(np.array_equal(a, b) for a, b in zip(images["traced"][1:], images["again"][1:], strict=True))
+    assert len({img.tobytes() for img in images["traced"][1:]}) == len(frames) + 1, "the frames must differ"
+    most = 2 * len(frames) + 4 if ball else 4
+    assert 1 <= recorded <= most, f"{recorded} recordings for {2 * len(frames) + 6} images: the render must replay"
+
+
+def test_a_camera_that_keeps_recording_goes_back_to_tracing():
+    """A sphere moved by its transform to a new place every frame keys a new recording every image: after a
+    few the camera traces (recording costs more than tracing), with the same images."""
+    xs = np.linspace(-0.1, 0.1, 16)
+    images = {}
+    for freeze in (False, True):
+        world, _, background = _world(ball=True, camera=True)
+        world.freeze_launches = freeze
+        images[freeze] = []
+        for x in xs:
+            world.update({**background, **transform_update("ball", _sphere_matrix(x, 0.05))})
+            images[freeze].append(world.camera_image(spp=8, seed=1))
+    assert world._camera_traced
+    assert frozen_functions.recordings(world.mincam_scene.fast_scene, render_function) < len(xs)
+    assert all(np.array_equal(a, b) for a, b in zip(images[False], images[True], strict=True))
+
+
+def test_a_moving_light_is_rendered_by_the_camera_unfrozen():
+    """Once a light has moved, its sampling tables live where a replay cannot see them: every later image is
+    traced (the same images as a run traced throughout)."""
+    world, frames, background = _world(moving_light=True, camera=True)
+    frozen = _camera_images(world, frames[:2], background, freeze=True)
+    assert world._camera_freeze_key() is None
+    traced = _camera_images(world, frames[:2], background, freeze=False)
+    assert all(np.array_equal(a, b) for a, b in zip(frozen, traced, strict=True))
+    assert not np.array_equal(traced[1], traced[2]), "the light must move"
 
 
 def test_an_in_place_vertex_update_renders_as_a_scene_built_there():

@@ -43,18 +43,15 @@ moving shapes; same expectation).
 
 from __future__ import annotations
 
-import gc
 import math
-from collections import OrderedDict
 from collections.abc import Sequence
-from contextlib import contextmanager
 from typing import NamedTuple
 
 import numpy as np
 
 from mincam_sim.model.optics import Mincam
 from mincam_sim.render import backend
-from mincam_sim.render.kernels import guided_path, qmc, tracing
+from mincam_sim.render.kernels import frozen, guided_path, qmc, tracing
 from mincam_sim.render.kernels.change_region import ApertureRegions, RegionSet
 from mincam_sim.render.kernels.tracing import LaneSampler, launch_seed
 
@@ -205,7 +202,7 @@ def stratified_lanes(scene, sensor, mincam: Mincam, regions: ApertureRegions | R
     boxes = [tuple(mi.Point3f(*(dr.opaque(mi.Float, float(x)) for x in corner)) for corner in box)
              for box in (watch or [])]
     groups_per_launch = max(1, tracing.MAX_LANES // per)
-    trace = _launch if freeze is None else _frozen_launch(scene)
+    trace = _launch if freeze is None else frozen.frozen(scene, _launch)
     values, touched, traced = [], ([] if watch is not None else None), 0
     for launch, g0 in enumerate(range(0, n_groups, groups_per_launch)):
         ng = min(groups_per_launch, n_groups - g0)
@@ -226,7 +223,7 @@ def stratified_lanes(scene, sensor, mincam: Mincam, regions: ApertureRegions | R
                              getattr(sensor, "version", 0), bool(sobol), n_regions)
         met = mi.Bool(False)
         if dr.width(lanes):
-            with _no_cyclic_gc():
+            with frozen.no_cyclic_gc():
                 out, met = trace(scene, sensor, coeffs, dr.opaque(mi.UInt32, launch_seed(seed, launch)),
                                  dr.opaque(mi.UInt32, g0), lanes, spheres, boxes, shape, freeze)
             out = np.asarray(out, dtype=np.float64).reshape(-1)
@@ -380,46 +377,9 @@ def _traversal(mi, obj, kept: dict | None):
     return entry[1]
 
 
-_FROZEN: OrderedDict[int, tuple] = OrderedDict()
-FROZEN_SCENES = 4  # scenes whose frozen launches are kept (each holds its recordings)
-FROZEN_RECORDINGS = 16  # recordings kept per scene (launch shapes x buffer addresses), least recently used dropped
-
-
-@contextmanager
-def _no_cyclic_gc():
-    """Python's cyclic garbage collector paused: collecting another scene (its Embree structure, its arrays)
-    while a frozen launch is being recorded aborts Dr.Jit."""
-    enabled = gc.isenabled()
-    gc.disable()
-    try:
-        yield
-    finally:
-        if enabled:
-            gc.enable()
-
-
 def frozen_recordings(scene) -> int:
     """How many times this scene's frozen launch has been recorded (0 if it never ran frozen)."""
-    entry = _FROZEN.get(id(scene))
-    return 0 if entry is None else int(entry[1].n_recordings)
-
-
-def _frozen_launch(scene):
-    """:func:`_launch` frozen (``dr.freeze``) for this scene: traced once per launch shape, then replayed.
-
-    One frozen function per scene object (kept while it is among the :data:`FROZEN_SCENES` last used), so a
-    recording is never replayed on another scene; the scene is an input, so its geometry and parameters as
-    updated before the call (acceleration structure rebuilt outside) are what the replay traces."""
-    import drjit as dr
-
-    key = id(scene)
-    if key in _FROZEN:
-        _FROZEN.move_to_end(key)
-    else:
-        _FROZEN[key] = (scene, dr.freeze(_launch, limit=FROZEN_RECORDINGS, warn_after=4 * FROZEN_RECORDINGS))
-        while len(_FROZEN) > FROZEN_SCENES:
-            _FROZEN.popitem(last=False)
-    return _FROZEN[key][1]
+    return frozen.recordings(scene, _launch)
 
 
 def _sobol_samples(dr, mi, seed, group, j, stratum, counts, sub=None, rank=None, n_sub: int = 1):

@@ -24,6 +24,7 @@ import numpy as np
 
 from mincam_sim.model.optics import Mincam
 from mincam_sim.render import backend
+from mincam_sim.render.kernels import frozen
 from mincam_sim.render.kernels.mixel_sensor import mixel_position_sample, sensor_dict
 from mincam_sim.render.kernels.monte_carlo import check_counts, derive_seed
 from mincam_sim.render.kernels.tracing import trace_groups
@@ -195,13 +196,32 @@ class MincamScene:
             out[:, k] = trace_groups(scene, sensor, replicates, per_rep, derive_seed(seed, "reference", k))
         return out
 
-    def camera_image(self, spp: int = 64, seed: int = 0) -> np.ndarray:
-        """Image (rows, cols) of the ground-truth pinhole camera [W m^-2 sr^-1], row 0 at the top."""
+    def camera_image(self, spp: int = 64, seed: int = 0, freeze: tuple | None = None) -> np.ndarray:
+        """Image (rows, cols) of the ground-truth pinhole camera [W m^-2 sr^-1], row 0 at the top.
+
+        ``freeze``: replay the render from a recording (``dr.freeze``: no Python tracing of the integrator per
+        image) made with this key, :func:`.stratified.buffers_key` of every object moved since the scene was
+        loaded (None: trace). The same image bit for bit either way."""
         camera = self.sensor(CAMERA_KEY)
         if camera is None:
             raise ValueError("this scene has no ground-truth camera; pass camera=pinhole_camera(...)")
-        img = self.mi.render(self.fast_scene, sensor=camera, spp=int(spp), seed=int(seed))
+        scene = self.fast_scene
+        if freeze is None:
+            img = self.mi.render(scene, sensor=camera, spp=int(spp), seed=int(seed))
+        else:
+            import drjit as dr
+
+            index = next(k for k, s in enumerate(scene.sensors()) if s.id() == CAMERA_KEY)
+            with frozen.no_cyclic_gc():
+                img = frozen.frozen(scene, camera_render)(scene, index, int(spp), dr.opaque(self.mi.UInt32, int(seed)),
+                                                    freeze)
         return np.asarray(img, dtype=np.float64)[..., 0]
+
+
+def camera_render(scene, sensor_index: int, spp: int, seed, buffers: tuple):
+    """``mi.render`` of one of the scene's sensors (frozen by :meth:`MincamScene.camera_image`); ``buffers`` only
+    keys the recording."""
+    return backend.mitsuba().render(scene, sensor=sensor_index, spp=spp, seed=seed)
 
 
 def geometry_meta(mincam: Mincam, screen: Screen | None = None) -> dict:
