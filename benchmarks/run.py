@@ -502,10 +502,12 @@ def _cost_split(a: dict, b: dict) -> dict:
     rays (``seconds_per_frame``, ``rays_per_mixel_per_frame``): what a frame costs before its first ray (region
     geometry, scene updates, launches) and what each thousand rays per mixel add."""
     d_rays = a["rays_per_mixel_per_frame"] - b["rays_per_mixel_per_frame"]
-    if d_rays == 0:
-        return {"fixed_ms_per_frame": None, "ms_per_1000_rays_per_mixel": None}
-    slope = (a["seconds_per_frame"] - b["seconds_per_frame"]) / d_rays
+    slope = (a["seconds_per_frame"] - b["seconds_per_frame"]) / d_rays if d_rays else float("nan")
     fixed = a["seconds_per_frame"] - slope * a["rays_per_mixel_per_frame"]
+    if not (slope > 0 and fixed >= 0):  # the two runs' times are not on one line through positive costs
+        return {"fixed_ms_per_frame": None, "ms_per_1000_rays_per_mixel": None,
+                "why_none": "the two timed runs do not fit a fixed cost plus a cost per ray (noise, or launches "
+                            "split differently at the two sizes)"}
     return {"fixed_ms_per_frame": 1e3 * fixed, "ms_per_1000_rays_per_mixel": 1e6 * slope}
 
 
