@@ -11,6 +11,7 @@ way in.
 * ``map_tracing.py``: response maps traced per display texel, with their variance, and their content cache.
 * ``map_export.py``: response maps and point-source responses out as NumPy arrays with a JSON sidecar.
 * ``stratified.py``: stratified estimates: most rays where a frame can change things, a few everywhere else.
+* ``frozen.py``: frozen functions (``dr.freeze``) kept per scene: the stratified launches, the ground-truth camera.
 * ``qmc.py``: randomised quasi-Monte Carlo points (an Owen-scrambled Sobol sequence) in Dr.Jit integer arithmetic.
 * ``guided_path.py``: path tracing with the inter-reflection bounce guided toward what a frame moves.
 * ``split_scene.py``: rays traced against a static scene and a small movers scene as if they were one.
