@@ -212,9 +212,9 @@ class MincamScene:
             import drjit as dr
 
             index = next(k for k, s in enumerate(scene.sensors()) if s.id() == CAMERA_KEY)
+            render = frozen.frozen(scene, camera_render)
             with frozen.no_cyclic_gc():
-                img = frozen.frozen(scene, camera_render)(scene, index, int(spp), dr.opaque(self.mi.UInt32, int(seed)),
-                                                    freeze)
+                img = render(scene, index, int(spp), dr.opaque(self.mi.UInt32, int(seed)), freeze)
         return np.asarray(img, dtype=np.float64)[..., 0]
 
 
