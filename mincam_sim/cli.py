@@ -1037,9 +1037,17 @@ def figures(
         typer.echo(str(make_wave_figure(out_dir / "wave_vs_geometric.png")))
 
 
+INTERRUPTED_WHILE_STARTING = "error: interrupted while starting; nothing was run"
+
+
 def main(argv: list[str] | None = None) -> None:
-    """Console-script entry point."""
-    app(args=argv if argv is not None else sys.argv[1:], prog_name="mincam-sim")
+    """Console-script entry point. A Ctrl-C while typer builds the commands (before any runs; inside one, the
+    group's own handling answers it) is one line and exit code 130, as during the package's imports."""
+    try:
+        app(args=argv if argv is not None else sys.argv[1:], prog_name="mincam-sim")
+    except KeyboardInterrupt:
+        typer.echo(INTERRUPTED_WHILE_STARTING, err=True)
+        raise SystemExit(130) from None
 
 
 if __name__ == "__main__":

@@ -777,10 +777,33 @@ def test_real_executable_exit_code(tmp_path):
 
 
 
+def test_ctrl_c_while_typer_builds_the_commands_is_one_line_and_130(monkeypatch, capsys):
+    """The window after the imports and before a command runs (typer reading every command's signature): a
+    Ctrl-C there is one line and exit code 130 too, not a traceback."""
+    import typer.main
+
+    from mincam_sim import cli
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(typer.main, "get_command", interrupted)
+    try:
+        cli.main(["render", "--help"])
+    except SystemExit as exit_info:
+        assert exit_info.code == 130
+    except KeyboardInterrupt:
+        pytest.fail("a Ctrl-C while typer builds the commands escaped as a KeyboardInterrupt (a traceback)")
+    else:
+        pytest.fail("main returned after a Ctrl-C")
+    stderr = capsys.readouterr().err
+    assert stderr == cli.INTERRUPTED_WHILE_STARTING + "\n"
+
+
 @pytest.mark.parametrize("delay_s", [0.05, 0.3])
 def test_ctrl_c_while_the_package_imports_is_one_line_and_130(delay_s, tmp_path):
-    """A Ctrl-C in the first second (Python still importing numpy, scipy, typer) ends like any interrupt: exit
-    code 130 and one line, no import traceback. The import takes >= 0.5 s here, so both delays land in it."""
+    """A Ctrl-C in the first second (Python still importing numpy, scipy, typer, or typer building the commands)
+    ends like any interrupt: exit code 130 and one line, no traceback."""
     import signal
     import time
 
