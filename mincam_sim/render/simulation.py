@@ -47,9 +47,10 @@ from mincam_sim.render.kernels.change_geometry import (
     change_points_each,
     delta_light_spheres,
     delta_surfaces,
+    emitters_among,
 )
 from mincam_sim.render.kernels.change_region import ApertureRegions, mixel_regions
-from mincam_sim.render.kernels.frozen import recordings
+from mincam_sim.render.kernels.frozen import keeps_recording, recordings
 from mincam_sim.render.kernels.guided_path import MAX_GUIDES, guide_spheres, spheres_of
 from mincam_sim.render.kernels.map_tracing import FRAME_CHUNK_BYTES, check_radiance
 from mincam_sim.render.kernels.stratified import buffers_key
@@ -71,7 +72,6 @@ from mincam_sim.storage.identity import display_frames_identity, fingerprint, sc
 
 Updates = Mapping[str, np.ndarray]
 DEFAULT_SOLVERS = {"display": ResponseMap, "world": Aperture}  # Simulation.measure's solver by scene kind
-CAMERA_FREEZE_ALLOWANCE = 6  # recordings of the camera render before it must replay (else: traced)
 DEFAULT_MAX_DEPTH = 3  # world scenes without a given depth or a file's integrator: one inter-reflection
 MAX_FILE_DEPTH = 16  # a file's unbounded (-1) or longer max_depth is taken as this
 
@@ -366,7 +366,7 @@ class Simulation:
         if key is not None:
             self._camera_frozen_images += 1
             recorded = recordings(self.mincam_scene.fast_scene, camera_render)
-            if recorded > CAMERA_FREEZE_ALLOWANCE + self._camera_frozen_images // 4:
+            if keeps_recording(recorded, self._camera_frozen_images):
                 self._camera_traced = True  # every image records anew (a shape moved by a changing transform)
         return image
 
@@ -377,8 +377,7 @@ class Simulation:
         if not self.freeze_launches or self._camera_traced:
             return None
         names = {key.split(".", 1)[0] for key in self._as_built}
-        shapes = self.shapes_by_id
-        if any(name not in shapes or shapes[name].emitter() is not None for name in names):
+        if not names <= set(self.shapes_by_id) or emitters_among(self.scene, names):
             return None
         return self.buffers_key()
 

@@ -16,6 +16,7 @@ from contextlib import contextmanager
 
 FROZEN_SCENES = 4  # scenes whose frozen functions are kept (each holds its recordings)
 FROZEN_RECORDINGS = 16  # recordings kept per (scene, function) (launch shapes x buffer addresses), LRU dropped
+FREEZE_ALLOWANCE = 6  # recordings of a frozen function before it must replay (then: one more per 4 calls)
 
 _FROZEN: OrderedDict[int, tuple] = OrderedDict()  # id(scene) -> (scene, {function: frozen function})
 
@@ -56,3 +57,10 @@ def recordings(scene, function: Callable) -> int:
     if entry is None or entry[0] is not scene or function not in entry[1]:
         return 0
     return int(entry[1][function].n_recordings)
+
+
+def keeps_recording(recorded: int, calls: int) -> bool:
+    """True once a frozen function recorded ``recorded`` times over ``calls`` calls, more than
+    :data:`FREEZE_ALLOWANCE` plus one per 4 calls: its inputs land at new addresses or values every call, so
+    recording (which costs what tracing does, and more) never pays off in replays; trace instead."""
+    return recorded > FREEZE_ALLOWANCE + calls // 4

@@ -57,6 +57,7 @@ from mincam_sim.render.kernels.change_geometry import (
     watch_box,
 )
 from mincam_sim.render.kernels.change_region import ApertureRegions, mover_regions
+from mincam_sim.render.kernels.frozen import keeps_recording
 from mincam_sim.render.kernels.guided_path import supports as guided_path_supports
 from mincam_sim.render.kernels.mask_eval import mask_model_meta
 from mincam_sim.render.kernels.monte_carlo import (
@@ -87,7 +88,6 @@ STRATA_SHARES = (0.6, 0.1, 0.1, 0.1, 0.1)  # rays per stratum (region, rings, re
 BACKGROUND_MIN_SPP = 1 << 16  # stratified: rays per mixel (at least) for the background's whole-aperture value
 RETRY_FACTOR = 4  # a frame whose replicates are heavy-tailed is measured again with this many times the replicates
 SPLIT_MIN_TRIANGLES = 10_000  # static split by default from these static triangles (rebuilt: ~0.65 us a triangle)
-FREEZE_ALLOWANCE = 6  # recordings of a run's frozen launch (passes x buffer addresses) before it must replay
 DEFAULT_REPLICATES = 8
 ALLOCATION_MAX_FACTOR = 4  # per-mixel allocation: a value gets at most this many times the pilot's replicates
 ALLOCATION_SIGNIFICANCE = 4.0  # |dP| under this many pilot sigmas: the value is not sized (it gets the floor)
@@ -764,7 +764,7 @@ class _StratifiedRun(_Run):
         if not self.freeze:
             return
         recorded = self._recordings() - self.recordings_at_start
-        if recorded > FREEZE_ALLOWANCE + self.frames_traced // 4:
+        if keeps_recording(recorded, self.frames_traced):
             self.freeze = False
             self.launches = (f"traced from frame {self.frames_traced}: the frozen launch recorded {recorded} times "
                              "(the moving shapes' buffers move in memory every frame)")
