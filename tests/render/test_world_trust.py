@@ -223,6 +223,26 @@ def test_heavy_tail_flag_has_its_false_alarm_rate_and_catches_one_dominant_repli
     assert 0.8 < dominance_threshold(8) < 0.875
 
 
+def test_dominance_threshold_has_its_false_alarm_rate_by_independent_monte_carlo():
+    """The closed-form threshold against Gaussian replicates drawn here: the count of draws whose largest share
+    passes it is Poisson with mean draws x 1e-4 (Bonferroni is tight this far out), two-sided p >= 1e-3."""
+    from scipy import stats
+
+    rng = np.random.default_rng(7)
+    draws = 400_000
+    for r in (3, 5, 24, 96):
+        threshold = dominance_threshold(r)
+        count = 0
+        for _ in range(draws // 20_000):
+            x = rng.standard_normal((20_000, r))
+            dev2 = (x - x.mean(axis=1, keepdims=True)) ** 2
+            count += int((dev2.max(axis=1) / dev2.sum(axis=1) > threshold).sum())
+        lo, hi = stats.poisson.ppf([5e-4, 1 - 5e-4], draws * 1e-4)
+        assert lo <= count <= hi, f"{r} replicates: {count} of {draws} passed {threshold:.4f} (expected ~40)"
+    with pytest.raises(ValueError, match="replicates must be >= 3"):
+        dominance_threshold(2)
+
+
 # Per value, |z| > 4.5 happens with probability ~0.003 when the reported sigma is honest (t distribution with 7
 # degrees of freedom from 8 replicates, and a little more from the leave-one-out mean); with 4 mixels x n seeds
 # values the bound below is the Poisson 99.9 % quantile of that expectation.

@@ -377,9 +377,7 @@ def _unseen(diff: np.ndarray, changes: np.ndarray) -> np.ndarray:
 
 def _heavy_tailed(diff: np.ndarray, pilot: int) -> np.ndarray:
     """``heavy_tailed`` per mixel; where replicates were allocated per mixel (NaN where not traced), on the first
-    ``pilot`` replicates and, apart, on each mixel's replicates after them (3 or more), the latter from 8 on at
-    the threshold of the largest power of two not above their count (a threshold per count costs a Monte Carlo
-    quantile; the one of fewer replicates is higher: no more false alarms, a little less sensitive)."""
+    ``pilot`` replicates and, apart, on each mixel's replicates after them (3 or more)."""
     if not np.isnan(diff).any():
         return heavy_tailed(diff)
     flags = heavy_tailed(diff[:pilot])
@@ -388,8 +386,7 @@ def _heavy_tailed(diff: np.ndarray, pilot: int) -> np.ndarray:
         if len(more) >= 3:
             dev2 = (more - more.mean()) ** 2
             total = dev2.sum()
-            count = len(more) if len(more) < 8 else 1 << (len(more).bit_length() - 1)
-            flags[k] |= total > 0 and dev2.max() / total > dominance_threshold(count)
+            flags[k] |= total > 0 and dev2.max() / total > dominance_threshold(len(more))
     return flags
 
 
