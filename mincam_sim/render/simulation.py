@@ -56,7 +56,7 @@ from mincam_sim.render.kernels.map_tracing import FRAME_CHUNK_BYTES, check_radia
 from mincam_sim.render.kernels.stratified import buffers_key
 from mincam_sim.render.scene.gltf_files import GLTF_SUFFIXES, GltfFile
 from mincam_sim.render.scene.mincam_scene import CAMERA_KEY, SENSOR_KEY, MincamScene, camera_render
-from mincam_sim.render.scene.scene_dicts import mincam_body_shapes
+from mincam_sim.render.scene.scene_dicts import mincam_body_keys
 from mincam_sim.render.scene.scene_files import SceneFile, check_parameters, in_metres
 from mincam_sim.render.scene.updates import removal_updates
 from mincam_sim.render.scene.world_checks import (
@@ -167,7 +167,7 @@ class Simulation:
             raise InputError(f"Mitsuba could not build the scene: {str(exc).strip()}") from None
         self.sensor = self.mincam_scene.sensor(SENSOR_KEY)
         self.camera = self.mincam_scene.sensor(CAMERA_KEY)
-        self._own = set(mincam_body_shapes(self.scene_mincam)) | {SENSOR_KEY}  # built in scene coordinates
+        self._own = mincam_body_keys(self.scene_mincam) | {SENSOR_KEY}  # built in scene coordinates
         scene_params = self.mincam_scene.params
         check_radiant_params(scene_params)
         self._shifted = _shifted_keys(self.scene, scene_params, self._own)

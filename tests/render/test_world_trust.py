@@ -145,7 +145,7 @@ BAD_UPDATES = {
     "negative radiance": ({"lamp.emitter.radiance.value": np.array([-1.0])}, "negative power"),
     "singular transform": ({"floor.to_world": np.zeros((4, 4))}, "singular"),
     "unknown key": ({"toy.vertex_position": np.zeros(9)}, "did you mean 'toy.vertex_positions'"),
-    "the mincam's own body": ({"mixel0_body_back.to_world": np.eye(4)}, "mincam's own body"),
+    "the mincam's own body": ({"mincam_bodies.vertex_positions": np.zeros(120)}, "mincam's own body"),
 }
 
 
@@ -335,3 +335,44 @@ def test_per_run_sigma_on_a_moving_glass_block():
     assert zero == 0
     assert beyond <= _allowed_beyond(z.size), f"{beyond} of {z.size} beyond 4.5 sigma (max |z| {np.abs(z).max():.1f})"
     assert np.abs(z).max() <= 6.0, f"max |z| {np.abs(z).max():.1f} over {z.size} values"
+
+
+def test_mincam_bodies_are_one_mesh_that_blocks_where_each_mixels_box_is():
+    """The mixels' bodies, one black mesh, against each mixel's pose and sizes (a tilted rig 40 m from the origin):
+    a ray toward the middle of each wall from 1 cm outside stops 1 cm on; a ray into the open mask front meets
+    the back plate just behind the detector plane; a ray beside the body passes."""
+    mi = backend.mitsuba()
+    import drjit as dr
+
+    axis = np.array([0.3, -0.5, -1.0]) / np.linalg.norm([0.3, -0.5, -1.0])
+    cam = cross_layout(center=Pose((40.0, -25.0, 3.0), tuple(axis), (0.0, 1.0, 0.0)))
+    shapes = sd.mincam_body_shapes(cam)
+    assert list(shapes) == [sd.BODIES_KEY]
+    scene = mi.load_dict({"type": "scene", **shapes}, optimize=False)
+    origins, directions, expected = [], [], []
+    for mixel in cam:
+        hw, hh, d = mixel.mask.width_m / 2, mixel.mask.height_m / 2, mixel.d_f_m
+        for normal in ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0)):
+            n = np.array(normal, dtype=float)
+            wall = n * np.array([hw, hh, 0.0]) + [0.0, 0.0, d / 2]
+            origins.append(mixel.pose.to_world(wall + 0.01 * n))
+            directions.append(mixel.pose.to_world(-n) - mixel.pose.to_world(np.zeros(3)))
+            expected.append(0.01)
+        origins.append(mixel.pose.to_world(np.array([0.0, 0.0, d + 0.01])))  # into the open front
+        directions.append(mixel.pose.to_world(np.array([0.0, 0.0, -1.0])) - mixel.pose.to_world(np.zeros(3)))
+        expected.append(0.01 + d * (1 + sd.BACK_PLATE_GAP))
+        origins.append(mixel.pose.to_world(np.array([2 * hw, 0.0, d + 0.01])))  # beside the body: passes
+        directions.append(directions[-1])
+        expected.append(np.inf)
+    o, v = np.array(origins), np.array(directions)
+    ray = mi.Ray3f(mi.Point3f(*(mi.Float(c) for c in o.T)), mi.Vector3f(*(mi.Float(c) for c in v.T)))
+    hit = scene.ray_intersect_preliminary(ray)
+    t = np.where(np.asarray(hit.is_valid()), np.asarray(hit.t), np.inf)
+    dr.eval(hit.t)
+    np.testing.assert_allclose(t, expected, rtol=1e-4, atol=2e-6)
+
+
+def test_an_element_named_like_the_mincams_bodies_is_refused():
+    world, _ = _simple_world()
+    with pytest.raises((InputError, ValueError), match="reserved"):
+        ms.Simulation(world.mincam, world={sd.BODIES_KEY: {"type": "rectangle"}})

@@ -29,6 +29,7 @@ from mincam_sim.render.kernels.mixel_sensor import mixel_position_sample, sensor
 from mincam_sim.render.kernels.monte_carlo import check_counts, derive_seed
 from mincam_sim.render.kernels.tracing import trace_groups
 from mincam_sim.render.scene.scene_dicts import (
+    BODIES_KEY,
     SCREEN_KEY,
     SCREEN_RADIANCE_PARAM,
     WORLD,
@@ -44,7 +45,7 @@ from mincam_sim.storage.identity import mask_parts
 SENSOR_KEY = "mincam"
 CAMERA_KEY = "ground_truth_camera"
 REFERENCE_MAX_DEPTH = 3  # detector ray -> mask pass-through (one bounce) -> screen emission, plus margin
-RESERVED_KEYS = {SENSOR_KEY, CAMERA_KEY, "integrator", "type"}
+RESERVED_KEYS = {SENSOR_KEY, CAMERA_KEY, BODIES_KEY, "integrator", "type"}
 
 
 class MincamScene:
