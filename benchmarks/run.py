@@ -440,9 +440,9 @@ def _cost_point(n_mixels: int = 4, table_triangles: int = 2, n_movers: int = 1, 
            "split_static": split_static, "ray_cast_ns": _ray_cast_ns(world, height)}
     for estimator, solver in (("stratified", StratifiedChange()), ("plain", PlainChange())):
         # warm-up: the timed run once, so that the frozen launches have recorded every buffer address a moving
-        # mesh alternates between and the launch of each frame measured again (a heavy-tailed one: 1 of 16 for
-        # the plain estimator here, whose recording read up to 2x into its time): the timed run then pays what
-        # a long video pays per frame
+        # mesh alternates between and the launch of a frame measured again (a heavy-tailed one: 1 of 16 for the
+        # plain estimator here; two processes of one point read its time 2x apart while the warm-up ran 3 other
+        # frames): the timed run then pays what a long video pays per frame
         world.measure_changes(frames, background, solver, Budget(spp=spp, replicates=16, seed=2))
         t = time.perf_counter()
         ch = world.measure_changes(frames, background, solver, Budget(spp=spp, replicates=16, seed=2))
