@@ -285,6 +285,24 @@ def _spawned_ignoring_sigint() -> Iterator[None]:
             mp_spawn.set_executable(previous)
 
 
+def _quiet_resource_tracker() -> None:
+    """Start multiprocessing's resource tracker (if it is not running yet) with its shutdown notice about leaked
+    semaphores muted: a study stopped by Ctrl-C kills its workers on purpose, and the tracker, which removes what
+    they leave, printed "There appear to be N leaked semaphore objects" under the one-line error. The tracker
+    takes its warning filters from ``sys.warnoptions`` when it is started."""
+    import sys
+    from multiprocessing import resource_tracker
+
+    if getattr(resource_tracker._resource_tracker, "_pid", None) is not None:
+        return
+    previous = list(sys.warnoptions)
+    sys.warnoptions.append("ignore:resource_tracker:UserWarning")
+    try:
+        resource_tracker.ensure_running()
+    finally:
+        sys.warnoptions[:] = previous
+
+
 @contextlib.contextmanager
 def embedded_client(n_workers: int, cache_root: Path) -> Iterator:
     """A client of a ``LocalCluster`` of ``n_workers`` spawned process workers (Dr.Jit threads capped so that
@@ -300,6 +318,7 @@ def embedded_client(n_workers: int, cache_root: Path) -> Iterator:
         threads = max(1, available_cores() // n_workers)
         with dask.config.set({"distributed.worker.multiprocessing-method": "spawn",
                               "distributed.worker.daemon": False}), _spawned_ignoring_sigint():
+            _quiet_resource_tracker()
             cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
                                    dashboard_address=None, env={ENV_THREADS: str(threads)})
         client = Client(cluster)
