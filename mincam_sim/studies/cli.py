@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import logging
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +17,7 @@ def run_study_command(study_file: Path, workers: int | None, scheduler: str | No
     Ctrl-C: one line ``error: interrupted: K of N points are complete and kept in ...; run the same command
     again to resume ...`` on stderr and exit code 130 (the generic Ctrl-C line of the CLI is not added)."""
     from mincam_sim.errors import StoreError
-    from mincam_sim.studies.cluster import check_workers, watched_interrupts
+    from mincam_sim.studies.cluster import check_workers, mute_dask_for_exit, watched_interrupts
     from mincam_sim.studies.plots import plot_study
     from mincam_sim.studies.runner import DEFAULT_TIME_LIMIT_S, StudyInterrupted, check_time_limit, run_study
     from mincam_sim.studies.spec import DEFAULT_MAX_POINTS, load_study
@@ -26,7 +25,8 @@ def run_study_command(study_file: Path, workers: int | None, scheduler: str | No
     check_workers(workers, scheduler)  # before anything is read or started
     limit_s = DEFAULT_TIME_LIMIT_S if time_limit_s is None else time_limit_s
     check_time_limit(limit_s)
-    with watched_interrupts():  # an interrupt swallowed while the study loads still stops it
+    # an interrupt swallowed while the study loads still stops it; from the first one, this process only ends
+    with watched_interrupts(on_interrupt=mute_dask_for_exit):
         spec = load_study(study_file, quick=quick,
                           max_points=DEFAULT_MAX_POINTS if max_points is None else max_points)
         out = out_dir or spec.out_dir
@@ -35,9 +35,8 @@ def run_study_command(study_file: Path, workers: int | None, scheduler: str | No
                                     overwrite=overwrite, show_progress=not quiet,
                                     say=lambda m: typer.echo(m, err=True), time_limit_s=limit_s)
         except StudyInterrupted as stop:
+            mute_dask_for_exit()  # muted by the first SIGINT already, unless it came by another way
             typer.echo(f"error: {stop}", err=True)
-            for name in ("asyncio", "distributed"):  # this process ends: no notices of the tasks it dropped
-                logging.getLogger(name).setLevel(logging.CRITICAL)
             raise SystemExit(130) from None
     try:
         plot = plot_study(ds, list(spec.metrics), Path(out) / "study.png")

@@ -26,10 +26,11 @@ import os
 import shlex
 import signal
 import subprocess
+import sys
 import tempfile
 import threading
 import warnings
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -136,12 +137,16 @@ def _one_line(err: BaseException) -> str:
     return " ".join(str(err).split()) or type(err).__name__
 
 
-_sigint = {"count": 0, "holding": 0}  # SIGINTs received while watched; how many held_interrupts blocks are open
+# SIGINTs received while watched; how many held_interrupts blocks are open; what the first one calls
+_sigint: dict = {"count": 0, "holding": 0, "on_interrupt": None}
 
 
 def _on_sigint(signum, frame) -> None:
-    """Count the interrupt; raise it unless a point is being written (then :func:`held_interrupts` raises it)."""
+    """Count the interrupt (the first calls the watching block's ``on_interrupt``); raise it unless a point is
+    being written (then :func:`held_interrupts` raises it)."""
     _sigint["count"] += 1
+    if _sigint["count"] == 1 and _sigint["on_interrupt"] is not None:
+        _sigint["on_interrupt"]()
     if _sigint["holding"] == 0:
         raise KeyboardInterrupt
 
@@ -153,20 +158,22 @@ def _can_handle() -> bool:
 
 
 @contextlib.contextmanager
-def watched_interrupts() -> Iterator[None]:
+def watched_interrupts(on_interrupt: Callable[[], None] | None = None) -> Iterator[None]:
     """Within the block SIGINT raises ``KeyboardInterrupt`` as usual and is also counted, so that an interrupt
     a library swallowed (an import guard that catches ``BaseException``) still stops the study at the next
-    :func:`raise_if_interrupted`. Nested blocks share the outermost one's count."""
+    :func:`raise_if_interrupted`; the first one also calls ``on_interrupt``. Nested blocks share the outermost
+    one's count and ``on_interrupt``."""
     if not _can_handle() or signal.getsignal(signal.SIGINT) is _on_sigint:
         yield
         return
     previous = signal.getsignal(signal.SIGINT)
-    _sigint.update(count=0, holding=0)
+    _sigint.update(count=0, holding=0, on_interrupt=on_interrupt)
     signal.signal(signal.SIGINT, _on_sigint)
     try:
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
+        _sigint["on_interrupt"] = None
 
 
 def raise_if_interrupted() -> None:
@@ -209,10 +216,22 @@ def _prepare_worker(cache_root: str, dask_worker=None) -> str:
     return str(path)
 
 
+def _dask_loggers() -> list[str]:
+    return ["distributed", *[n for n in logging.root.manager.loggerDict if n.startswith("distributed.")]]
+
+
+def mute_dask_for_exit() -> None:
+    """dask's and asyncio's loggers at CRITICAL for the rest of the process: for a command that ends when its
+    study stops, whatever they say after a Ctrl-C is about work stopped on purpose (a connection closed, a
+    nanny's start task "never retrieved") and came out as tracebacks under the one-line error."""
+    for name in ["asyncio", *_dask_loggers()]:
+        logging.getLogger(name).setLevel(logging.CRITICAL)
+
+
 @contextlib.contextmanager
 def _muted_dask() -> Iterator[None]:
     """dask's loggers at CRITICAL (its warnings about workers killed on purpose say nothing to the user)."""
-    names = ["distributed", *[n for n in logging.root.manager.loggerDict if n.startswith("distributed.")]]
+    names = _dask_loggers()
     levels = {n: logging.getLogger(n).level for n in names}
     for n in names:
         logging.getLogger(n).setLevel(logging.CRITICAL)
@@ -290,7 +309,6 @@ def _quiet_resource_tracker() -> None:
     semaphores muted: a study stopped by Ctrl-C kills its workers on purpose, and the tracker, which removes what
     they leave, printed "There appear to be N leaked semaphore objects" under the one-line error. The tracker
     takes its warning filters from ``sys.warnoptions`` when it is started."""
-    import sys
     from multiprocessing import resource_tracker
 
     if getattr(resource_tracker._resource_tracker, "_pid", None) is not None:

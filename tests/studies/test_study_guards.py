@@ -60,6 +60,29 @@ def test_an_interrupt_a_library_swallowed_still_stops_the_study():
     cluster_mod.raise_if_interrupted()  # outside a watched block: nothing to raise
 
 
+def test_the_first_interrupt_calls_on_interrupt_once_and_nested_blocks_share_it(monkeypatch):
+    calls = []
+    with cluster_mod.watched_interrupts(on_interrupt=lambda: calls.append("muted")):
+        with cluster_mod.watched_interrupts():  # nested (the runner's): the outer one's hook stays
+            for _ in range(2):
+                with pytest.raises(KeyboardInterrupt):
+                    _sigint_to_self()
+    assert calls == ["muted"]
+    with cluster_mod.watched_interrupts(), pytest.raises(KeyboardInterrupt):  # a later block: no hook left
+        _sigint_to_self()
+    assert calls == ["muted"]
+
+
+def test_dask_and_asyncio_are_muted_for_the_exit(monkeypatch):
+    import logging
+
+    names = ["asyncio", "distributed", "distributed.batched"]
+    for name in names:
+        monkeypatch.setattr(logging.getLogger(name), "level", logging.INFO)
+    cluster_mod.mute_dask_for_exit()
+    assert all(logging.getLogger(name).level == logging.CRITICAL for name in names)
+
+
 def test_ctrl_c_while_a_record_is_written_keeps_that_point_and_the_rerun_reuses_it(tmp_path, monkeypatch):
     spec = load_study(TINY, quick=True)
     original = runner_mod.atomic_write_json
