@@ -176,18 +176,23 @@ def _speed(signal: np.ndarray, rate_hz: float, omega_d: float, v_min: float, ord
                                    max_frequency_hz=f_max))
 
 
-def road_irradiance_by_shift(maps, road: np.ndarray, cols: int, n_shifts: int, chunk: int = 256) -> np.ndarray:
+def road_irradiance_by_shift(maps, road: np.ndarray, cols: int, n_shifts: int) -> np.ndarray:
     """The mixel's irradiance [W/m^2] for the road crop shifted by 0 .. ``n_shifts - 1`` display px, (n_shifts,).
 
     The response maps are linear in the displayed radiance, so every video of the road (any shift per frame, any
     display timing) is a lookup into this one measurement; nothing is rendered again per speed or per timing.
-    ``maps.measure`` sums each frame in one order whatever the chunk, so a lookup equals measuring the crop alone.
+    Shifting the crop column by column makes the lookup a cross-correlation of the road with the mixel's weight
+    map (``maps.weights_sr[0]``), taken by FFT (``scipy.signal.correlate``): a crop's value equals measuring
+    that crop alone (``maps.measure``) to float64 rounding (~1e-15 relative), at ~1/100 of the time.
     """
-    out = np.empty(n_shifts)
-    for i in range(0, n_shifts, chunk):
-        crops = np.stack([road[:, s : s + cols] for s in range(i, min(i + chunk, n_shifts))])
-        out[i : i + len(crops)] = maps.measure(crops).irradiance_w_m2[:, 0]
-    return out
+    from scipy.signal import correlate
+
+    weights = np.asarray(maps.weights_sr[0], dtype=np.float64)
+    road = np.asarray(road, dtype=np.float64)
+    if weights.shape != (road.shape[0], cols) or road.shape[1] < cols + n_shifts - 1:
+        raise ValueError(f"a road of {road.shape} px cannot give {n_shifts} shifts of a {cols}-column crop seen "
+                         f"through weight maps of {weights.shape} px")
+    return correlate(road[:, : cols + n_shifts - 1], weights, mode="valid", method="fft")[0]
 
 
 def displayed_signal(position_irr: np.ndarray, speed_px_s: float, shift_px: int, duration_s: float,

@@ -24,26 +24,31 @@ from mincam_sim.experiments.speed import (
     run_mask_period_study,
 )
 from mincam_sim.paper import SPEED_AVG_ERROR_PCT, SPEED_MAX_ERROR_PCT
+from mincam_sim.render.kernels.map_tracing import ResponseMaps
 
 
-class _LinearMaps:
-    """A stand-in for response maps: one mixel whose reading is a fixed weighted sum of the frame."""
-
-    def __init__(self, weights: np.ndarray):
-        self.weights = weights
-
-    def measure(self, frames: np.ndarray):
-        values = np.einsum("frc,rc->f", np.asarray(frames, dtype=np.float64), self.weights)[:, None]
-        return type("M", (), {"irradiance_w_m2": values})()
+def _maps(weights: np.ndarray) -> ResponseMaps:
+    """Response maps of one mixel whose reading is a fixed weighted sum of the frame."""
+    return ResponseMaps(weights[None], np.zeros((1, *weights.shape)), ["m"])
 
 
-def test_road_irradiance_by_shift_equals_measuring_each_crop():
+@pytest.mark.parametrize("shape, cols, n_shifts", [((4, 40), 8, 30), ((48, 400), 96, 300)])
+def test_road_irradiance_by_shift_equals_measuring_each_crop(shape, cols, n_shifts):
+    """The FFT lookup against measuring every crop alone with the maps' own sum (a road of 0-1 radiance seen
+    through a sinusoid-like weight map, and a small random case)."""
     rng = np.random.default_rng(0)
-    road, weights = rng.random((4, 40)), rng.random((4, 8))
-    maps = _LinearMaps(weights)
-    by_shift = road_irradiance_by_shift(maps, road, 8, 30, chunk=7)
-    direct = [float((road[:, s : s + 8] * weights).sum()) for s in range(30)]
-    np.testing.assert_allclose(by_shift, direct, rtol=1e-13)
+    road = rng.random(shape)
+    weights = rng.random((shape[0], cols)) * (1.5 + np.sin(np.arange(cols) / 3.0))
+    maps = _maps(weights)
+    by_shift = road_irradiance_by_shift(maps, road, cols, n_shifts)
+    crops = np.stack([road[:, s : s + cols] for s in range(n_shifts)])
+    np.testing.assert_allclose(by_shift, maps.measure(crops).irradiance_w_m2[:, 0], rtol=1e-13)
+
+
+def test_road_irradiance_by_shift_refuses_a_road_too_short_for_its_shifts():
+    maps = _maps(np.ones((4, 8)))
+    with pytest.raises(ValueError, match="cannot give 30 shifts"):
+        road_irradiance_by_shift(maps, np.ones((4, 36)), 8, 30)
 
 
 def test_displayed_signal_with_the_ideal_shift_is_the_held_video_read_on_its_clock():
