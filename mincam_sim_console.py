@@ -6,8 +6,9 @@ the CLI's answer for an interrupt instead: one line and exit code 130. This modu
 because importing anything inside ``mincam_sim`` runs the package's own imports first.
 
 A Ctrl-C that lands inside a C extension's own import (numpy's core importing ``datetime``) reaches Python as an
-``ImportError``, not a ``KeyboardInterrupt``; the signal is therefore recorded when it arrives, and an import
-error that follows one is the interrupt's. Any other import error is shown as it is.
+``ImportError``, not a ``KeyboardInterrupt``, and one that lands in an import guard catching ``BaseException`` is
+swallowed; the signal is therefore recorded when it arrives, and an import error that follows one, or a
+successful import during which one arrived, is the interrupt's. Any other import error is shown as it is.
 """
 
 import signal
@@ -37,6 +38,9 @@ def main() -> None:
         raise SystemExit(130) from None
     finally:
         signal.signal(signal.SIGINT, previous)
+    if interrupted:  # swallowed on the way (an import guard that catches BaseException): nothing has run yet
+        print(INTERRUPTED_WHILE_STARTING, file=sys.stderr)
+        raise SystemExit(130)
     cli_main()
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import re
+import signal
 import sys
 import traceback
 from collections.abc import Iterator
@@ -21,7 +22,7 @@ import numpy as np
 import typer
 from typer.core import TyperGroup
 
-from mincam_sim import paper
+from mincam_sim import interrupts, paper
 from mincam_sim.configuration.config import EXAMPLE_TOML, load_config, parse_mask
 from mincam_sim.errors import BackendUnavailableError, ConfigError, InputError, MincamError
 from mincam_sim.masks import PrintedFilm, export_print_png, generate_library, save_exr
@@ -130,6 +131,9 @@ class _MincamGroup(TyperGroup):
         except typer.Exit:
             raise
         except BaseException as err:
+            if interrupts.arrived() and not isinstance(err, KeyboardInterrupt | SystemExit) and not _state["debug"]:
+                # a Ctrl-C that landed in an import can come out as another error (a module left half-imported)
+                raise KeyboardInterrupt from None
             if isinstance(err, KeyboardInterrupt | SystemExit) or _state["debug"] or not _is_user_error(err):
                 raise
             raise _fail_line(user_error_message(err)) from None
@@ -139,6 +143,10 @@ class _MincamGroup(TyperGroup):
         _state.update(verbose=False, quiet=False, debug=os.environ.get(ENV_DEBUG, "") not in ("", "0"),
                       variant=None)
         install_warning_format()
+        interrupts.reset()
+        recording = signal.getsignal(signal.SIGINT) is signal.default_int_handler
+        if recording:  # SIGINT left as Python's (not ignored, not the caller's own handler): counted as well
+            signal.signal(signal.SIGINT, interrupts.recording_handler)
         try:
             rv = super().main(args=args, prog_name=prog_name, complete_var=complete_var, standalone_mode=False,
                               **extra)
@@ -155,6 +163,9 @@ class _MincamGroup(TyperGroup):
         except typer.Abort:
             typer.echo("error: aborted", err=True)
             code = 1
+        finally:
+            if recording:
+                signal.signal(signal.SIGINT, signal.default_int_handler)
         if code == 130:  # Ctrl-C (typer turns KeyboardInterrupt into exit code 130)
             typer.echo("error: interrupted; results written so far are kept, and the same command resumes", err=True)
         if standalone_mode:

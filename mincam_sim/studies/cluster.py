@@ -34,6 +34,7 @@ from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+from mincam_sim import interrupts
 from mincam_sim.errors import ConfigError
 
 ENV_THREADS = "MINCAM_DRJIT_THREADS"
@@ -145,6 +146,7 @@ def _on_sigint(signum, frame) -> None:
     """Count the interrupt (the first calls the watching block's ``on_interrupt``); raise it unless a point is
     being written (then :func:`held_interrupts` raises it)."""
     _sigint["count"] += 1
+    interrupts.note()
     if _sigint["count"] == 1 and _sigint["on_interrupt"] is not None:
         _sigint["on_interrupt"]()
     if _sigint["holding"] == 0:
@@ -154,7 +156,8 @@ def _on_sigint(signum, frame) -> None:
 def _can_handle() -> bool:
     """SIGINT can be handled here: the main thread, and Python's own handler (or this module's) installed."""
     return (threading.current_thread() is threading.main_thread()
-            and signal.getsignal(signal.SIGINT) in (signal.default_int_handler, _on_sigint))
+            and signal.getsignal(signal.SIGINT) in (signal.default_int_handler, interrupts.recording_handler,
+                                                    _on_sigint))
 
 
 @contextlib.contextmanager
@@ -162,17 +165,35 @@ def watched_interrupts(on_interrupt: Callable[[], None] | None = None) -> Iterat
     """Within the block SIGINT raises ``KeyboardInterrupt`` as usual and is also counted, so that an interrupt
     a library swallowed (an import guard that catches ``BaseException``) still stops the study at the next
     :func:`raise_if_interrupted`; the first one also calls ``on_interrupt``. Nested blocks share the outermost
-    one's count and ``on_interrupt``."""
+    one's count and ``on_interrupt``.
+
+    An interrupt that lands in a finalizer (a weak reference's callback, a ``__del__``) cannot be raised from
+    there: Python prints it as "Exception ignored in ..." and goes on. Within the block such a
+    ``KeyboardInterrupt`` is dropped quietly instead (it is counted, and the study stops at its next check);
+    every other unraisable exception is shown as before.
+
+    Under the command line (its counting handler installed), an interrupt it counted before the block
+    (:mod:`mincam_sim.interrupts`; one an import guard swallowed while the study's modules were imported) is
+    raised as the block starts."""
     if not _can_handle() or signal.getsignal(signal.SIGINT) is _on_sigint:
         yield
         return
-    previous = signal.getsignal(signal.SIGINT)
+    if signal.getsignal(signal.SIGINT) is interrupts.recording_handler and interrupts.arrived():
+        raise KeyboardInterrupt
+    previous, previous_hook = signal.getsignal(signal.SIGINT), sys.unraisablehook
+
+    def unraisable(info) -> None:
+        if not (isinstance(info.exc_value, KeyboardInterrupt) and _sigint["count"]):
+            previous_hook(info)
+
     _sigint.update(count=0, holding=0, on_interrupt=on_interrupt)
     signal.signal(signal.SIGINT, _on_sigint)
+    sys.unraisablehook = unraisable
     try:
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
+        sys.unraisablehook = previous_hook
         _sigint["on_interrupt"] = None
 
 
@@ -279,19 +300,24 @@ def _stop_at_once(client, cluster, before: set[int]) -> None:
 
 
 @contextlib.contextmanager
-def _spawned_ignoring_sigint() -> Iterator[None]:
+def _spawned_ignoring_sigint(log_path: Path | None = None) -> Iterator[None]:
     """Processes spawned in the block start with SIGINT ignored, so that a Ctrl-C while the workers start
-    reaches only this process (a worker importing its modules would print a traceback). The interpreter is
-    started through a two-line shell script, ``trap '' INT; exec python "$@"`` (an ignored signal stays ignored
-    across ``exec``, and Python then leaves it so); where the script cannot run (no ``/bin/sh``, a ``noexec``
-    temporary folder) the plain interpreter is used."""
+    reaches only this process (a worker importing its modules would print a traceback), and, given
+    ``log_path``, with their stderr appended to that file: dask's worker log, a worker's warnings, and what a
+    worker started just as the study stops says about its lost parent go there, not under the study's own lines.
+    The interpreter is started through a shell script, ``trap '' INT; exec python "$@" 2>>LOG`` (an ignored
+    signal stays ignored across ``exec``, and Python then leaves it so); where the script cannot run (no
+    ``/bin/sh``, a ``noexec`` temporary folder, a log that cannot be opened) the plain interpreter is used. The
+    script lives until the block ends: hold the block until no process can be spawned any more (a nanny
+    restarting its worker while the study stops)."""
     import multiprocessing.spawn as mp_spawn
 
     previous = mp_spawn.get_executable()
     with tempfile.TemporaryDirectory(prefix="mincam_study_") as folder:
         script = Path(folder) / "python_ignoring_sigint"
+        redirect = f" 2>>{shlex.quote(os.fsdecode(log_path))}" if log_path is not None else ""
         try:
-            script.write_text(f"#!/bin/sh\ntrap '' INT\nexec {shlex.quote(os.fsdecode(previous))} \"$@\"\n")
+            script.write_text(f"#!/bin/sh\ntrap '' INT\nexec {shlex.quote(os.fsdecode(previous))} \"$@\"{redirect}\n")
             script.chmod(0o755)
             subprocess.run([str(script), "-c", "pass"], check=True, timeout=60, capture_output=True)
         except (OSError, subprocess.SubprocessError):
@@ -322,9 +348,10 @@ def _quiet_resource_tracker() -> None:
 
 
 @contextlib.contextmanager
-def embedded_client(n_workers: int, cache_root: Path) -> Iterator:
+def embedded_client(n_workers: int, cache_root: Path, log_path: Path | None = None) -> Iterator:
     """A client of a ``LocalCluster`` of ``n_workers`` spawned process workers (Dr.Jit threads capped so that
-    workers x threads <= cores, one kernel cache each under ``cache_root``); stopped at once on any exception."""
+    workers x threads <= cores, one kernel cache each under ``cache_root``, their stderr appended to
+    ``log_path`` if given); stopped at once on any exception."""
     import dask
     from distributed import Client, LocalCluster
     from distributed.deploy.spec import SpecCluster
@@ -332,26 +359,37 @@ def embedded_client(n_workers: int, cache_root: Path) -> Iterator:
     before = {p.pid for p in multiprocessing.active_children()}
     clusters_before = set(SpecCluster._instances)
     client = cluster = None
-    try:
-        threads = max(1, available_cores() // n_workers)
-        with dask.config.set({"distributed.worker.multiprocessing-method": "spawn",
-                              "distributed.worker.daemon": False}), _spawned_ignoring_sigint():
-            _quiet_resource_tracker()
-            cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, env={ENV_THREADS: str(threads)})
-        client = Client(cluster)
-        client.run(_prepare_worker, str(cache_root))
-        raise_if_interrupted()  # swallowed while the cluster started
-        yield client
-    except BaseException:
-        with held_interrupts(), _muted_dask():  # a second Ctrl-C does not cut the clean-up short
-            _stop_at_once(client, cluster, before)
-            if cluster is None:  # stopped while it started: its workers are gone, dask's exit hook must not wait
-                for half_built in [c for c in list(SpecCluster._instances) if c not in clusters_before]:
-                    SpecCluster._instances.discard(half_built)
-        raise
-    client.close()
-    cluster.close()
+    with _spawned_ignoring_sigint(log_path):
+        try:
+            threads = max(1, available_cores() // n_workers)
+            with dask.config.set({"distributed.worker.multiprocessing-method": "spawn",
+                                  "distributed.worker.daemon": False}):
+                _quiet_resource_tracker()
+                cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
+                                       dashboard_address=None, env={ENV_THREADS: str(threads)})
+            client = Client(cluster)
+            client.run(_prepare_worker, str(cache_root))
+            raise_if_interrupted()  # swallowed while the cluster started
+            yield client
+        except BaseException:
+            with held_interrupts(), _muted_dask():  # a second Ctrl-C does not cut the clean-up short
+                _stop_at_once(client, cluster, before)
+                if cluster is None:  # stopped while it started: its workers are gone, dask's exit hook must not wait
+                    for half_built in [c for c in list(SpecCluster._instances) if c not in clusters_before]:
+                        SpecCluster._instances.discard(half_built)
+            raise
+        else:
+            client.close()
+            cluster.close()
+        finally:
+            _drop_if_empty(log_path)
+
+
+def _drop_if_empty(path: Path | None) -> None:
+    """Remove the workers' log if they wrote nothing to it (the shell creates it when it starts one)."""
+    with contextlib.suppress(OSError):
+        if path is not None and path.stat().st_size == 0:
+            path.unlink()
 
 
 @contextlib.contextmanager

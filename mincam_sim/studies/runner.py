@@ -64,6 +64,7 @@ DEFAULT_TIME_LIMIT_S = 24 * 3600.0
 STORE_NAME = "results.zarr"
 RECORDS_NAME = "points"
 HOLDER_NAME = ".study_holder.json"
+WORKERS_LOG = "workers.log"  # the embedded cluster's workers' stderr (dask's log, their warnings), appended
 
 
 def point_seed(study_seed: int, params: dict | None, replicate: int = 0) -> int:
@@ -476,7 +477,7 @@ def _run_distributed(spec: StudySpec, store: Path, records: Path, pending: list,
     from distributed import as_completed
 
     opened = (scheduler_client(plan.scheduler) if plan.scheduler is not None
-              else embedded_client(plan.workers, out / "drjit_cache"))
+              else embedded_client(plan.workers, out / "drjit_cache", out / WORKERS_LOG))
     with opened as client:
         futures = {client.submit(compute_point, spec.experiment.ref, params, point_seeds(spec, params), plan.quick,
                                  list(spec.metrics), pure=False): (idx, params) for idx, params in pending}
