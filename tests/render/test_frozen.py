@@ -374,3 +374,32 @@ def test_a_replay_after_another_solver_restored_a_texture_reads_the_texture_wher
     traced.freeze_launches = False
     reference = traced.measure_changes(frames, None, ms.StratifiedChange(), budget)
     np.testing.assert_array_equal(again.dp.irradiance_w_m2, reference.dp.irradiance_w_m2)
+
+
+def test_a_dropped_simulation_releases_its_frozen_launches_and_its_scenes():
+    """The frozen functions are kept per scene; they (and the reference that keeps a scene alive) go with the
+    simulation that owns the scene, its static split's scene included: a loop over simulations of a large
+    table kept up to four dropped scenes alive before."""
+    import gc
+
+    world, frames, background = _world(ball=False, camera=True)
+    world.split_static = True  # the static shapes in a scene of their own: that scene's launches are kept too
+    changes(world, frames[:2], background, spp=1024, seed=3, solver=ms.StratifiedChange())
+    world.camera_image(spp=4, seed=1)  # frozen (the default)
+    split_scenes = [split.scene for split in world.static_splits.values()]
+    assert split_scenes, "the test needs a split run"
+    keys = {id(world.scene), *(id(s) for s in split_scenes)}
+    assert keys <= set(frozen_functions._FROZEN), "the launches must have run frozen on both scenes"
+    del world, split_scenes
+    gc.collect()
+    assert not keys & set(frozen_functions._FROZEN)
+
+
+def test_the_mixel_sensor_keeps_its_configuration_out_of_the_frozen_launches_walk():
+    """``dr.freeze`` walks every Dr.Jit value reachable from a launch's inputs on every call; the mixels' poses
+    (``mi.Transform4f``) and sizes made that walk ~3x longer. They sit in a slotted holder it does not enter (the
+    sensor's ``version`` keys the launches instead; the frozen passes above equal the traced ones)."""
+    world, _, _ = _world(ball=False)
+    sensor = world.sensor
+    assert set(vars(sensor)) == {"_mixels", "version"}
+    assert not hasattr(sensor._mixels, "__dict__") and len(sensor._mixels.matrices) == len(world.mincam)

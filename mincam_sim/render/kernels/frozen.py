@@ -51,6 +51,20 @@ def frozen(scene, function: Callable) -> Callable:
     return kept[function]
 
 
+def release_with(owner, scene) -> None:
+    """Drop ``scene``'s frozen functions (their recordings, and the reference that keeps the scene alive) when
+    ``owner`` (the Python object that holds the scene: a simulation's scene, a static split) is collected.
+    Without it a dropped simulation's scene stayed alive while it was among the :data:`FROZEN_SCENES` last used:
+    a loop over seven simulations of a 500 k triangle table grew from 310 to 557 MiB."""
+    import weakref
+
+    weakref.finalize(owner, _release, id(scene))
+
+
+def _release(key: int) -> None:
+    _FROZEN.pop(key, None)
+
+
 def recordings(scene, function: Callable) -> int:
     """How many times ``function`` was recorded frozen for ``scene`` (0 if it never ran frozen there)."""
     entry = _FROZEN.get(id(scene))

@@ -33,6 +33,18 @@ PLUGIN_NAME = "mincam_mixel_array"
 START_OFFSET_M = 1e-6  # [m] rays start this far along their direction past the mask plane (0.05 % of d_f)
 
 
+class _Mixels:
+    """The mixels' poses, sizes and mask weights, held out of sight of ``dr.freeze``: a frozen function walks
+    every Dr.Jit value it can reach from its inputs on every call (the scene reaches this sensor), and the poses
+    as ``mi.Transform4f`` and the sizes as tuples took ~60 us a call. They are fixed per configuration (the
+    sensor's ``version``, which keys every frozen launch, changes with them), so a recording may hold them."""
+
+    __slots__ = ("matrices", "geometry", "masks")
+
+    def __init__(self, matrices=(), geometry=(), masks=()) -> None:
+        self.matrices, self.geometry, self.masks = list(matrices), list(geometry), list(masks)
+
+
 def _make_class():
     mi = backend.mitsuba()
     import drjit as dr
@@ -43,21 +55,22 @@ def _make_class():
         def __init__(self, props):
             super().__init__(props)
             self.m_needs_sample_3 = True
-            self._n = 0
+            self._mixels = _Mixels()
             self.version = 0  # bumped whenever the mixels change: a frozen launch records again
+
+        @property
+        def _n(self) -> int:
+            return len(self._mixels.geometry)
 
         def set_mixels(self, mixels: Sequence[Mixel]) -> None:
             mixels = list(mixels)
-            self._n = len(mixels)
-            self._matrices = [mi.Transform4f(m.pose.matrix().tolist()) for m in mixels]
-            self._geometry = [
-                (m.d_f_m, m.detector_size_m, m.mask.width_m, m.mask.height_m) for m in mixels
-            ]
-            self._masks = [RayWeight(m) for m in mixels]
+            self._mixels = _Mixels([mi.Transform4f(m.pose.matrix().tolist()) for m in mixels],
+                                   [(m.d_f_m, m.detector_size_m, m.mask.width_m, m.mask.height_m) for m in mixels],
+                                   [RayWeight(m) for m in mixels])
             self.version += 1
 
         def update_pose(self, index: int, matrix: np.ndarray) -> None:
-            self._matrices[index] = mi.Transform4f(np.asarray(matrix).tolist())
+            self._mixels.matrices[index] = mi.Transform4f(np.asarray(matrix).tolist())
             self.version += 1
 
         def sample_ray(self, time, sample1, sample2, sample3, active=True):
@@ -71,17 +84,17 @@ def _make_class():
             direction = dr.zeros(mi.Vector3f)
             weight = dr.zeros(mi.Float)
             for k in range(n):
-                d_f, det, w, h = self._geometry[k]
+                d_f, det, w, h = self._mixels.geometry[k]
                 sel = active & (index == k)
                 x_d = mi.Point3f((frac_x - 0.5) * det, (frac_y - 0.5) * det, 0.0)
                 x_m = mi.Point3f((sample3.x - 0.5) * w, (sample3.y - 0.5) * h, d_f)
                 delta = mi.Vector3f(x_m - x_d)
                 r2 = dr.squared_norm(delta)
                 d_local = delta * dr.rsqrt(r2)
-                transmission = self._masks[k](*local_to_mask_xy(x_m.x, x_m.y), -d_local.x / d_local.z,
+                transmission = self._mixels.masks[k](*local_to_mask_xy(x_m.x, x_m.y), -d_local.x / d_local.z,
                                               d_local.y / d_local.z, sel)
                 w_k = (w * h) * transmission * d_local.z * d_local.z / r2
-                to_world = self._matrices[k]
+                to_world = self._mixels.matrices[k]
                 origin = dr.select(sel, to_world @ mi.Point3f(x_m + d_local * START_OFFSET_M), origin)
                 direction = dr.select(sel, dr.normalize(to_world @ d_local), direction)
                 weight = dr.select(sel, w_k, weight)

@@ -110,6 +110,7 @@ class MincamScene:
             # World scenes keep every shape as built: Mitsuba's default merges shapes that share a BSDF into one
             # anonymous mesh, whose parameters then belong to no element (the mixels' bodies, a user's card).
             self._fast = self.mi.load_dict(scene, optimize=self.screen is not None)
+            frozen.release_with(self, self._fast)
             sensors = {s.id(): s for s in self._fast.sensors()}
             sensors[SENSOR_KEY].set_mixels(list(self.mincam))
             self._fast_params = self.mi.traverse(self._fast)

@@ -21,6 +21,7 @@ from collections.abc import Iterable, Mapping
 import numpy as np
 
 from mincam_sim.render import backend
+from mincam_sim.render.kernels import frozen
 from mincam_sim.render.kernels.change_geometry import watch_box
 from mincam_sim.render.kernels.split_scene import SplitScene
 from mincam_sim.render.scene.mincam_scene import _write_in_place, as_param
@@ -140,6 +141,7 @@ class StaticSplit:
         movers = mi.load_dict({"type": "scene", **self.copies}, optimize=False)
         self._params = mi.traverse(movers)
         self.scene = SplitScene(self.static, movers)
+        frozen.release_with(self, self.scene)
         self.scene.set_movers_box(*_box_of(self.copies.values()))
         self.view = _ShapesView(self.static, self.copies, movers)
         self.movers_updates = 0  # rebuilds of the movers scene (the static scene is never updated)
