@@ -403,3 +403,4 @@ def test_the_mixel_sensor_keeps_its_configuration_out_of_the_frozen_launches_wal
     sensor = world.sensor
     assert set(vars(sensor)) == {"_mixels", "version"}
     assert not hasattr(sensor._mixels, "__dict__") and len(sensor._mixels.matrices) == len(world.mincam)
+
