@@ -4,10 +4,18 @@ seeds are fixed, so a run is repeatable."""
 
 from __future__ import annotations
 
+import signal
+
 import numpy as np
 import pytest
 
 Z = 4.5
+
+# A runner that starts the tests in the background (``cmd &`` in a script) hands them SIGINT ignored, and every
+# process they start inherits that. The Ctrl-C tests need what a terminal gives: Python's own handler here, the
+# default disposition in the processes started from here.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def assert_close_mc(value, expected, sigma, z: float = Z, what: str = "") -> None:
