@@ -3,7 +3,10 @@
 Two definitions, both from that camera: the paper's (Sec. 4.1.1, 4.2.1), the centroid of the **object**, from
 the silhouette of the object's mesh projected into the camera (``GroundTruthCamera.object_centroid``); and
 the centroid of the **change** (background subtraction, binary detection, the centroid of the detected pixels,
-``GroundTruthCamera.change_centroid``), which also takes in the object's shadow."""
+``GroundTruthCamera.change_centroid``), which also takes in the object's shadow. The experiments render the
+change where the movers and their shadows can be seen only
+(:meth:`mincam_sim.render.simulation.Simulation.camera_changes`): a whole-image difference at 32 samples a pixel
+detected noise pixels where paths that met a mover on a bounce decorrelated from the background's."""
 
 from __future__ import annotations
 

@@ -16,11 +16,11 @@ from mincam_sim.experiments.ground_truth import GroundTruthCamera
 from mincam_sim.experiments.setup import Setup
 from mincam_sim.experiments.tabletop_world import check_spp_fraction
 from mincam_sim.model.readout import propagate_sigma, read_out
-from mincam_sim.progress import progress
 from mincam_sim.render.simulation import Simulation
 from mincam_sim.render.solvers import PlainChange, StratifiedChange
 
-GROUND_TRUTH_SPP = 32  # camera samples per pixel
+GROUND_TRUTH_SPP = 64  # camera samples per pixel where the change can be seen directly (its window)
+GROUND_TRUTH_ELSEWHERE_SPP = 8  # ... over the whole film, for what inter-reflections change elsewhere
 GROUND_TRUTH_THRESHOLD = 0.02  # binary detection: |change| > this fraction of the brightest background pixel
 STRATIFIED_SHARE = 128  # the stratified dP estimator spends the plain budget / this per pass
 
@@ -116,8 +116,10 @@ def locate_in_world(sim: Simulation, camera: GroundTruthCamera, frames: Sequence
     Two ground truths are computed for every frame (:class:`LocateOptions` for the fields named here): the centroid
     of the **object** (the paper's definition: the silhouette of the frame's meshes ``objects[i]``, each (world
     vertices [m], faces), in the camera) and the centroid of the **change** (background subtraction, binary
-    detection: object and shadow). ``ground_truth`` ("object" or "change") picks the one the headline numbers use;
-    the other is scored too. Without ``objects`` only the change centroid exists and must be the one chosen.
+    detection: object and shadow, within the window of the camera where the movers and their shadows can be
+    seen: :meth:`Simulation.camera_changes`). ``ground_truth`` ("object" or "change") picks the one the headline
+    numbers use; the other is scored too. Without ``objects`` only the change centroid exists and must be the
+    one chosen.
 
     ``axis`` picks one coordinate (1D experiments); ``region`` restricts both ground truths (e.g. the boundary
     band). ``extrapolated(change_dn, min_total_dn)``, if given, marks the frames whose observation lies outside
@@ -244,7 +246,10 @@ class _Truths:
 def _ground_truths(sim: Simulation, camera: GroundTruthCamera, frames, background, setup: Setup,
                    options: LocateOptions) -> _Truths:
     """Render the ground-truth camera for the background and every frame (the world is left at the
-    background) and take each frame's centroids."""
+    background) and take each frame's centroids: the change centroid from the window where the frame's
+    movers and their shadows can be seen (:meth:`Simulation.camera_changes`, ``GROUND_TRUTH_SPP``); the signed
+    centroid and the net change fraction, sums over the whole film, from the window plus the rest of the film
+    at ``GROUND_TRUTH_ELSEWHERE_SPP`` (inter-reflections; both parts unbiased)."""
     objects, region, axis = options.objects, options.region, options.axis
     sim.update(background)
     bg_image = sim.camera_image(spp=GROUND_TRUTH_SPP, seed=setup.seed)
@@ -254,20 +259,23 @@ def _ground_truths(sim: Simulation, camera: GroundTruthCamera, frames, backgroun
     images = []
     pick = (lambda v: v[axis]) if axis is not None else (lambda v: v)
     threshold = GROUND_TRUTH_THRESHOLD * float(bg_image.max())
-    for i in progress(range(len(frames)), desc="ground truth", disable=not options.show_progress):
-        sim.update(frames[i])
-        image = sim.camera_image(spp=GROUND_TRUTH_SPP, seed=setup.seed)
-        centroid, mask = camera.change_centroid(image, bg_image, threshold, region)
+    changes = sim.camera_changes(frames, background, spp=GROUND_TRUTH_SPP, seed=setup.seed,
+                                 elsewhere_spp=GROUND_TRUTH_ELSEWHERE_SPP, show_progress=options.show_progress)
+    for i, change in enumerate(changes):
+        near = bg_image + change.change_image(bg_image.shape)
+        centroid, mask = camera.change_centroid(near, bg_image, threshold, region)
         truth_change[i] = pick(centroid) if mask.sum() >= 3 else np.nan
         if objects is not None:
-            centroid, mask = camera.object_centroid(objects[i], image.shape, region)
+            centroid, mask = camera.object_centroid(objects[i], bg_image.shape, region)
             truth_object[i] = pick(centroid) if mask.sum() >= 3 else np.nan
+        diff = change.change_image(bg_image.shape, elsewhere=True)
+        image = bg_image + diff
         signed[i] = pick(camera.signed_change_centroid(image, bg_image, region))
-        diff = (image - bg_image) if region is None else np.where(region, image - bg_image, 0.0)
+        if region is not None:
+            diff = np.where(region, diff, 0.0)
         total = np.abs(diff).sum()
         net_fraction[i] = diff.sum() / total if total > 0 else np.nan
         images.append(image)
-    sim.update(background)
     return _Truths(truth_change, truth_object, signed, net_fraction, images, bg_image)
 
 

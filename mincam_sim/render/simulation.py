@@ -42,9 +42,13 @@ from mincam_sim.errors import IgnoredSettingWarning, InputError
 from mincam_sim.frames import FrameSink, MemorySink, collect
 from mincam_sim.measurements import Measurements
 from mincam_sim.model.optics import Mincam
+from mincam_sim.progress import progress
 from mincam_sim.render import backend
+from mincam_sim.render.camera_change import CameraChange, outside
+from mincam_sim.render.kernels.camera_window import FilmProjection, Window, change_window, window_render
 from mincam_sim.render.kernels.change_geometry import (
     change_points_each,
+    changed_shapes,
     delta_light_spheres,
     delta_surfaces,
     emitters_among,
@@ -185,6 +189,7 @@ class Simulation:
         self._content_key = self._content_fingerprint()  # before any update: the scene as built
         self._as_built: dict[str, object] = {}  # each updated parameter's value (world coordinates) before updates
         self._camera_frozen_images, self._camera_traced = 0, False  # camera renders replayed, or traced from now
+        self._camera_frozen_windows, self._film_projection = 0, None  # camera windows replayed; their projection
         self._last_set: dict[str, np.ndarray] = {}  # the last numpy value each parameter was set to
         self.revisions: dict[str, int] = {}  # how often each parameter was changed (who replays a scene checks it)
         self._traversals: dict = {}  # mi.traverse of the objects buffers_key reads (read afresh every call)
@@ -369,6 +374,74 @@ class Simulation:
             if keeps_recording(recorded, self._camera_frozen_images):
                 self._camera_traced = True  # every image records anew (a shape moved by a changing transform)
         return image
+
+    def camera_changes(self, frames: Sequence[Updates], background: Updates, spp: int = 64, seed: int = 0,
+                       elsewhere_spp: int = 0, show_progress: bool = False) -> list[CameraChange]:
+        """The ground-truth camera's view of each frame (updates applied on top of ``background``) and of the
+        background over the window of its film where the two can differ by direct sight or direct light: the
+        image of the frame's changed shapes' boxes and shadow volumes, in the frame and in the background
+        (:func:`.kernels.camera_window.change_window`; the whole film where a change is unbounded), both rendered
+        there with ``spp`` samples a pixel and the same ``seed``, lane by lane.
+
+        A change that reaches a pixel outside the window only by an inter-reflection is not in the window; with
+        ``elsewhere_spp`` > 0 the whole film of each frame and of the background is rendered too, with that many
+        samples a pixel and the same seed, and their difference outside the window is kept
+        (``CameraChange.elsewhere``: for sums over the whole film). Frames first, then the background's windows
+        (one update a frame); the world is left at the background."""
+        self._require_world("ground-truth cameras")
+        if self.camera is None:
+            raise InputError("this world has no ground-truth camera; pass camera=pinhole_camera(...)")
+        if self._film_projection is None:
+            self._film_projection = FilmProjection(self.camera)
+        self.update(background)
+        names = [sorted(changed_shapes(frame, background)) for frame in frames]
+        moved = sorted(set().union(*names))
+        at_background = dict(zip(moved, self._change_hulls(moved), strict=True))
+        whole = backend.variant() not in backend.JIT_VARIANTS
+        windows, frame_pixels, frame_films = [], [], []
+        for i in progress(range(2 * len(frames)), desc="ground truth", disable=not show_progress):
+            if i < len(frames):  # the frames: their windows and films
+                self.update({**background, **frames[i]})
+                hulls = [h for name in names[i] for h in at_background[name]] + self._change_hulls(names[i])
+                windows.append(change_window(self._film_projection, hulls))
+                frame_pixels.append(self._camera_window(windows[i], spp, seed, whole))
+                frame_films.append(self.camera_image(elsewhere_spp, seed) if elsewhere_spp else None)
+                continue
+            if i == len(frames):
+                self.update(background)
+                background_film = self.camera_image(elsewhere_spp, seed) if elsewhere_spp else None
+            k = i - len(frames)  # the background's windows
+            elsewhere = None if frame_films[k] is None else outside(frame_films[k] - background_film, windows[k])
+            pixels = self._camera_window(windows[k], spp, seed, whole)
+            frame_pixels[k] = CameraChange(windows[k], frame_pixels[k], pixels, elsewhere)
+            frame_films[k] = None
+        self.update(background)
+        return frame_pixels
+
+    def _change_hulls(self, names: list[str]) -> list:
+        """Per name, the corner points [m] of the shape's change hull as the world is now and of its mirror
+        images ([None] where the change is unbounded)."""
+        out = []
+        for name, (points, _) in zip(names, change_points_each(self.scene, [[n] for n in names], self._mirrors),
+                                     strict=True):
+            out.append([None] if points is None else [points, *self._mirrors.images(points, exclude=name)])
+        return out
+
+    def _camera_window(self, window: Window | None, spp: int, seed: int, whole: bool) -> np.ndarray:
+        """The camera's pixels over ``window`` as the world is now (none for None); ``whole``: cut from a whole
+        image (variants without the window kernel)."""
+        if window is None:
+            return np.zeros((0, 0))
+        row, col, rows, cols = window
+        if whole:
+            return self.camera_image(spp, seed)[row:row + rows, col:col + cols]
+        key = self._camera_freeze_key()
+        pixels = self.mincam_scene.camera_window(window, spp, seed, freeze=key)
+        if key is not None:
+            self._camera_frozen_windows += 1
+            if keeps_recording(recordings(self.mincam_scene.fast_scene, window_render), self._camera_frozen_windows):
+                self._camera_traced = True
+        return pixels
 
     def _camera_freeze_key(self) -> tuple | None:
         """The key of a frozen camera render (:meth:`buffers_key`), or None (trace) off LLVM, once the images

@@ -279,22 +279,19 @@ def _ground_truth(sim: Simulation, camera: CameraSpec, frames, background, out: 
     """Images of the background and every frame, and the centroid (row, col) [px] of each frame's change:
     background subtraction, |change| > threshold x the background's brightest pixel that is no light seen
     directly (:func:`~mincam_sim.render.scene.world_checks.light_pixels`: a lamp or a sky in view would set the
-    threshold above every change it lights)."""
+    threshold above every change it lights), counted in the window where the frame's movers and their shadows
+    can be seen (:meth:`Simulation.camera_changes`: noise elsewhere detected no pixel); the images are whole
+    films with the window's change, both at the camera's samples a pixel."""
     sim.update(background)
     bg = sim.camera_image(camera.spp, seed=0)
     lit = ~light_pixels(sim.scene, sim.camera)
     scale = float(bg[lit].max()) if lit.any() else float(bg.max())
     images, rows, cols = [], [], []
-    for frame in frames:
-        sim.update(background)
-        sim.update(frame)
-        image = sim.camera_image(camera.spp, seed=0)
-        images.append(image)
-        hit = np.abs(image - bg) > camera.threshold * scale
-        r, c = np.nonzero(hit)
+    for change in sim.camera_changes(frames, background, spp=camera.spp, seed=0, elsewhere_spp=camera.spp):
+        images.append(bg + change.change_image(bg.shape, elsewhere=True))
+        r, c = np.nonzero(np.abs(change.change_image(bg.shape)) > camera.threshold * scale)
         rows.append(r.mean() if r.size else np.nan)
         cols.append(c.mean() if c.size else np.nan)
-    sim.update(background)
     atomic_save_npz(out / "camera.npz", background=bg, frames=np.array(images))
     rows, cols = np.array(rows), np.array(cols)
     _warn_undefined_centroids(images, bg, rows, camera.threshold, scale)

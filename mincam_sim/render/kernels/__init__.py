@@ -17,4 +17,5 @@ way in.
 * ``split_scene.py``: rays traced against a static scene and a small movers scene as if they were one.
 * ``change_region.py``: bounds on a mixel's aperture plane where a frame can change its measurement.
 * ``change_geometry.py``: the geometry oracle of the change solvers (where a frame's change can reach).
+* ``camera_window.py``: the ground-truth camera over the window of its film where a frame's change can be seen.
 """

@@ -25,6 +25,7 @@ import numpy as np
 from mincam_sim.model.optics import Mincam
 from mincam_sim.render import backend
 from mincam_sim.render.kernels import frozen
+from mincam_sim.render.kernels.camera_window import window_render
 from mincam_sim.render.kernels.mixel_sensor import mixel_position_sample, sensor_dict
 from mincam_sim.render.kernels.monte_carlo import check_counts, derive_seed
 from mincam_sim.render.kernels.tracing import trace_groups
@@ -218,6 +219,30 @@ class MincamScene:
             with frozen.no_cyclic_gc():
                 img = render(scene, index, int(spp), dr.opaque(self.mi.UInt32, int(seed)), freeze)
         return np.asarray(img, dtype=np.float64)[..., 0]
+
+    def camera_window(self, window: tuple[int, int, int, int], spp: int, seed: int,
+                      freeze: tuple | None = None) -> np.ndarray:
+        """The ground-truth camera's image over ``window`` (first row, first column, rows, columns) [px] of its
+        film [W m^-2 sr^-1] (:func:`.camera_window.window_render`: the same estimator as :meth:`camera_image`,
+        whose random numbers depend on the window's shape and the seed only, so that two renders of one window
+        pair up pixel by pixel). Only on Dr.Jit's JIT variants; ``freeze`` as in :meth:`camera_image`."""
+        import drjit as dr
+
+        scene = self.fast_scene
+        if self.sensor(CAMERA_KEY) is None:
+            raise ValueError("this scene has no ground-truth camera; pass camera=pinhole_camera(...)")
+        row, col, rows, cols = (int(v) for v in window)
+        index = next(k for k, s in enumerate(scene.sensors()) if s.id() == CAMERA_KEY)
+        origin = (dr.opaque(self.mi.UInt32, row), dr.opaque(self.mi.UInt32, col))
+        args = (scene, index, int(spp), dr.opaque(self.mi.UInt32, int(seed)), origin, (rows, cols))
+        if freeze is None:
+            values = window_render(*args, ())
+        else:
+            with frozen.no_cyclic_gc():
+                # the window's shape named in the key as text: Dr.Jit 1.5 replayed a 32 x 48 recording for a
+                # 48 x 48 window keyed on the integers alone
+                values = frozen.frozen(scene, window_render)(*args, (f"{rows}x{cols} px, {int(spp)} spp", *freeze))
+        return np.asarray(values, dtype=np.float64).reshape(rows, cols)
 
 
 def camera_render(scene, sensor_index: int, spp: int, seed, buffers: tuple):
