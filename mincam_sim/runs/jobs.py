@@ -338,7 +338,8 @@ def plot_changes(ch: Changes, path: Path) -> Path:
 # core's work; on an idle 2-core machine the wall time is between half of it, where the tracing runs on both
 # cores, and all of it, for the per-frame work in Python). ``tests/core/test_estimates.py`` times real runs
 # against it.
-STARTUP_S = 3.5  # a tiny render: imports, the backend, the scene, the result files and figures
+STARTUP_S = 2.5  # a tiny render: imports, the backend, the scene, the result files and figures (3.5 until the
+# Xeon: its tiny world render took 2.1 s wall, 2.8 s CPU in all, and read 0.32-0.36 of a 6 s estimate)
 #: Samples traced per CPU second per solver (response maps: texel samples; the others: rays; worlds: paths of
 #: max_depth 3 in the room of scenes/world).
 SAMPLES_PER_S: dict[type[Solver], float] = {ResponseMap: 3.0e7, Aperture: 5.0e6, Reference: 2.0e6,

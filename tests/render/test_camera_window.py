@@ -196,9 +196,9 @@ def test_frozen_windows_equal_traced_ones_bit_for_bit():
 
 
 def test_a_frozen_window_of_a_new_shape_records_afresh():
-    """Windows of 32 x 32, 32 x 48, 48 x 32 and then 48 x 48 pixels at 32 samples: each frozen render has its own window's shape and
-    equals the traced one bit for bit (Dr.Jit 1.5 replayed the 32 x 48 recording for the 48 x 48 window while
-    the recordings were keyed on the integers alone)."""
+    """Windows of 32 x 32, 32 x 48, 48 x 32 and then 48 x 48 pixels at 32 samples: each frozen render has its own
+    window's shape and equals the traced one bit for bit (Dr.Jit 1.5 replayed the 32 x 48 recording for the
+    48 x 48 window while the recordings were keyed on the integers alone)."""
     world, background = _world(pixels=96)
     world.update(_box_at(0.0, 0.0))
     scene = world.mincam_scene
