@@ -2,7 +2,7 @@
 
 :meth:`mincam_sim.render.simulation.Simulation.camera_changes` renders the frame and the background over the
 window of the camera's film where the moving shapes and their shadows can be seen
-(:func:`mincam_sim.render.kernels.camera_window.change_window`), with the same seed lane by lane, and
+(``kernels.camera_window.change_window``), with the same seed lane by lane, and
 optionally whole films with fewer samples for what reaches the rest of the film by inter-reflection.
 """
 

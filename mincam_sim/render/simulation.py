@@ -380,8 +380,9 @@ class Simulation:
         """The ground-truth camera's view of each frame (updates applied on top of ``background``) and of the
         background over the window of its film where the two can differ by direct sight or direct light: the
         image of the frame's changed shapes' boxes and shadow volumes, in the frame and in the background
-        (:func:`.kernels.camera_window.change_window`; the whole film where a change is unbounded), both rendered
-        there with ``spp`` samples a pixel and the same ``seed``, lane by lane.
+        (``kernels.camera_window.change_window``; the whole film where a change is unbounded), both rendered
+        there with ``spp`` samples a pixel and the same ``seed``, lane by lane
+        (:class:`~mincam_sim.render.camera_change.CameraChange`).
 
         A change that reaches a pixel outside the window only by an inter-reflection is not in the window; with
         ``elsewhere_spp`` > 0 the whole film of each frame and of the background is rendered too, with that many
@@ -391,6 +392,10 @@ class Simulation:
         self._require_world("ground-truth cameras")
         if self.camera is None:
             raise InputError("this world has no ground-truth camera; pass camera=pinhole_camera(...)")
+        for name, value, least in (("spp", spp, 1), ("elsewhere_spp", elsewhere_spp, 0)):
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < least:
+                raise InputError(f"camera_changes: {name} (samples per pixel) must be an integer >= {least}, got "
+                                 f"{value!r}")
         if self._film_projection is None:
             self._film_projection = FilmProjection(self.camera)
         self.update(background)

@@ -206,3 +206,12 @@ def test_a_frozen_window_of_a_new_shape_records_afresh():
         frozen = scene.camera_window(window, 32, 3, freeze=world._camera_freeze_key())
         assert frozen.shape == window[2:]
         assert np.array_equal(frozen, scene.camera_window(window, 32, 3))
+
+
+@pytest.mark.parametrize(("field", "value"), [("spp", 0), ("spp", 2.5), ("spp", True), ("elsewhere_spp", -1)])
+def test_bad_sample_counts_are_refused_by_name(field, value):
+    """A sample count that is no integer, or below 1 (``spp``) or 0 (``elsewhere_spp``), is one InputError naming
+    it, before anything is rendered."""
+    world, background = _world(pixels=16)
+    with pytest.raises(ms.InputError, match=field):
+        world.camera_changes([_box_at(0.0, 0.0)], background, **{field: value})

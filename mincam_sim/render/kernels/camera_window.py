@@ -2,7 +2,7 @@
 
 A moving shape changes what a pinhole camera sees directly (its own pixels) and through direct light (its
 shadows). Both lie inside the hull of the shape's box and its shadow volumes from every light
-(:func:`.change_geometry.change_points_each`, the same hull the change solvers aim their rays at), in the frame
+(:func:`.change_geometry.change_points_each`, the hull the change solvers aim their rays at), in the frame
 and in the background, so their image lies inside the camera's image of those hulls: a perspective projection maps
 a hull in front of the camera onto the hull of its projected corners. :func:`change_window` is that image's
 bounding rectangle, grown to a multiple of :data:`WINDOW_STEP_PX` (so that a handful of window sizes keep their
@@ -97,7 +97,7 @@ def window_render(scene, sensor_index: int, spp: int, seed, origin, shape: tuple
     by row: each sample a film position uniform in its pixel, one path of the scene's integrator (what
     ``mi.render`` gives a pixel through a box filter). Lane ``i`` is sample ``i % spp`` of pixel ``i // spp``, its
     random numbers from ``seed`` and ``i`` alone, so two renders of one window pair up lane by lane. Frozen by
-    :meth:`.mincam_scene.MincamScene.camera_window`; ``buffers`` only keys the recording."""
+    :meth:`mincam_sim.render.scene.mincam_scene.MincamScene.camera_window`; ``buffers`` only keys the recording."""
     mi = backend.mitsuba()
     import drjit as dr
 

@@ -223,7 +223,7 @@ class MincamScene:
     def camera_window(self, window: tuple[int, int, int, int], spp: int, seed: int,
                       freeze: tuple | None = None) -> np.ndarray:
         """The ground-truth camera's image over ``window`` (first row, first column, rows, columns) [px] of its
-        film [W m^-2 sr^-1] (:func:`.camera_window.window_render`: the same estimator as :meth:`camera_image`,
+        film [W m^-2 sr^-1] (``kernels.camera_window.window_render``: the same estimator as :meth:`camera_image`,
         whose random numbers depend on the window's shape and the seed only, so that two renders of one window
         pair up pixel by pixel). Only on Dr.Jit's JIT variants; ``freeze`` as in :meth:`camera_image`."""
         import drjit as dr
