@@ -402,14 +402,13 @@ class Simulation:
         names = [sorted(changed_shapes(frame, background)) for frame in frames]
         moved = sorted(set().union(*names))
         at_background = dict(zip(moved, self._change_hulls(moved), strict=True))
-        whole = backend.variant() not in backend.JIT_VARIANTS
         windows, frame_pixels, frame_films = [], [], []
         for i in progress(range(2 * len(frames)), desc="ground truth", disable=not show_progress):
             if i < len(frames):  # the frames: their windows and films
                 self.update({**background, **frames[i]})
                 hulls = [h for name in names[i] for h in at_background[name]] + self._change_hulls(names[i])
                 windows.append(change_window(self._film_projection, hulls))
-                frame_pixels.append(self._camera_window(windows[i], spp, seed, whole))
+                frame_pixels.append(self._camera_window(windows[i], spp, seed))
                 frame_films.append(self.camera_image(elsewhere_spp, seed) if elsewhere_spp else None)
                 continue
             if i == len(frames):
@@ -417,7 +416,7 @@ class Simulation:
                 background_film = self.camera_image(elsewhere_spp, seed) if elsewhere_spp else None
             k = i - len(frames)  # the background's windows
             elsewhere = None if frame_films[k] is None else outside(frame_films[k] - background_film, windows[k])
-            pixels = self._camera_window(windows[k], spp, seed, whole)
+            pixels = self._camera_window(windows[k], spp, seed)
             frame_pixels[k] = CameraChange(windows[k], frame_pixels[k], pixels, elsewhere)
             frame_films[k] = None
         self.update(background)
@@ -432,14 +431,10 @@ class Simulation:
             out.append([None] if points is None else [points, *self._mirrors.images(points, exclude=name)])
         return out
 
-    def _camera_window(self, window: Window | None, spp: int, seed: int, whole: bool) -> np.ndarray:
-        """The camera's pixels over ``window`` as the world is now (none for None); ``whole``: cut from a whole
-        image (variants without the window kernel)."""
+    def _camera_window(self, window: Window | None, spp: int, seed: int) -> np.ndarray:
+        """The camera's pixels over ``window`` as the world is now (none for None)."""
         if window is None:
             return np.zeros((0, 0))
-        row, col, rows, cols = window
-        if whole:
-            return self.camera_image(spp, seed)[row:row + rows, col:col + cols]
         key = self._camera_freeze_key()
         pixels = self.mincam_scene.camera_window(window, spp, seed, freeze=key)
         if key is not None:
