@@ -377,9 +377,12 @@ def estimate_seconds(cfg: RenderConfig | WorldConfig, variant: str | None = None
         what = f"{n_frames} frames x {traced} rays x {n_mixels} mixels"
         seconds = samples / SAMPLES_PER_S[kind] + n_frames * FRAME_S[kind]
         if cfg.camera is not None:
-            pixels = float(n_frames + 1) * cfg.camera.width_px * cfg.camera.height_px * cfg.camera.spp
-            seconds += pixels / SAMPLES_PER_S[Aperture] + (n_frames + 1) * CAMERA_IMAGE_S
-            what += f" + camera {n_frames + 1} images"
+            # a film a frame, and the frame's and the background's change windows (a few percent of a film for a
+            # small mover, the whole film for a moving light): half a film a frame, within 2x either way
+            films = 1.5 * n_frames + 2
+            pixels = films * cfg.camera.width_px * cfg.camera.height_px * cfg.camera.spp
+            seconds += pixels / SAMPLES_PER_S[Aperture] + (3 * n_frames + 2) * CAMERA_IMAGE_S
+            what += f" + camera {n_frames + 1} images and their change windows"
     else:
         n_frames, (traced, _) = len(cfg.frames), traced_samples(cfg.run)
         rows, cols = cfg.screen.shape
@@ -461,7 +464,8 @@ def estimate_bytes(cfg: RenderConfig | WorldConfig) -> tuple[float, str]:
         n_bytes = float(n) * n_mixels * RESULT_BYTES_PER_VALUE + float(n) * len(cfg.movers) * (16 + 6) * 8 * 2
         what = f"{n} frames x {len(cfg.movers)} movers"
         if cfg.camera is not None:
-            n_bytes += 2.0 * (n + 1) * cfg.camera.width_px * cfg.camera.height_px * 8
+            # the images, their stack for camera.npz and each frame's whole-film difference (camera_changes)
+            n_bytes += 3.0 * (n + 1) * cfg.camera.width_px * cfg.camera.height_px * 8
             what += f" + {n + 1} camera images of {cfg.camera.width_px} x {cfg.camera.height_px} px"
         return n_bytes, what
     n = len(cfg.frames)
