@@ -24,18 +24,22 @@ FAR = np.array([40.0, -25.0, 3.0])  # the rig, the table and the camera all sit 
 BOX = trimesh.creation.box((0.06, 0.04, 0.05))
 BOX.apply_translation((0, 0, 0.025))
 PARKED = FAR + [20.0, 20.0, 0.0]
+SMALL = BOX.copy()
+SMALL.apply_scale(0.8)
 
 
-def _world(mirror: bool = False, pixels: int = 64, spp: int = 8):
+def _world(mirror: bool = False, pixels: int = 64, spp: int = 8, other: bool = False):
     """A textured table under an area light 1.2 m up and a box moved by its vertices; a camera 0.8 m over the
     table, tilted 25 degrees and looking at its centre (``mirror``: a vertical mirror at x = +0.3 m, and the
-    camera turned to see it)."""
+    camera turned to see it; ``other``: a second, smaller box, parked 1 m beside the first)."""
     table = np.clip(0.45 + 0.1 * np.random.default_rng(0).standard_normal((32, 32)), 0, 1)
     elements = {
         "table": sd.textured_plane(table, 1.2, 1.2, Pose(tuple(FAR), (0, 0, 1)).matrix()),
         "light": sd.area_light(0.4, 0.4, Pose(tuple(FAR + [0, 0, 1.2]), (0, 0, -1)).matrix(), 10.0),
         "box": sd.mesh_object("box", BOX.vertices + PARKED, BOX.faces, 0.9),
     }
+    if other:
+        elements["other"] = sd.mesh_object("other", SMALL.vertices + PARKED + [1, 0, 0], SMALL.faces, 0.8)
     target = FAR + ([0.3, 0.0, 0.1] if mirror else [0.0, 0.0, 0.0])
     eye = FAR + ([-0.1, 0.05, 0.5] if mirror else [-0.37, 0.0, 0.8])
     if mirror:
@@ -47,6 +51,8 @@ def _world(mirror: bool = False, pixels: int = 64, spp: int = 8):
     rig = cross_layout(center=Pose(tuple(FAR + [0.0, 0.0, 0.5]), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)))
     world = ms.Simulation(rig, world=elements, camera=camera)
     background = vertex_update("box", BOX.vertices + PARKED)
+    if other:
+        background.update(vertex_update("other", SMALL.vertices + PARKED + [1, 0, 0]))
     return world, background
 
 
@@ -215,3 +221,25 @@ def test_bad_sample_counts_are_refused_by_name(field, value):
     world, background = _world(pixels=16)
     with pytest.raises(ms.InputError, match=field):
         world.camera_changes([_box_at(0.0, 0.0)], background, **{field: value})
+
+
+def test_two_movers_apart_are_both_in_the_window():
+    """Two boxes moved at once to opposite sides of the view: every pixel whose whole-film change (512 samples,
+    paired) passes 2 % of the brightest background pixel lies in the one window, and both boxes' changes are
+    there."""
+    world2, background = _world(pixels=48, other=True)
+    frame = {**_box_at(-0.15, 0.12), **vertex_update("other", SMALL.vertices + FAR + [0.2, -0.15, 0.0])}
+    world2.update(background)
+    bg = world2.camera_image(spp=512, seed=4)
+    world2.update(frame)
+    whole = world2.camera_image(spp=512, seed=4) - bg
+    world2.update(background)
+    change = world2.camera_changes([frame], background, spp=64, seed=4)[0]
+    inside = np.zeros(bg.shape, dtype=bool)
+    row, col, rows, cols = change.window
+    inside[row:row + rows, col:col + cols] = True
+    seen = np.abs(whole) > 0.02 * bg.max()
+    assert not (seen & ~inside).any()
+    rows_seen, cols_seen = np.nonzero(seen)
+    assert np.ptp(cols_seen) > 10 or np.ptp(rows_seen) > 10, "the two changes must lie apart"
+    assert (np.abs(change.change_image(bg.shape)) > 0.02 * bg.max()).sum() > 0.8 * seen.sum()
