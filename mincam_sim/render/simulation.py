@@ -45,7 +45,7 @@ from mincam_sim.model.optics import Mincam
 from mincam_sim.progress import progress
 from mincam_sim.render import backend
 from mincam_sim.render.camera_change import CameraChange, outside
-from mincam_sim.render.kernels.camera_window import FilmProjection, Window, change_window, window_render
+from mincam_sim.render.kernels.camera_window import FilmProjection, Window, change_windows, window_render
 from mincam_sim.render.kernels.change_geometry import (
     change_points_each,
     changed_shapes,
@@ -378,15 +378,15 @@ class Simulation:
     def camera_changes(self, frames: Sequence[Updates], background: Updates, spp: int = 64, seed: int = 0,
                        elsewhere_spp: int = 0, show_progress: bool = False) -> list[CameraChange]:
         """The ground-truth camera's view of each frame (updates applied on top of ``background``) and of the
-        background over the window of its film where the two can differ by direct sight or direct light: the
-        image of the frame's changed shapes' boxes and shadow volumes, in the frame and in the background
-        (``kernels.camera_window.change_window``; the whole film where a change is unbounded), both rendered
-        there with ``spp`` samples a pixel and the same ``seed``, lane by lane
+        background over the windows of its film where the two can differ by direct sight or direct light: the
+        images of the frame's changed shapes' boxes and shadow volumes, in the frame and in the background
+        (``kernels.camera_window.change_windows``: a window per mover unless they overlap; the whole film where a
+        change is unbounded), both rendered there with ``spp`` samples a pixel and the same ``seed``, lane by lane
         (:class:`~mincam_sim.render.camera_change.CameraChange`).
 
-        A change that reaches a pixel outside the window only by an inter-reflection is not in the window; with
+        A change that reaches a pixel outside the windows only by an inter-reflection is not in them; with
         ``elsewhere_spp`` > 0 the whole film of each frame and of the background is rendered too, with that many
-        samples a pixel and the same seed, and their difference outside the window is kept
+        samples a pixel and the same seed, and their difference outside the windows is kept
         (``CameraChange.elsewhere``: for sums over the whole film). Frames first, then the background's windows
         (one update a frame); the world is left at the background."""
         self._require_world("ground-truth cameras")
@@ -407,8 +407,8 @@ class Simulation:
             if i < len(frames):  # the frames: their windows and films
                 self.update({**background, **frames[i]})
                 hulls = [h for name in names[i] for h in at_background[name]] + self._change_hulls(names[i])
-                windows.append(change_window(self._film_projection, hulls))
-                frame_pixels.append(self._camera_window(windows[i], spp, seed))
+                windows.append(change_windows(self._film_projection, hulls))
+                frame_pixels.append(self._camera_windows(windows[i], spp, seed))
                 frame_films.append(self.camera_image(elsewhere_spp, seed) if elsewhere_spp else None)
                 continue
             if i == len(frames):
@@ -416,7 +416,7 @@ class Simulation:
                 background_film = self.camera_image(elsewhere_spp, seed) if elsewhere_spp else None
             k = i - len(frames)  # the background's windows
             elsewhere = None if frame_films[k] is None else outside(frame_films[k] - background_film, windows[k])
-            pixels = self._camera_window(windows[k], spp, seed)
+            pixels = self._camera_windows(windows[k], spp, seed)
             frame_pixels[k] = CameraChange(windows[k], frame_pixels[k], pixels, elsewhere)
             frame_films[k] = None
         self.update(background)
@@ -431,17 +431,18 @@ class Simulation:
             out.append([None] if points is None else [points, *self._mirrors.images(points, exclude=name)])
         return out
 
-    def _camera_window(self, window: Window | None, spp: int, seed: int) -> np.ndarray:
-        """The camera's pixels over ``window`` as the world is now (none for None)."""
-        if window is None:
-            return np.zeros((0, 0))
-        key = self._camera_freeze_key()
-        pixels = self.mincam_scene.camera_window(window, spp, seed, freeze=key)
-        if key is not None:
-            self._camera_frozen_windows += 1
-            if keeps_recording(recordings(self.mincam_scene.fast_scene, window_render), self._camera_frozen_windows):
-                self._camera_traced = True
-        return pixels
+    def _camera_windows(self, windows: tuple[Window, ...], spp: int, seed: int) -> tuple[np.ndarray, ...]:
+        """The camera's pixels over each of ``windows`` as the world is now."""
+        out = []
+        for window in windows:
+            key = self._camera_freeze_key()
+            out.append(self.mincam_scene.camera_window(window, spp, seed, freeze=key))
+            if key is not None:
+                self._camera_frozen_windows += 1
+                if keeps_recording(recordings(self.mincam_scene.fast_scene, window_render),
+                                   self._camera_frozen_windows):
+                    self._camera_traced = True
+        return tuple(out)
 
     def _camera_freeze_key(self) -> tuple | None:
         """The key of a frozen camera render (:meth:`buffers_key`), or None (trace) off LLVM, once the images

@@ -14,7 +14,7 @@ from mincam_sim.experiments.ground_truth import GroundTruthCamera
 from mincam_sim.experiments.setup import Setup
 from mincam_sim.model.geometry import look_at
 from mincam_sim.render import backend
-from mincam_sim.render.kernels.camera_window import WINDOW_STEP_PX, FilmProjection, change_window
+from mincam_sim.render.kernels.camera_window import WINDOW_STEP_PX, FilmProjection, change_windows
 from mincam_sim.render.scene import scene_dicts as sd
 from mincam_sim.render.scene.updates import vertex_update
 
@@ -98,25 +98,35 @@ def test_a_tilted_camera_far_from_the_origin_casts_its_ray_through_the_projected
         assert np.linalg.norm(rel - (rel @ d) * d) < 1e-6 * np.linalg.norm(rel)
 
 
-def test_windows_hold_the_projected_hull_in_steps_and_inside_the_film():
-    """A hull's window holds its projection grown by the margin, in sides of WINDOW_STEP_PX, inside the film; a
-    hull out of view gives None (nothing can change), one behind the camera or unbounded the whole film."""
+def test_windows_hold_the_projected_hulls_in_steps_and_inside_the_film():
+    """A hull's window holds its projection grown by the margin, in sides of WINDOW_STEP_PX, inside the film;
+    hulls apart keep windows of their own, overlapping ones share one; a hull out of view gives no window
+    (nothing can change), one behind the camera or unbounded the whole film."""
     world, _ = _world(pixels=100)
     project = FilmProjection(world.camera)
     origin = world.scene_origin_m
-    hull = FAR - origin + np.array([[x, y, z] for x in (-0.05, 0.05) for y in (-0.03, 0.04) for z in (0.0, 0.05)])
-    row, col, rows, cols = change_window(project, [hull])
-    film = project(hull)
+
+    def hull(x, y):
+        return FAR - origin + np.array([[x + dx, y + dy, z] for dx in (-0.05, 0.05) for dy in (-0.03, 0.04)
+                                        for z in (0.0, 0.05)])
+
+    (row, col, rows, cols), = change_windows(project, [hull(0.0, 0.0)])
+    film = project(hull(0.0, 0.0))
     assert rows % WINDOW_STEP_PX == 0 and cols % WINDOW_STEP_PX == 0
     assert col <= film[:, 0].min() - 1 and film[:, 0].max() + 1 <= col + cols
     assert row <= film[:, 1].min() - 1 and film[:, 1].max() + 1 <= row + rows
+    apart = change_windows(project, [hull(-0.25, -0.2), hull(0.25, 0.2)])
+    assert len(apart) == 2 and sum(r * c for *_, r, c in apart) < 0.5 * 100 * 100
+    (r0, c0, h0, w0), (r1, c1, h1, w1) = apart
+    assert r0 + h0 <= r1 or r1 + h1 <= r0 or c0 + w0 <= c1 or c1 + w1 <= c0  # no pixel in both
+    assert len(change_windows(project, [hull(0.0, 0.0), hull(0.02, 0.01)])) == 1
     corner = FAR - origin + np.array([[0.0, 0.0, 0.0], [0.0, 3.0, 0.01]])  # out of the film on one side: cut
-    row, col, rows, cols = change_window(project, [corner])
+    (row, col, rows, cols), = change_windows(project, [corner])
     assert 0 <= row and row + rows <= 100 and 0 <= col and col + cols <= 100 and rows * cols < 100 * 100
-    assert change_window(project, [PARKED - origin + np.zeros((2, 3))]) is None
-    assert change_window(project, [hull, None]) == (0, 0, 100, 100)
+    assert change_windows(project, [PARKED - origin + np.zeros((2, 3))]) == ()
+    assert change_windows(project, [hull(0.0, 0.0), None]) == ((0, 0, 100, 100),)
     behind = FAR - origin + np.array([[-0.37, 0.0, 0.9], [-0.5, 0.0, 1.2]])
-    assert change_window(project, [hull, behind]) == (0, 0, 100, 100)
+    assert change_windows(project, [hull(0.0, 0.0), behind]) == ((0, 0, 100, 100),)
 
 
 def test_the_windowed_change_agrees_with_whole_film_renders():
@@ -133,9 +143,7 @@ def test_the_windowed_change_agrees_with_whole_film_renders():
     whole = world.camera_image(spp=1024, seed=5) - bg  # paired: 0 where no path meets the box
     change = world.camera_changes([frame], background, spp=1024, seed=7)[0]
     assert world.world_value("box.vertex_positions")[0] == pytest.approx(BOX.vertices[0, 0] + PARKED[0])
-    row, col, rows, cols = change.window
-    inside = np.zeros(bg.shape, dtype=bool)
-    inside[row:row + rows, col:col + cols] = True
+    inside = change.inside(bg.shape)
     seen = np.abs(whole) > 0.02 * bg.max()
     assert seen.sum() > 20 and not (seen & ~inside).any()
     windowed = change.change_image(bg.shape)
@@ -149,7 +157,8 @@ def test_the_windowed_change_agrees_with_whole_film_renders():
 
     np.testing.assert_allclose(centroid(windowed), centroid(whole), atol=0.1)
     few = world.camera_changes([frame], background, spp=2, seed=7)[0]  # few paths: many meet no box
-    assert few.window == change.window and (few.frame == few.background).mean() > 0.2
+    assert few.windows == change.windows
+    assert np.mean(np.concatenate([(f == b).ravel() for f, b in zip(few.frame, few.background, strict=True)])) > 0.2
 
 
 def test_a_mover_seen_only_in_a_mirror_is_in_the_window():
@@ -163,10 +172,8 @@ def test_a_mover_seen_only_in_a_mirror_is_in_the_window():
     whole = world.camera_image(spp=256, seed=1) - bg
     world.update(background)
     change = world.camera_changes([frame], background, spp=256, seed=1)[0]
-    assert change.window is not None
-    inside = np.zeros(bg.shape, dtype=bool)
-    row, col, rows, cols = change.window
-    inside[row:row + rows, col:col + cols] = True
+    assert change.windows
+    inside = change.inside(bg.shape)
     seen = np.abs(whole) > 0.02 * bg.max()
     assert seen.sum() > 10 and not (seen & ~inside).any()
     assert (np.abs(change.change_image(bg.shape)) > 0.02 * bg.max()).sum() > 10
@@ -178,9 +185,9 @@ def test_a_moving_light_changes_the_whole_film_and_nothing_changes_nothing():
     world, background = _world(pixels=32)
     moved = {"light.to_world": Pose(tuple(FAR + [0.1, 0, 1.2]), (0, 0, -1)).matrix()}
     lit = world.camera_changes([moved], {"light.to_world": world.world_value("light.to_world")}, spp=4)[0]
-    assert lit.window == (0, 0, 32, 32)
+    assert lit.windows == ((0, 0, 32, 32),)
     same = world.camera_changes([background], background, spp=4)[0]
-    assert same.window is None and not same.change_image((32, 32)).any()
+    assert same.windows == () and not same.change_image((32, 32)).any()
 
 
 def test_frozen_windows_equal_traced_ones_bit_for_bit():
@@ -193,11 +200,12 @@ def test_frozen_windows_equal_traced_ones_bit_for_bit():
         world, background = _world(pixels=160)
         world.freeze_launches = freeze
         out[freeze] = world.camera_changes(frames, background, spp=8, seed=2, elsewhere_spp=2)
-    shapes = {c.frame.shape for c in out[True]}
+    shapes = {f.shape for c in out[True] for f in c.frame}
     assert len(shapes) >= 2, shapes
     for a, b in zip(out[False], out[True], strict=True):
-        assert a.window == b.window
-        assert np.array_equal(a.frame, b.frame) and np.array_equal(a.background, b.background)
+        assert a.windows == b.windows
+        for name in ("frame", "background"):
+            assert all(np.array_equal(x, y) for x, y in zip(getattr(a, name), getattr(b, name), strict=True))
         assert np.array_equal(a.elsewhere, b.elsewhere)
 
 
@@ -224,9 +232,9 @@ def test_bad_sample_counts_are_refused_by_name(field, value):
 
 
 def test_two_movers_apart_are_both_in_the_window():
-    """Two boxes moved at once to opposite sides of the view: every pixel whose whole-film change (512 samples,
-    paired) passes 2 % of the brightest background pixel lies in the one window, and both boxes' changes are
-    there."""
+    """Two boxes moved at once to opposite sides of the view: each keeps a window of its own (the pixels between
+    them are not rendered), every pixel whose whole-film change (512 samples, paired) passes 2 % of the brightest
+    background pixel lies in one of them, and both boxes' changes are there."""
     world2, background = _world(pixels=48, other=True)
     frame = {**_box_at(-0.15, 0.12), **vertex_update("other", SMALL.vertices + FAR + [0.2, -0.15, 0.0])}
     world2.update(background)
@@ -235,11 +243,10 @@ def test_two_movers_apart_are_both_in_the_window():
     whole = world2.camera_image(spp=512, seed=4) - bg
     world2.update(background)
     change = world2.camera_changes([frame], background, spp=64, seed=4)[0]
-    inside = np.zeros(bg.shape, dtype=bool)
-    row, col, rows, cols = change.window
-    inside[row:row + rows, col:col + cols] = True
+    inside = change.inside(bg.shape)
     seen = np.abs(whole) > 0.02 * bg.max()
     assert not (seen & ~inside).any()
     rows_seen, cols_seen = np.nonzero(seen)
     assert np.ptp(cols_seen) > 10 or np.ptp(rows_seen) > 10, "the two changes must lie apart"
     assert (np.abs(change.change_image(bg.shape)) > 0.02 * bg.max()).sum() > 0.8 * seen.sum()
+    assert len(change.windows) == 2 and inside.mean() < 0.5

@@ -2,15 +2,16 @@
 
 A moving shape changes what a pinhole camera sees directly (its own pixels) and through direct light (its
 shadows). Both lie inside the hull of the shape's box and its shadow volumes from every light
-(:func:`.change_geometry.change_points_each`, the hull the change solvers aim their rays at), in the frame
-and in the background, so their image lies inside the camera's image of those hulls: a perspective projection maps
-a hull in front of the camera onto the hull of its projected corners. :func:`change_window` is that image's
-bounding rectangle, grown to a multiple of :data:`WINDOW_STEP_PX` (so that a handful of window sizes keep their
-frozen recordings); :func:`window_render` renders the camera there only, and a frame and its background rendered
-with the same seed pair up lane by lane, so where the frame changes nothing their pixels are equal bit for bit.
+(:func:`.change_geometry.change_points_each`, the hull the change solvers aim their rays at), in the frame and in
+the background, so their image lies inside the camera's image of those hulls: a perspective projection maps a hull
+in front of the camera onto the hull of its projected corners. :func:`change_windows` bounds each hull's image by
+a rectangle, merges those that overlap and grows them to multiples of :data:`WINDOW_STEP_PX` (so that a handful
+of window sizes keep their frozen recordings); :func:`window_render` renders the camera there only, and a frame
+and its background rendered with the same seed pair up lane by lane, so where the frame changes nothing their
+pixels are equal bit for bit.
 
 What the window leaves out is light that reaches a pixel outside it only by an inter-reflection off the moving
-shape: on the tabletop less than 1 % of the brightest background pixel, under the change truth's 2 % threshold,
+shape: on the tabletop under 1.3 % of the brightest background pixel, below the change truth's 2 % threshold,
 while a full-image difference at 32 samples a pixel crossed that threshold by noise alone (paths that meet the
 mover on a bounce decorrelate from the background's): the window removes those noise pixels.
 """
@@ -63,15 +64,17 @@ class FilmProjection:
         return np.stack([xy[0] * self.width_px, xy[1] * self.height_px], axis=1)
 
 
-def change_window(projection: FilmProjection, hulls: list[np.ndarray | None],
-                  step_px: int = WINDOW_STEP_PX) -> Window | None:
-    """The window of the film that holds the image of every hull in ``hulls`` (corner points [m]; None: a change
-    that reaches anywhere), grown by :data:`WINDOW_MARGIN_PX` and to sides that are multiples of ``step_px``
-    (or the film's side), kept inside the film. None if no hull is seen (nothing in the image can change); the
-    whole film if a hull is unbounded or reaches behind the camera."""
+def change_windows(projection: FilmProjection, hulls: list[np.ndarray | None],
+                   step_px: int = WINDOW_STEP_PX) -> tuple[Window, ...]:
+    """Windows of the film that hold the image of every hull in ``hulls`` (corner points [m]; None: a change that
+    reaches anywhere): each hull's image bounds grown by :data:`WINDOW_MARGIN_PX` and to sides that are multiples
+    of ``step_px`` (or the film's side), kept inside the film, windows that overlap merged into the one holding
+    both (movers apart keep windows of their own, so the pixels between them are not rendered). None of them
+    where no hull is seen (nothing in the image can change); the whole film if a hull is unbounded or reaches
+    behind the camera."""
     width, height = projection.width_px, projection.height_px
-    whole = (0, 0, height, width)
-    lo, hi = np.array([np.inf, np.inf]), np.array([-np.inf, -np.inf])
+    whole = ((0, 0, height, width),)
+    rects = []
     for hull in hulls:
         if hull is None:
             return whole
@@ -81,14 +84,30 @@ def change_window(projection: FilmProjection, hulls: list[np.ndarray | None],
         a = np.maximum(film.min(axis=0) - WINDOW_MARGIN_PX, 0.0)
         b = np.minimum(film.max(axis=0) + WINDOW_MARGIN_PX, [width, height])
         if np.all(b > a):
-            lo, hi = np.minimum(lo, a), np.maximum(hi, b)
-    if not np.all(hi > lo):
-        return None
-    first = np.floor(lo).astype(int)
-    last = np.ceil(hi).astype(int)  # one past the last pixel
-    sides = [min(-(-int(n) // step_px) * step_px, full) for n, full in zip(last - first, (width, height), strict=True)]
-    starts = [min(int(s), full - side) for s, side, full in zip(first, sides, (width, height), strict=True)]
-    return starts[1], starts[0], sides[1], sides[0]
+            rects.append(_stepped(np.floor(a).astype(int), np.ceil(b).astype(int), (width, height), step_px))
+    merged = True
+    while merged:
+        merged = False
+        for i in range(len(rects)):
+            for j in range(i + 1, len(rects)):
+                (a0, a1), (b0, b1) = rects[i], rects[j]
+                if np.all(a0 < b1) and np.all(b0 < a1):  # they overlap: one window holding both
+                    rects[i] = _stepped(np.minimum(a0, b0), np.maximum(a1, b1), (width, height), step_px)
+                    del rects[j]
+                    merged = True
+                    break
+            if merged:
+                break
+    return tuple((int(lo[1]), int(lo[0]), int(hi[1] - lo[1]), int(hi[0] - lo[0])) for lo, hi in sorted(
+        rects, key=lambda r: (int(r[0][1]), int(r[0][0]))))
+
+
+def _stepped(first: np.ndarray, last: np.ndarray, film: tuple[int, int], step_px: int) -> tuple:
+    """(first, one past the last) pixel (x, y) of a rectangle holding ``first`` .. ``last``, its sides grown to
+    multiples of ``step_px`` (or the film's side) and kept inside the film."""
+    sides = np.array([min(-(-int(n) // step_px) * step_px, full) for n, full in zip(last - first, film, strict=True)])
+    starts = np.array([min(int(s), full - side) for s, side, full in zip(first, sides, film, strict=True)])
+    return starts, starts + sides
 
 
 def window_render(scene, sensor_index: int, spp: int, seed, origin, shape: tuple[int, int], buffers: tuple):
