@@ -60,6 +60,17 @@ def _box_at(x_m: float, y_m: float) -> dict:
     return vertex_update("box", BOX.vertices + FAR + [x_m, y_m, 0.0])
 
 
+def _whole_change(world, frame: dict, background: dict, spp: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """The background's whole film and the frame's whole-film change from it (the same seed: paired), the world
+    left at the background."""
+    world.update(background)
+    bg = world.camera_image(spp=spp, seed=seed)
+    world.update(frame)
+    whole = world.camera_image(spp=spp, seed=seed) - bg
+    world.update(background)
+    return bg, whole
+
+
 def test_film_coordinates_of_table_points_follow_the_ground_truth_cameras_closed_form():
     """The camera looking straight down from depth d: a table point (x, y, 0) lies at column x / pitch + W / 2
     and row H / 2 - y / pitch (film coordinates, pixel edges; the ground truth camera's own convention), a point
@@ -137,10 +148,7 @@ def test_the_windowed_change_agrees_with_whole_film_renders():
     bit (same seed lane by lane); the world is left at the background."""
     world, background = _world()
     frame = _box_at(0.05, -0.02)
-    world.update(background)
-    bg = world.camera_image(spp=1024, seed=5)
-    world.update(frame)
-    whole = world.camera_image(spp=1024, seed=5) - bg  # paired: 0 where no path meets the box
+    bg, whole = _whole_change(world, frame, background, 1024, 5)  # paired: 0 where no path meets the box
     change = world.camera_changes([frame], background, spp=1024, seed=7)[0]
     assert world.world_value("box.vertex_positions")[0] == pytest.approx(BOX.vertices[0, 0] + PARKED[0])
     inside = change.inside(bg.shape)
@@ -166,11 +174,7 @@ def test_a_mover_seen_only_in_a_mirror_is_in_the_window():
     pixel its change reaches (256 samples a pixel, whole film), and that change is there."""
     world, background = _world(mirror=True, pixels=48)
     frame = _box_at(0.1, 0.0)
-    world.update(background)
-    bg = world.camera_image(spp=256, seed=1)
-    world.update(frame)
-    whole = world.camera_image(spp=256, seed=1) - bg
-    world.update(background)
+    bg, whole = _whole_change(world, frame, background, 256, 1)
     change = world.camera_changes([frame], background, spp=256, seed=1)[0]
     assert change.windows
     inside = change.inside(bg.shape)
@@ -237,11 +241,7 @@ def test_two_movers_apart_are_both_in_the_window():
     background pixel lies in one of them, and both boxes' changes are there."""
     world2, background = _world(pixels=48, other=True)
     frame = {**_box_at(-0.15, 0.12), **vertex_update("other", SMALL.vertices + FAR + [0.2, -0.15, 0.0])}
-    world2.update(background)
-    bg = world2.camera_image(spp=512, seed=4)
-    world2.update(frame)
-    whole = world2.camera_image(spp=512, seed=4) - bg
-    world2.update(background)
+    bg, whole = _whole_change(world2, frame, background, 512, 4)
     change = world2.camera_changes([frame], background, spp=64, seed=4)[0]
     inside = change.inside(bg.shape)
     seen = np.abs(whole) > 0.02 * bg.max()
