@@ -403,24 +403,22 @@ class Simulation:
         moved = sorted(set().union(*names))
         at_background = dict(zip(moved, self._change_hulls(moved), strict=True))
         windows, frame_pixels, frame_films = [], [], []
-        for i in progress(range(2 * len(frames)), desc="ground truth", disable=not show_progress):
-            if i < len(frames):  # the frames: their windows and films
-                self.update({**background, **frames[i]})
-                hulls = [h for name in names[i] for h in at_background[name]] + self._change_hulls(names[i])
-                windows.append(change_windows(self._film_projection, hulls))
-                frame_pixels.append(self._camera_windows(windows[i], spp, seed))
-                frame_films.append(self.camera_image(elsewhere_spp, seed) if elsewhere_spp else None)
-                continue
-            if i == len(frames):
-                self.update(background)
-                background_film = self.camera_image(elsewhere_spp, seed) if elsewhere_spp else None
-            k = i - len(frames)  # the background's windows
-            elsewhere = None if frame_films[k] is None else outside(frame_films[k] - background_film, windows[k])
-            pixels = self._camera_windows(windows[k], spp, seed)
-            frame_pixels[k] = CameraChange(windows[k], frame_pixels[k], pixels, elsewhere)
-            frame_films[k] = None
+        for frame, changed in zip(progress(frames, desc="ground truth: frames", disable=not show_progress), names,
+                                  strict=True):
+            self.update({**background, **frame})
+            hulls = [h for name in changed for h in at_background[name]] + self._change_hulls(changed)
+            windows.append(change_windows(self._film_projection, hulls))
+            frame_pixels.append(self._camera_windows(windows[-1], spp, seed))
+            frame_films.append(self.camera_image(elsewhere_spp, seed) if elsewhere_spp else None)
         self.update(background)
-        return frame_pixels
+        background_film = self.camera_image(elsewhere_spp, seed) if elsewhere_spp else None
+        changes = []
+        for k in progress(range(len(frames)), desc="ground truth: background", disable=not show_progress):
+            elsewhere = None if background_film is None else outside(frame_films[k] - background_film, windows[k])
+            frame_films[k] = None  # one film a frame held at a time beyond the differences
+            changes.append(CameraChange(windows[k], frame_pixels[k], self._camera_windows(windows[k], spp, seed),
+                                        elsewhere))
+        return changes
 
     def _change_hulls(self, names: list[str]) -> list:
         """Per name, the corner points [m] of the shape's change hull as the world is now and of its mirror
@@ -434,8 +432,8 @@ class Simulation:
     def _camera_windows(self, windows: tuple[Window, ...], spp: int, seed: int) -> tuple[np.ndarray, ...]:
         """The camera's pixels over each of ``windows`` as the world is now."""
         out = []
+        key = self._camera_freeze_key()
         for window in windows:
-            key = self._camera_freeze_key()
             out.append(self.mincam_scene.camera_window(window, spp, seed, freeze=key))
             if key is not None:
                 self._camera_frozen_windows += 1

@@ -18,6 +18,8 @@ mover on a bounce decorrelate from the background's): the window removes those n
 
 from __future__ import annotations
 
+from itertools import combinations
+
 import numpy as np
 
 from mincam_sim.render import backend
@@ -85,19 +87,12 @@ def change_windows(projection: FilmProjection, hulls: list[np.ndarray | None],
         b = np.minimum(film.max(axis=0) + WINDOW_MARGIN_PX, [width, height])
         if np.all(b > a):
             rects.append(_stepped(np.floor(a).astype(int), np.ceil(b).astype(int), (width, height), step_px))
-    merged = True
-    while merged:
-        merged = False
-        for i in range(len(rects)):
-            for j in range(i + 1, len(rects)):
-                (a0, a1), (b0, b1) = rects[i], rects[j]
-                if np.all(a0 < b1) and np.all(b0 < a1):  # they overlap: one window holding both
-                    rects[i] = _stepped(np.minimum(a0, b0), np.maximum(a1, b1), (width, height), step_px)
-                    del rects[j]
-                    merged = True
-                    break
-            if merged:
-                break
+    while overlap := next(((i, j) for i, j in combinations(range(len(rects)), 2)
+                           if np.all(rects[i][0] < rects[j][1]) and np.all(rects[j][0] < rects[i][1])), None):
+        i, j = overlap  # one window holding both
+        rects[i] = _stepped(np.minimum(rects[i][0], rects[j][0]), np.maximum(rects[i][1], rects[j][1]),
+                            (width, height), step_px)
+        del rects[j]
     return tuple((int(lo[1]), int(lo[0]), int(hi[1] - lo[1]), int(hi[0] - lo[0])) for lo, hi in sorted(
         rects, key=lambda r: (int(r[0][1]), int(r[0][0]))))
 
