@@ -53,7 +53,7 @@ from mincam_sim.render.kernels.change_geometry import (
     delta_surfaces,
     emitters_among,
 )
-from mincam_sim.render.kernels.change_region import ApertureRegions, mixel_regions
+from mincam_sim.render.kernels.change_region import ApertureRegions, mixel_regions_each
 from mincam_sim.render.kernels.frozen import keeps_recording, recordings
 from mincam_sim.render.kernels.guided_path import MAX_GUIDES, guide_spheres, spheres_of
 from mincam_sim.render.kernels.map_tracing import FRAME_CHUNK_BYTES, check_radiance
@@ -347,12 +347,13 @@ class Simulation:
                 reasons.append(why)
         if reasons:
             return [ApertureRegions.full(self.mincam)], None, reasons
-        each, half = [], ApertureRegions.empty(self.mincam).detector_half_m
-        for name, p in points.items():
-            own = mixel_regions(self.scene_mincam, p)
-            regions = ApertureRegions(own.base, own.slope, half)
-            for seen in self._mirrors.images(p, exclude=name):
-                regions = regions.union(mixel_regions(self.scene_mincam, seen))
+        seen = [[p, *self._mirrors.images(p, exclude=name)] for name, p in points.items()]
+        flat = iter(mixel_regions_each(self.scene_mincam, [q for sets in seen for q in sets]))
+        each = []
+        for sets in seen:  # each shape's own region, then the union with its images' (in that order)
+            regions = next(flat)
+            for _ in sets[1:]:
+                regions = regions.union(next(flat))
             each.append(regions)
         spheres = guide_spheres(list(points.values()))
         if spheres:  # light reaching the change through a mirror: bounces aimed at the lights' images find it
@@ -406,7 +407,8 @@ class Simulation:
         for frame, changed in zip(progress(frames, desc="ground truth: frames", disable=not show_progress), names,
                                   strict=True):
             self.update({**background, **frame})
-            hulls = [h for name in changed for h in at_background[name]] + self._change_hulls(changed)
+            hulls = [h for per_name in (*(at_background[name] for name in changed), *self._change_hulls(changed))
+                     for h in per_name]
             windows.append(change_windows(self._film_projection, hulls))
             frame_pixels.append(self._camera_windows(windows[-1], spp, seed))
             frame_films.append(self.camera_image(elsewhere_spp, seed) if elsewhere_spp else None)

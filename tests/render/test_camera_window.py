@@ -17,6 +17,7 @@ from mincam_sim.render import backend
 from mincam_sim.render.kernels.camera_window import WINDOW_STEP_PX, FilmProjection, change_windows
 from mincam_sim.render.scene import scene_dicts as sd
 from mincam_sim.render.scene.updates import vertex_update
+from rare_paths import _glass_mesh
 
 pytestmark = pytest.mark.skipif(not backend.is_jit(), reason="needs a JIT variant (LLVM or CUDA)")
 
@@ -28,10 +29,12 @@ SMALL = BOX.copy()
 SMALL.apply_scale(0.8)
 
 
-def _world(mirror: bool = False, pixels: int = 64, spp: int = 8, other: bool = False):
+def _world(mirror: bool = False, pixels: int = 64, spp: int = 8, other: bool = False, glass: bool = False):
     """A textured table under an area light 1.2 m up and a box moved by its vertices; a camera 0.8 m over the
     table, tilted 25 degrees and looking at its centre (``mirror``: a vertical mirror at x = +0.3 m, and the
-    camera turned to see it; ``other``: a second, smaller box, parked 1 m beside the first)."""
+    camera turned to see it; ``other``: a second, smaller box, parked 1 m beside the first; ``glass``: an 8 cm
+    thick upright glass slab between the camera and the table's centre, out of the light's way, and paths of
+    up to 6 segments, so that the camera sees the box through it)."""
     table = np.clip(0.45 + 0.1 * np.random.default_rng(0).standard_normal((32, 32)), 0, 1)
     elements = {
         "table": sd.textured_plane(table, 1.2, 1.2, Pose(tuple(FAR), (0, 0, 1)).matrix()),
@@ -47,9 +50,13 @@ def _world(mirror: bool = False, pixels: int = 64, spp: int = 8, other: bool = F
                               "to_world": backend.mitsuba().ScalarTransform4f(
                                   Pose(tuple(FAR + [0.3, 0.0, 0.15]), (-1, 0, 0), (0, 0, 1)).matrix()
                                   @ np.diag([0.15, 0.3, 1.0, 1.0]))}
+    if glass:
+        slab = trimesh.creation.box((0.08, 0.3, 0.3))
+        slab.apply_translation(FAR + [-0.12, 0.0, 0.3])
+        elements["slab"] = _glass_mesh("slab", slab.vertices, slab.faces)
     camera = sd.pinhole_camera(look_at(eye, target, (0.0, 0.0, 1.0)).matrix(), 50.0, pixels, pixels, spp=spp)
     rig = cross_layout(center=Pose(tuple(FAR + [0.0, 0.0, 0.5]), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)))
-    world = ms.Simulation(rig, world=elements, camera=camera)
+    world = ms.Simulation(rig, world=elements, camera=camera, max_depth=6 if glass else None)
     background = vertex_update("box", BOX.vertices + PARKED)
     if other:
         background.update(vertex_update("other", SMALL.vertices + PARKED + [1, 0, 0]))
@@ -181,6 +188,28 @@ def test_a_mover_seen_only_in_a_mirror_is_in_the_window():
     seen = np.abs(whole) > 0.02 * bg.max()
     assert seen.sum() > 10 and not (seen & ~inside).any()
     assert (np.abs(change.change_image(bg.shape)) > 0.02 * bg.max()).sum() > 10
+
+
+def test_a_mover_seen_through_a_glass_slab_is_in_the_window():
+    """The box seen through a thick glass slab (two refractions shift it sideways): the windows hold the slab's
+    image, and with it every pixel whose whole-film change (512 samples, paired) passes 2 % of the brightest
+    background pixel, some of which lie outside the window of the box's own hull (so the slab is what holds them).
+    A frame's hulls are the mover's and each of its images apart (a glass box beside a mover's hull once broke
+    the window's projection)."""
+    world, background = _world(pixels=48, glass=True)
+    frame = _box_at(0.05, -0.02)
+    bg, whole = _whole_change(world, frame, background, 512, 4)
+    change = world.camera_changes([frame], background, spp=64, seed=4)[0]
+    seen = np.abs(whole) > 0.02 * bg.max()
+    assert seen.sum() > 10 and not (seen & ~change.inside(bg.shape)).any()
+    world.update(frame)
+    own_hull = world._change_hulls(["box"])[0][0]
+    world.update(background)
+    own = np.zeros(bg.shape, dtype=bool)
+    for row, col, rows, cols in change_windows(world._film_projection, [own_hull]):
+        own[row:row + rows, col:col + cols] = True
+    assert (seen & ~own).sum() >= 3
+    assert (np.abs(change.change_image(bg.shape)) > 0.02 * bg.max()).sum() > 0.8 * seen.sum()
 
 
 def test_a_moving_light_changes_the_whole_film_and_nothing_changes_nothing():

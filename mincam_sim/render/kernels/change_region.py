@@ -318,28 +318,42 @@ def mixel_regions(mincam: Mincam, points_m: np.ndarray | None) -> ApertureRegion
     ``None`` means "unbounded" (e.g. an environment light, whose shadows reach everywhere): the whole aperture.
     An empty point set gives empty regions.
     """
+    return mixel_regions_each(mincam, [points_m])[0]
+
+
+def mixel_regions_each(mincam: Mincam, point_sets: Sequence[np.ndarray | None]) -> list[ApertureRegions]:
+    """:func:`mixel_regions` of each point set, every mixel's pose applied once to all of them together (the
+    same numbers as a call per set: each point is mapped on its own, and the bounds are per set minima and
+    maxima)."""
     n = len(mincam)
-    if points_m is None:
-        return ApertureRegions.full(mincam)
-    points_m = np.asarray(points_m, float)
-    if points_m.size == 0:
-        return ApertureRegions.empty(mincam)
-    base = np.empty((n, 4))
-    slope = np.empty((n, 4))
-    for k, mixel in enumerate(mincam):
-        local = mixel.pose.to_local(points_m)
+    sets = [None if p is None else np.asarray(p, float).reshape(-1, 3) for p in point_sets]
+    bounded = [k for k, p in enumerate(sets) if p is not None and len(p)]
+    out = [ApertureRegions.full(mincam) if p is None else ApertureRegions.empty(mincam) for p in sets]
+    if not bounded:
+        return out
+    points = np.concatenate([sets[k] for k in bounded])
+    starts = np.cumsum([0] + [len(sets[k]) for k in bounded[:-1]])
+    base = np.empty((len(bounded), n, 4))
+    slope = np.empty((len(bounded), n, 4))
+    for m, mixel in enumerate(mincam):
+        local = mixel.pose.to_local(points)
         z = local[:, 2]
-        if np.any(z <= mixel.d_f_m * (1 + 1e-9)):  # part of the hull at or behind the mask plane: unbounded
-            base[k], slope[k] = FULL, 0.0
-            continue
-        scale = mixel.d_f_m / z
+        behind = np.logical_or.reduceat(z <= mixel.d_f_m * (1 + 1e-9), starts)  # part of a hull at or behind the
+        with np.errstate(divide="ignore", invalid="ignore"):  # mask plane: that set is unbounded
+            scale = mixel.d_f_m / z
         a = 1.0 - scale
         sx = local[:, 0] * scale / mixel.mask.width_m + 0.5
         sy = local[:, 1] * scale / mixel.mask.height_m + 0.5
-        base[k] = [sx.min(), sy.min(), sx.max(), sy.max()]
-        slope[k] = [a.min() / mixel.mask.width_m, a.max() / mixel.mask.width_m,
-                    a.min() / mixel.mask.height_m, a.max() / mixel.mask.height_m]
-    return ApertureRegions(base, slope, _detector_half(mincam))
+        base[:, m] = np.stack([np.minimum.reduceat(sx, starts), np.minimum.reduceat(sy, starts),
+                               np.maximum.reduceat(sx, starts), np.maximum.reduceat(sy, starts)], axis=1)
+        a_lo, a_hi = np.minimum.reduceat(a, starts), np.maximum.reduceat(a, starts)
+        slope[:, m] = np.stack([a_lo / mixel.mask.width_m, a_hi / mixel.mask.width_m,
+                                a_lo / mixel.mask.height_m, a_hi / mixel.mask.height_m], axis=1)
+        base[behind, m], slope[behind, m] = FULL, 0.0
+    half = _detector_half(mincam)
+    for j, k in enumerate(bounded):
+        out[k] = ApertureRegions(base[j], slope[j], half)
+    return out
 
 
 def _detector_half(mincam: Mincam) -> np.ndarray:
