@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
+from rare_paths import _glass_mesh
 
 import mincam_sim as ms
 from mincam_sim import Pose, cross_layout
@@ -17,7 +18,6 @@ from mincam_sim.render import backend
 from mincam_sim.render.kernels.camera_window import WINDOW_STEP_PX, FilmProjection, change_windows
 from mincam_sim.render.scene import scene_dicts as sd
 from mincam_sim.render.scene.updates import vertex_update
-from rare_paths import _glass_mesh
 
 pytestmark = pytest.mark.skipif(not backend.is_jit(), reason="needs a JIT variant (LLVM or CUDA)")
 
