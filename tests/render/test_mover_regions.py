@@ -18,6 +18,7 @@ import mincam_sim as ms
 from mincam_sim import Pose
 from mincam_sim.model.optics import cross_layout
 from mincam_sim.render import backend
+from mincam_sim.render.kernels import change_region
 from mincam_sim.render.kernels.change_region import (
     ApertureRegions,
     RegionSet,
@@ -123,6 +124,35 @@ def test_overlapping_rectangles_merge_and_the_count_is_capped():
     assert alloc.shape == (n, 2, 2) and np.all(alloc.sum(axis=2) == [600, 100]) and np.all(alloc >= 1)
     with pytest.raises(ValueError, match="max_regions"):
         mover_regions([a], max_regions=0)
+
+
+def test_mixels_whose_rectangles_lie_apart_keep_them_as_the_merging_loop_would(monkeypatch):
+    """The rectangles of every mixel checked at once for lying apart give the same rectangle set, bit for bit, as
+    the pairwise merging loop run on each mixel alone (random rectangles, 64 mixels: apart, overlapping,
+    nested, off the aperture, unbounded, more than ``max_regions``)."""
+    rng = np.random.default_rng(7)
+    n = 64
+    half = rng.uniform(1e-4, 3e-3, n)
+    parts = []
+    for _ in range(10):
+        lo = rng.uniform(-0.2, 1.0, (n, 2))
+        hi = lo + rng.uniform(0.01, 0.3, (n, 2)) * (rng.uniform(size=(n, 1)) < 0.9)  # some empty (hi <= lo)
+        base = np.concatenate([lo, hi], axis=1)
+        base[rng.uniform(size=n) < 0.02] = [-np.inf, -np.inf, np.inf, np.inf]
+        slope = np.sort(rng.uniform(-3.0, 3.0, (n, 2, 2)), axis=2).reshape(n, 4)
+        parts.append(ApertureRegions(base, slope, half))
+    for count, cap in ((3, 8), (6, 8), (10, 8), (10, 4)):
+        fast = mover_regions(parts[:count], max_regions=cap)
+        monkeypatch.setattr(change_region, "_already_apart", lambda base, *a: np.zeros(len(base), dtype=bool))
+        loop = mover_regions(parts[:count], max_regions=cap)
+        monkeypatch.undo()
+        assert np.array_equal(fast.distinct, loop.distinct)
+        assert np.array_equal(fast.base, loop.base) and np.array_equal(fast.slope, loop.slope)
+    six = parts[:6]
+    seen = ~np.stack([p.is_empty() for p in six], axis=1)
+    apart = change_region._already_apart(np.stack([p.base for p in six], axis=1),
+                                         np.stack([p.slope for p in six], axis=1), seen, half, 8)
+    assert 0 < apart.sum() < n  # both ways were taken
 
 
 def test_the_solver_samples_per_mover_rectangles_and_one_mover_keeps_the_nested_strata(monkeypatch):

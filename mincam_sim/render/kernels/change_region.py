@@ -209,21 +209,47 @@ def mover_regions(parts: Sequence[ApertureRegions], max_regions: int = MAX_REGIO
     if int(max_regions) < 1:
         raise ValueError(f"max_regions (rectangles a mixel keeps) must be >= 1, got {max_regions!r}")
     n, half = len(parts[0].base), parts[0].detector_half_m
-    empty = [p.is_empty() for p in parts]
-    kept = []
-    for m in range(n):
-        rects = [(p.base[m], p.slope[m]) for p, e in zip(parts, empty, strict=True) if not e[m]]
-        if any(not np.all(np.isfinite(b)) for b, _ in rects):
-            rects = [(FULL, np.zeros(4))]
-        kept.append(_merged(rects, float(half[m]), int(max_regions)))
-    most = max(len(r) for r in kept)
+    base = np.stack([p.base for p in parts], axis=1)  # (n, parts, 4)
+    slope = np.stack([p.slope for p in parts], axis=1)
+    reach = (np.abs(slope).max(axis=2) * half[:, None])[..., None]  # as ApertureRegions.is_empty, every part at once
+    seen = ~np.any((base[..., :2] - reach > 1.0) | (base[..., 2:] + reach < 0.0) | (base[..., :2] > base[..., 2:]),
+                   axis=2)  # (n, parts)
+    unbounded = np.any(seen & ~np.all(np.isfinite(base), axis=2), axis=1)
+    apart = _already_apart(base, slope, seen, half, int(max_regions)) & ~unbounded
+    counts = np.where(unbounded, 1, seen.sum(axis=1))
+    merged = {}
+    for m in np.flatnonzero(~apart & ~unbounded):
+        merged[m] = _merged([(base[m, k], slope[m, k]) for k in np.flatnonzero(seen[m])], float(half[m]),
+                            int(max_regions))
+        counts[m] = len(merged[m])
+    most = int(counts.max())
     k_max = 1 if most <= 1 else 1 << (most - 1).bit_length()  # 2, 4, 8, ...: few launch shapes (recordings)
-    base = np.tile(np.array([1.0, 1.0, 0.0, 0.0]), (n, k_max, 1))
-    slope = np.zeros((n, k_max, 4))
-    for m, rects in enumerate(kept):
+    out_base = np.tile(np.array([1.0, 1.0, 0.0, 0.0]), (n, k_max, 1))
+    out_slope = np.zeros((n, k_max, 4))
+    rows, cols = np.nonzero(seen & apart[:, None])  # apart: the seen rectangles, in order
+    slots = np.cumsum(seen, axis=1)[rows, cols] - 1
+    out_base[rows, slots], out_slope[rows, slots] = base[rows, cols], slope[rows, cols]
+    out_base[unbounded, 0] = FULL
+    for m, rects in merged.items():
         for k, (b, sl) in enumerate(rects):
-            base[m, k], slope[m, k] = b, sl
-    return RegionSet(base, slope, half, np.array([len(r) for r in kept]))
+            out_base[m, k], out_slope[m, k] = b, sl
+    return RegionSet(out_base, out_slope, half, counts)
+
+
+def _already_apart(base: np.ndarray, slope: np.ndarray, seen: np.ndarray, half_m: np.ndarray,
+                   max_regions: int) -> np.ndarray:
+    """(n,) bool: the mixels whose seen rectangles (``base``, ``slope``: (n, parts, 4); ``seen``: (n, parts)) are
+    bounded, at most ``max_regions`` and pairwise apart (every pair's bounding rectangle covers more than the two:
+    :func:`_merged` keeps them as they are), found for every mixel at once; the others go through :func:`_merged`.
+    Each pair's numbers are those :func:`_merged` computes for it (the same operations, element by element)."""
+    half = half_m[:, None, None]
+    with np.errstate(invalid="ignore"):  # an unbounded rectangle: such a mixel is not apart
+        area = _reach_areas(base, slope, half)  # (n, parts)
+        joined = _joined((base[:, :, None], slope[:, :, None]), (base[:, None, :], slope[:, None, :]))
+        grow = _reach_areas(*joined, half[..., None]) - area[:, :, None] - area[:, None, :]
+    pairs = seen[:, :, None] & seen[:, None, :] & np.triu(np.ones(seen.shape[1:] * 2, dtype=bool), 1)
+    bounded = np.all(np.isfinite(base) | ~seen[:, :, None], axis=(1, 2))
+    return bounded & (seen.sum(axis=1) <= max_regions) & np.all(np.where(pairs, grow > 0.0, True), axis=(1, 2))
 
 
 def _reach_areas(base: np.ndarray, slope: np.ndarray, half_m: float) -> np.ndarray:
