@@ -16,7 +16,9 @@ A job builds no identity of its own: the run's one identity is ``Run``'s.
 World outputs in ``[run] out_dir``: ``measurements.npz`` (``irradiance_w_m2`` / ``stderr_w_m2``: P;
 ``delta_irradiance_w_m2`` / ``delta_stderr_w_m2``: dP; (n_frames, n_mixels) each), ``measurements.csv`` (frame,
 time, each mover's offset and centre, dP and P per mixel with their standard errors), ``dP.png``, and with a
-camera ``camera.npz`` (every frame's image and the background's) plus the change centroid per frame in the CSV.
+camera ``camera.npz`` (every frame's image and the background's, the change centroids, and the key of what made
+them: a rerun of a finished run reads it back when the key is the same) plus the change centroid per frame in the
+CSV.
 """
 
 from __future__ import annotations
@@ -53,10 +55,14 @@ from mincam_sim.render.solvers import (
 )
 from mincam_sim.runs.run import Run
 from mincam_sim.storage.atomic import atomic_path, atomic_save_npz
+from mincam_sim.storage.identity import fingerprint
 
 #: The store and result name of a job in its output directory: ``OUT/measurements/`` (per-frame rows, resume),
 #: ``OUT/measurements.npz`` / ``.csv`` (the finished result).
 RESULT = "measurements"
+#: The ground-truth camera's method (windows, samples, threshold rule): part of the key ``camera.npz`` is kept
+#: under, so images rendered by an earlier method are never shown again as this one's.
+GROUND_TRUTH_METHOD = "2026-12-06: change windows per mover and per delta surface's image; lit-pixel threshold"
 
 
 @dataclass(frozen=True)
@@ -156,7 +162,9 @@ def run_world_config(cfg: WorldConfig, show_progress: bool = False, overwrite: b
         _say_if_reused(run, out, say)
         columns = dict(job.columns)
         if cfg.camera is not None:
-            rows, cols = _ground_truth(job.sim, cfg.camera, job.frames, job.background, out)
+            key = fingerprint({"run": ch.dp.meta["identity_key"], "camera": cfg.camera, "method": GROUND_TRUTH_METHOD})
+            rows, cols = _ground_truth(job.sim, cfg.camera, job.frames, job.background, out,
+                                       None if overwrite else key, key, say)
             columns["change_centroid_row_px"], columns["change_centroid_col_px"] = rows, cols
         ch.frame_columns = columns
         plot_changes(ch, out / "dP.png")
@@ -275,13 +283,45 @@ def _camera_dict(camera: CameraSpec) -> dict:
     return sd.pinhole_camera(pose.matrix(), camera.fov_deg, camera.width_px, camera.height_px, spp=camera.spp)
 
 
-def _ground_truth(sim: Simulation, camera: CameraSpec, frames, background, out: Path):
+def _ground_truth(sim: Simulation, camera: CameraSpec, frames, background, out: Path, reuse_key: str | None = None,
+                  key: str = "", say: Callable[[str], None] | None = None):
     """Images of the background and every frame, and the centroid (row, col) [px] of each frame's change:
     background subtraction, |change| > threshold x the background's brightest pixel that is no light seen
     directly (:func:`~mincam_sim.render.scene.world_checks.light_pixels`: a lamp or a sky in view would set the
     threshold above every change it lights), counted in the window where the frame's movers and their shadows
     can be seen (:meth:`Simulation.camera_changes`: noise elsewhere detected no pixel); the images are whole
-    films with the window's change, both at the camera's samples a pixel."""
+    films with the window's change, both at the camera's samples a pixel.
+
+    ``OUT/camera.npz`` holds them with ``key`` (what determines them: the run's identity, the camera's settings
+    and :data:`GROUND_TRUTH_METHOD`); a file that holds ``reuse_key`` is read back instead of rendering."""
+    path = out / "camera.npz"
+    kept = _kept_ground_truth(path, reuse_key) if reuse_key else None
+    if kept is None:
+        if reuse_key and path.is_file() and say is not None:
+            say(f"mincam-sim: {path} was rendered for other settings (camera, scene or method): rendering it again")
+        kept = _render_ground_truth(sim, camera, frames, background)
+        atomic_save_npz(path, background=kept["background"], frames=kept["frames"],
+                        change_centroid_row_px=kept["rows"], change_centroid_col_px=kept["cols"],
+                        threshold_scale_w_m2_sr=np.float64(kept["scale"]), identity_key=np.array(key))
+    _warn_undefined_centroids(list(kept["frames"]), kept["background"], kept["rows"], camera.threshold,
+                              kept["scale"])
+    return kept["rows"], kept["cols"]
+
+
+def _kept_ground_truth(path: Path, key: str) -> dict | None:
+    """The ground truth in ``path`` if it was written with ``key`` (else None: absent, another key, unreadable)."""
+    try:
+        with np.load(path) as data:
+            if str(data["identity_key"]) != key:
+                return None
+            return {"background": data["background"], "frames": data["frames"],
+                    "rows": data["change_centroid_row_px"], "cols": data["change_centroid_col_px"],
+                    "scale": float(data["threshold_scale_w_m2_sr"])}
+    except (OSError, KeyError, ValueError, EOFError):  # absent, from an earlier version, or damaged: render anew
+        return None
+
+
+def _render_ground_truth(sim: Simulation, camera: CameraSpec, frames, background) -> dict:
     sim.update(background)
     bg = sim.camera_image(camera.spp, seed=0)
     lit = ~light_pixels(sim.scene, sim.camera)
@@ -292,10 +332,8 @@ def _ground_truth(sim: Simulation, camera: CameraSpec, frames, background, out: 
         r, c = np.nonzero(np.abs(change.change_image(bg.shape)) > camera.threshold * scale)
         rows.append(r.mean() if r.size else np.nan)
         cols.append(c.mean() if c.size else np.nan)
-    atomic_save_npz(out / "camera.npz", background=bg, frames=np.array(images))
-    rows, cols = np.array(rows), np.array(cols)
-    _warn_undefined_centroids(images, bg, rows, camera.threshold, scale)
-    return rows, cols
+    return {"background": bg, "frames": np.array(images), "rows": np.array(rows), "cols": np.array(cols),
+            "scale": scale}
 
 
 def _warn_undefined_centroids(images: list, bg: np.ndarray, rows: np.ndarray, threshold: float,

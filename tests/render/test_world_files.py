@@ -122,6 +122,41 @@ def test_rerun_reuses_and_a_changed_xml_or_mesh_is_refused(tmp_path):
         run_world_config(load_world_config(config))
 
 
+def test_a_finished_run_shows_its_camera_again_and_renders_it_only_when_something_changed(tmp_path, monkeypatch):
+    """A rerun of a finished world run reads ``camera.npz`` back (no camera render, the same centroids); other
+    camera settings, ``overwrite``, or a damaged file render it again (the measurements are still reused, the
+    user is told why); the file never answers for settings it was not rendered with."""
+    config = _room_copy(tmp_path)
+    text = config.read_text().replace("spp = 8192", "spp = 1024")
+    config.write_text(text)
+    first = run_world_config(load_world_config(config))
+    renders, said = [], []
+    real = ms.Simulation.camera_changes
+
+    def counted(self, *args, **kwargs):
+        renders.append(kwargs.get("spp"))
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(ms.Simulation, "camera_changes", counted)
+    again = run_world_config(load_world_config(config), say=said.append)
+    assert renders == [] and "without rendering" in said[0]
+    for name in ("change_centroid_row_px", "change_centroid_col_px"):
+        np.testing.assert_array_equal(again.frame_columns[name], first.frame_columns[name])
+    config.write_text(text.replace("spp = 32", "spp = 16"))  # the camera's samples: the run itself is the same
+    other = run_world_config(load_world_config(config), say=said.append)
+    assert renders == [16] and "rendered for other settings" in said[-1]
+    np.testing.assert_array_equal(other.dp.irradiance_w_m2, first.dp.irradiance_w_m2)
+    run_world_config(load_world_config(config))
+    assert renders == [16]
+    run_world_config(load_world_config(config), overwrite=True)
+    assert renders == [16, 16]
+    (tmp_path / "out" / "camera.npz").write_bytes(b"not a npz file")
+    run_world_config(load_world_config(config))
+    assert renders == [16, 16, 16]
+    with np.load(tmp_path / "out" / "camera.npz") as data:
+        assert data["frames"].shape == (13, 96, 96)
+
+
 def _y_up(text: str) -> str:
     """The same room authored y-up: every shape's to_world followed by a turn taking z-up to y-up."""
     return re.sub(r"(<transform name=\"to_world\">)(.*?)(</transform>)",
