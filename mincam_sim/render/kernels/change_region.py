@@ -215,7 +215,10 @@ def mover_regions(parts: Sequence[ApertureRegions], max_regions: int = MAX_REGIO
     seen = ~np.any((base[..., :2] - reach > 1.0) | (base[..., 2:] + reach < 0.0) | (base[..., :2] > base[..., 2:]),
                    axis=2)  # (n, parts)
     unbounded = np.any(seen & ~np.all(np.isfinite(base), axis=2), axis=1)
-    apart = _already_apart(base, slope, seen, half, int(max_regions)) & ~unbounded
+    if seen.sum(axis=1).max() <= 1:  # one rectangle or none a mixel (one mover): nothing to merge
+        apart = ~unbounded
+    else:
+        apart = _already_apart(base, slope, seen, half, int(max_regions)) & ~unbounded
     counts = np.where(unbounded, 1, seen.sum(axis=1))
     merged = {}
     for m in np.flatnonzero(~apart & ~unbounded):
@@ -354,32 +357,33 @@ def mixel_regions_each(mincam: Mincam, point_sets: Sequence[np.ndarray | None]) 
     n = len(mincam)
     sets = [None if p is None else np.asarray(p, float).reshape(-1, 3) for p in point_sets]
     bounded = [k for k, p in enumerate(sets) if p is not None and len(p)]
-    out = [ApertureRegions.full(mincam) if p is None else ApertureRegions.empty(mincam) for p in sets]
-    if not bounded:
-        return out
-    points = np.concatenate([sets[k] for k in bounded])
-    starts = np.cumsum([0] + [len(sets[k]) for k in bounded[:-1]])
-    base = np.empty((len(bounded), n, 4))
-    slope = np.empty((len(bounded), n, 4))
-    for m, mixel in enumerate(mincam):
-        local = mixel.pose.to_local(points)
-        z = local[:, 2]
-        behind = np.logical_or.reduceat(z <= mixel.d_f_m * (1 + 1e-9), starts)  # part of a hull at or behind the
-        with np.errstate(divide="ignore", invalid="ignore"):  # mask plane: that set is unbounded
-            scale = mixel.d_f_m / z
-        a = 1.0 - scale
-        sx = local[:, 0] * scale / mixel.mask.width_m + 0.5
-        sy = local[:, 1] * scale / mixel.mask.height_m + 0.5
-        base[:, m] = np.stack([np.minimum.reduceat(sx, starts), np.minimum.reduceat(sy, starts),
-                               np.maximum.reduceat(sx, starts), np.maximum.reduceat(sy, starts)], axis=1)
-        a_lo, a_hi = np.minimum.reduceat(a, starts), np.maximum.reduceat(a, starts)
-        slope[:, m] = np.stack([a_lo / mixel.mask.width_m, a_hi / mixel.mask.width_m,
-                                a_lo / mixel.mask.height_m, a_hi / mixel.mask.height_m], axis=1)
-        base[behind, m], slope[behind, m] = FULL, 0.0
-    half = _detector_half(mincam)
-    for j, k in enumerate(bounded):
-        out[k] = ApertureRegions(base[j], slope[j], half)
-    return out
+    out: list = [None] * len(sets)
+    if bounded:
+        points = sets[bounded[0]] if len(bounded) == 1 else np.concatenate([sets[k] for k in bounded])
+        starts = np.cumsum([0] + [len(sets[k]) for k in bounded[:-1]])
+        base = np.empty((n, 4, len(bounded)))
+        slope = np.empty((n, 4, len(bounded)))
+        for m, mixel in enumerate(mincam):
+            local = mixel.pose.to_local(points)
+            z = local[:, 2]
+            near = z <= mixel.d_f_m * (1 + 1e-9)  # at or behind the mask plane: that point's set is unbounded
+            scale = mixel.d_f_m / np.where(near, 1.0, z)
+            a = 1.0 - scale
+            sx = local[:, 0] * scale / mixel.mask.width_m + 0.5
+            sy = local[:, 1] * scale / mixel.mask.height_m + 0.5
+            for j, (values, reduce) in enumerate(((sx, np.minimum), (sy, np.minimum), (sx, np.maximum),
+                                                  (sy, np.maximum))):
+                base[m, j] = reduce.reduceat(values, starts)
+            a_lo, a_hi = np.minimum.reduceat(a, starts), np.maximum.reduceat(a, starts)
+            slope[m] = [a_lo / mixel.mask.width_m, a_hi / mixel.mask.width_m,
+                        a_lo / mixel.mask.height_m, a_hi / mixel.mask.height_m]
+            behind = np.logical_or.reduceat(near, starts)
+            base[m, :, behind], slope[m, :, behind] = FULL, 0.0
+        half = _detector_half(mincam)
+        for j, k in enumerate(bounded):
+            out[k] = ApertureRegions(base[:, :, j], slope[:, :, j], half)
+    return [ApertureRegions.full(mincam) if p is None else ApertureRegions.empty(mincam) if r is None else r
+            for p, r in zip(sets, out, strict=True)]
 
 
 def _detector_half(mincam: Mincam) -> np.ndarray:
