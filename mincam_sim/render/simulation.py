@@ -52,6 +52,7 @@ from mincam_sim.render.kernels.change_geometry import (
     delta_light_spheres,
     delta_surfaces,
     emitters_among,
+    redirects_light,
 )
 from mincam_sim.render.kernels.change_region import ApertureRegions, mixel_regions_each
 from mincam_sim.render.kernels.frozen import keeps_recording, recordings
@@ -382,7 +383,7 @@ class Simulation:
         background over the windows of its film where the two can differ by direct sight or direct light: the
         images of the frame's changed shapes' boxes and shadow volumes, in the frame and in the background
         (``kernels.camera_window.change_windows``: a window per mover unless they overlap; the whole film where a
-        change is unbounded), both rendered there with ``spp`` samples a pixel and the same ``seed``, lane by lane
+        change is unbounded: a moving light or environment light, a moving mirror or glass shape), both rendered there with ``spp`` samples a pixel and the same ``seed``, lane by lane
         (:class:`~mincam_sim.render.camera_change.CameraChange`).
 
         A change that reaches a pixel outside the windows only by an inter-reflection is not in them; with
@@ -424,11 +425,15 @@ class Simulation:
 
     def _change_hulls(self, names: list[str]) -> list:
         """Per name, the corner points [m] of the shape's change hull as the world is now and of its mirror
-        images ([None] where the change is unbounded)."""
+        images ([None] where the change is unbounded: a moving light, an environment light, or a moving mirror or
+        glass, whose reflected and refracted light lands beyond its shadow)."""
         out = []
         for name, (points, _) in zip(names, change_points_each(self.scene, [[n] for n in names], self._mirrors),
                                      strict=True):
-            out.append([None] if points is None else [points, *self._mirrors.images(points, exclude=name)])
+            if points is None or redirects_light(self.shapes_by_id[name]):
+                out.append([None])
+            else:
+                out.append([points, *self._mirrors.images(points, exclude=name)])
         return out
 
     def _camera_windows(self, windows: tuple[Window, ...], spp: int, seed: int) -> tuple[np.ndarray, ...]:

@@ -16,6 +16,7 @@ from mincam_sim.experiments.setup import Setup
 from mincam_sim.model.geometry import look_at
 from mincam_sim.render import backend
 from mincam_sim.render.kernels.camera_window import WINDOW_STEP_PX, FilmProjection, change_windows
+from mincam_sim.render.kernels.change_geometry import change_points_of
 from mincam_sim.render.scene import scene_dicts as sd
 from mincam_sim.render.scene.updates import vertex_update
 
@@ -210,6 +211,37 @@ def test_a_mover_seen_through_a_glass_slab_is_in_the_window():
         own[row:row + rows, col:col + cols] = True
     assert (seen & ~own).sum() >= 3
     assert (np.abs(change.change_image(bg.shape)) > 0.02 * bg.max()).sum() > 0.8 * seen.sum()
+
+
+def test_a_moving_glass_block_changes_the_whole_film():
+    """A glass block moved onto the table throws light beside its shadow (refracted and reflected lamp light):
+    the paired whole-film change (512 samples) outside the window of its box and shadow volumes adds up to more than
+    half the brightest background pixel, all of it brighter (light, not noise), at each of two seeds; so a moving
+    mirror or glass shape gets the whole film."""
+    table = np.clip(0.45 + 0.1 * np.random.default_rng(0).standard_normal((32, 32)), 0, 1)
+    block = trimesh.creation.box((0.08, 0.06, 0.06))
+    block.apply_translation((0.0, 0.0, 0.03))
+    elements = {
+        "table": sd.textured_plane(table, 1.2, 1.2, Pose(tuple(FAR), (0, 0, 1)).matrix()),
+        "light": sd.area_light(0.2, 0.2, Pose(tuple(FAR + [0.15, 0, 1.2]), (0, 0, -1)).matrix(), 40.0),
+        "glass": _glass_mesh("glass", block.vertices + PARKED, block.faces),
+    }
+    camera = sd.pinhole_camera(look_at(FAR + [-0.37, 0.0, 0.8], FAR, (0.0, 0.0, 1.0)).matrix(), 50.0, 64, 64, spp=8)
+    rig = cross_layout(center=Pose(tuple(FAR + [0.0, 0.0, 0.5]), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)))
+    world = ms.Simulation(rig, world=elements, camera=camera, max_depth=6)
+    background = vertex_update("glass", block.vertices + PARKED)
+    frame = vertex_update("glass", block.vertices + FAR + [0.02, 0.01, 0.0])
+    assert world.camera_changes([frame], background, spp=4)[0].windows == ((0, 0, 64, 64),)
+    world.update(frame)
+    hull = change_points_of(world.scene, ["glass"])[0]
+    world.update(background)
+    near = np.zeros((64, 64), dtype=bool)
+    for row, col, rows, cols in change_windows(FilmProjection(world.camera), [hull]):
+        near[row:row + rows, col:col + cols] = True
+    for seed in (1, 2):
+        bg, whole = _whole_change(world, frame, background, 512, seed)
+        beyond = whole[~near]
+        assert beyond.sum() > 0.5 * bg.max() and beyond.sum() >= 0.99 * np.abs(beyond).sum()
 
 
 def test_a_moving_light_changes_the_whole_film_and_nothing_changes_nothing():

@@ -204,6 +204,15 @@ def merge_parked(boxes: list, keep_clear: tuple[np.ndarray, np.ndarray] | None) 
     return [b for b in boxes if not outside(*b)] + [merged]
 
 
+def redirects_light(shape) -> bool:
+    """True if ``shape`` has a specular (delta) BSDF, a mirror or glass: moved, it reflects or refracts the lights'
+    light onto places no box or shadow volume of it bounds (a glass block throws a caustic beside its shadow)."""
+    mi = backend.mitsuba()
+    bsdf = shape.bsdf()
+    specular = int(mi.BSDFFlags.DeltaReflection) | int(mi.BSDFFlags.DeltaTransmission)
+    return bsdf is not None and bool(int(bsdf.flags()) & specular)
+
+
 def emitters_among(scene, names) -> bool:
     """True if one of the named shapes emits light (its sampling tables are rebuilt when it moves, at
     addresses a frozen launch cannot see: such runs are traced unfrozen)."""
