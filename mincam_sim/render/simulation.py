@@ -383,7 +383,8 @@ class Simulation:
         background over the windows of its film where the two can differ by direct sight or direct light: the
         images of the frame's changed shapes' boxes and shadow volumes, in the frame and in the background
         (``kernels.camera_window.change_windows``: a window per mover unless they overlap; the whole film where a
-        change is unbounded: a moving light or environment light, a moving mirror or glass shape), both rendered there with ``spp`` samples a pixel and the same ``seed``, lane by lane
+        change is unbounded: a moving light or environment light, a moving mirror or glass shape), both rendered
+        there with ``spp`` samples a pixel and the same ``seed``, lane by lane
         (:class:`~mincam_sim.render.camera_change.CameraChange`).
 
         A change that reaches a pixel outside the windows only by an inter-reflection is not in them; with

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import os
 import warnings
+import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -317,7 +318,7 @@ def _kept_ground_truth(path: Path, key: str) -> dict | None:
             return {"background": data["background"], "frames": data["frames"],
                     "rows": data["change_centroid_row_px"], "cols": data["change_centroid_col_px"],
                     "scale": float(data["threshold_scale_w_m2_sr"])}
-    except (OSError, KeyError, ValueError, EOFError):  # absent, from an earlier version, or damaged: render anew
+    except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile):  # absent, older, damaged: render anew
         return None
 
 
