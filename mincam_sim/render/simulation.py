@@ -191,6 +191,7 @@ class Simulation:
         self._as_built: dict[str, object] = {}  # each updated parameter's value (world coordinates) before updates
         self._camera_frozen_images, self._camera_traced = 0, False  # camera renders replayed, or traced from now
         self._camera_frozen_windows, self._film_projection = 0, None  # camera windows replayed; their projection
+        self._redirecting: dict[str, bool] = {}  # shape name -> moved, does it redirect light (mirror, glass)
         self._last_set: dict[str, np.ndarray] = {}  # the last numpy value each parameter was set to
         self.revisions: dict[str, int] = {}  # how often each parameter was changed (who replays a scene checks it)
         self._traversals: dict = {}  # mi.traverse of the objects buffers_key reads (read afresh every call)
@@ -431,11 +432,18 @@ class Simulation:
         out = []
         for name, (points, _) in zip(names, change_points_each(self.scene, [[n] for n in names], self._mirrors),
                                      strict=True):
-            if points is None or redirects_light(self.shapes_by_id[name]):
+            if points is None or self._redirects_light(name):
                 out.append([None])
             else:
                 out.append([points, *self._mirrors.images(points, exclude=name)])
         return out
+
+    def _redirects_light(self, name: str) -> bool:
+        """:func:`~.kernels.change_geometry.redirects_light` of the named shape, read once (BSDF kinds do not
+        change with updates)."""
+        if name not in self._redirecting:
+            self._redirecting[name] = redirects_light(self.scene, self.shapes_by_id[name])
+        return self._redirecting[name]
 
     def _camera_windows(self, windows: tuple[Window, ...], spp: int, seed: int) -> tuple[np.ndarray, ...]:
         """The camera's pixels over each of ``windows`` as the world is now."""

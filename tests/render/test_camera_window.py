@@ -244,6 +244,35 @@ def test_a_moving_glass_block_changes_the_whole_film():
         assert beyond.sum() > 0.5 * bg.max() and beyond.sum() >= 0.99 * np.abs(beyond).sum()
 
 
+@pytest.mark.parametrize("glass", [True, False])
+def test_a_moving_instance_of_glass_changes_the_whole_film_and_one_of_a_diffuse_group_its_window(glass):
+    """An ``instance`` has no BSDF of its own (Mitsuba gives it a diffuse one): moved, an instance of a glass block
+    gets the whole film as the block itself would, an instance of a diffuse block the window of its box."""
+    def block(kind):
+        return {"type": "cube", "to_world": sd._transform(np.diag([0.04, 0.03, 0.03, 1.0])),
+                "bsdf": {"type": kind} if kind == "dielectric" else {"type": "diffuse"}}
+
+    group = {"type": "shapegroup", "part": block("dielectric" if glass else "diffuse")}
+    placed = np.eye(4)
+    placed[:3, 3] = PARKED + [0.0, 0.0, 0.03]
+    moved = np.eye(4)
+    moved[:3, 3] = FAR + [0.02, 0.01, 0.03]
+    table = np.full((8, 8), 0.5)
+    elements = {
+        "table": sd.textured_plane(table, 1.2, 1.2, Pose(tuple(FAR), (0, 0, 1)).matrix()),
+        "light": sd.area_light(0.2, 0.2, Pose(tuple(FAR + [0.15, 0, 1.2]), (0, 0, -1)).matrix(), 40.0),
+        "group": group,
+        "block": {"type": "instance", "group": {"type": "ref", "id": "group"}, "to_world": sd._transform(placed)},
+    }
+    camera = sd.pinhole_camera(look_at(FAR + [-0.37, 0.0, 0.8], FAR, (0.0, 0.0, 1.0)).matrix(), 50.0, 64, 64, spp=8)
+    rig = cross_layout(center=Pose(tuple(FAR + [0.0, 0.0, 0.5]), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)))
+    world = ms.Simulation(rig, world=elements, camera=camera, max_depth=6)
+    frame = {"block.to_world": moved}
+    change = world.camera_changes([frame], {"block.to_world": placed}, spp=4)[0]
+    assert (change.windows == ((0, 0, 64, 64),)) == glass
+    assert change.windows and change.inside((64, 64)).mean() > (0.99 if glass else 0.0)
+
+
 def test_a_moving_light_changes_the_whole_film_and_nothing_changes_nothing():
     """A light moved by a frame can change any pixel: the window is the whole film. A frame that leaves the
     box parked changes nothing: no window, a change of 0."""

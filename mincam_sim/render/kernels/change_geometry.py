@@ -204,13 +204,37 @@ def merge_parked(boxes: list, keep_clear: tuple[np.ndarray, np.ndarray] | None) 
     return [b for b in boxes if not outside(*b)] + [merged]
 
 
-def redirects_light(shape) -> bool:
+def redirects_light(scene, shape) -> bool:
     """True if ``shape`` has a specular (delta) BSDF, a mirror or glass: moved, it reflects or refracts the lights'
-    light onto places no box or shadow volume of it bounds (a glass block throws a caustic beside its shadow)."""
+    light onto places no box or shadow volume of it bounds (a glass block throws a caustic beside its shadow).
+
+    An ``instance`` carries no BSDF of its own (Mitsuba gives it a default diffuse one) and cannot be intersected
+    alone: the BSDFs of the shapes it draws are read where :data:`INSTANCE_PROBE_RAYS` rays cast through the scene
+    at its box, from a sphere around it, meet it (a part no probe meets is hidden inside the others)."""
     mi = backend.mitsuba()
-    bsdf = shape.bsdf()
     specular = int(mi.BSDFFlags.DeltaReflection) | int(mi.BSDFFlags.DeltaTransmission)
-    return bsdf is not None and bool(int(bsdf.flags()) & specular)
+    if shape.class_name() != "Instance":
+        bsdf = shape.bsdf()
+        return bsdf is not None and bool(int(bsdf.flags()) & specular)
+    import drjit as dr
+
+    box = shape.bbox()
+    lo, hi = np.array(box.min, dtype=float), np.array(box.max, dtype=float)
+    rng = np.random.default_rng(0)
+    towards = rng.uniform(lo, hi, (INSTANCE_PROBE_RAYS, 3))
+    away = rng.standard_normal((INSTANCE_PROBE_RAYS, 3))
+    away /= np.linalg.norm(away, axis=1)[:, None]
+    origins = 0.5 * (lo + hi) + away * (0.51 * np.linalg.norm(hi - lo) + 1e-4)
+    ray = mi.Ray3f(mi.Point3f(*(mi.Float(v) for v in origins.T)),
+                   mi.Vector3f(*(mi.Float(v) for v in (towards - origins).T)))
+    ray.d = dr.normalize(ray.d)
+    si = scene.ray_intersect(ray)
+    met = si.is_valid() & (si.instance == mi.ShapePtr(shape))
+    flags = mi.UInt32(si.bsdf().flags())
+    return bool(dr.any(met & ((flags & specular) != 0)))
+
+
+INSTANCE_PROBE_RAYS = 1024
 
 
 def emitters_among(scene, names) -> bool:
