@@ -53,6 +53,7 @@ from mincam_sim.render.kernels.change_geometry import (
     light_bounds,
     merge_parked,
     moving_shapes,
+    redirects_light,
     static_box,
     watch_box,
 )
@@ -443,16 +444,14 @@ class _Run:
         the light it refracts or reflects onto the rest of the scene is then found only by delta bounces drawn
         as the BSDF draws them, and a run that draws none of those rare heavy paths reports too small a sigma
         (on a glass block in view, ~10x in one run of 32), which no diagnostic inside one run can see."""
-        mi = backend.mitsuba()
         shapes = self.r.shapes_by_id
         for name in sorted(moving):
-            bsdf = shapes[name].bsdf() if name in shapes else None
-            if bsdf is not None and int(bsdf.flags()) & int(mi.BSDFFlags.Delta) and not self.guides_through(name):
+            if name in shapes and redirects_light(self.r.scene, shapes[name]) and not self.guides_through(name):
                 self.fallbacks[f"delta:{name}"] = (
-                    f"'{name}' is glass or a mirror and moves, and is curved, a mirror or not guided: the light it "
-                    "refracts or reflects onto the scene is found only by delta bounces not aimed at it, so one "
-                    "run's sigma can be too small when it draws none of those rare paths; raise the replicates or "
-                    "compare a few seeds")
+                    f"'{name}' is glass or a mirror (or an instance of one) and moves, and is curved, a mirror, an "
+                    "instance or not guided: the light it refracts or reflects onto the scene is found only by delta "
+                    "bounces not aimed at it, so one run's sigma can be too small when it draws none of those rare "
+                    "paths; raise the replicates or compare a few seeds")
 
     def guides_through(self, name: str) -> bool:
         """True if the bounces of this run are guided through the moving delta shape ``name``."""
