@@ -69,7 +69,8 @@ def _user_files() -> tuple[str, str]:
 
 
 def rare_scene(case: str):
-    """(world, frames, background) for ``case`` in {"far_movers", "mirror", "glass", "emitter", "textured"}."""
+    """(world, frames, background) for ``case`` in {"far_movers", "mirror", "glass", "glass_instance", "emitter",
+    "textured"}."""
     cam = cross_layout(center=Pose((0.0, 0.0, HEIGHT_M), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)))
     elements = {
         "table": {"type": "rectangle", "to_world": sd._transform(np.diag([0.8, 0.8, 1.0, 1.0])),
@@ -97,6 +98,16 @@ def rare_scene(case: str):
         # through delta bounces, which are never guided
         places = {"lens": (0.05, 0.03, 0.0)}
         sizes = {"lens": (0.04, 0.04, 0.03)}
+    elif case == "glass_instance":
+        # the same block as an instance of a shape group, moved by its to_world
+        v, f = _box((0.04, 0.04, 0.03), (0.0, 0.0, 0.0))
+        elements["group"] = {"type": "shapegroup", "block": _glass_mesh("block", v, f)}
+        parked, placed = np.eye(4), np.eye(4)
+        parked[:3, 3], placed[:3, 3] = PARK_M, (0.05, 0.03, 0.0)
+        elements["lens"] = {"type": "instance", "group": {"type": "ref", "id": "group"},
+                            "to_world": sd._transform(parked)}
+        world = ms.Simulation(cam, world=elements, max_depth=3)
+        return world, [{"lens.to_world": placed}], {"lens.to_world": parked}
     elif case == "emitter":
         # a 2 cm glowing ball carried through the view at 5 cm height: seen directly, and lighting the table
         elements["glow"] = {"type": "sphere", "to_world": sd._transform(_ball(PARK_M)),

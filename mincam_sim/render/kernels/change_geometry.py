@@ -99,19 +99,17 @@ def light_boxes(scene) -> list[tuple[np.ndarray, np.ndarray]]:
 def delta_light_point_sets(scene, moving) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """Where a bounce meets a light through a moving delta shape (glass, a mirror): the lights' corners (a slab
     with parallel faces shifts a ray but keeps its direction, so light refracted through it comes from the lights'
-    directions), and their images in each face plane of the moving delta meshes (light the faces reflect,
-    Fresnel's share for glass), one point set per light and per light and plane; ([], []) when no moving shape
-    has a delta BSDF."""
-    mi = backend.mitsuba()
-    delta = [s for s in scene.shapes() if s.id() in moving and s.bsdf() is not None
-             and int(s.bsdf().flags()) & int(mi.BSDFFlags.Delta) and not s.is_emitter()]
+    directions), and their images in each face plane of the moving delta meshes, an instance's included
+    (:func:`delta_face_planes`: light the faces reflect, Fresnel's share for glass), one point set per light and
+    per light and plane; ([], []) when no moving shape has a delta BSDF."""
+    delta = [planes for s in scene.shapes() if s.id() in moving and not s.is_emitter()
+             for planes in delta_face_planes(scene, s)]
     boxes = light_boxes(scene) if delta else []
     if not boxes:
         return [], []
     lights = [box_corners(lo, hi) for lo, hi in boxes]
     images = []
-    for shape in delta:
-        planes = face_planes(shape)
+    for planes in delta:
         if len(planes) > MAX_FACE_PLANES:
             continue
         for n, c in planes:
@@ -205,36 +203,69 @@ def merge_parked(boxes: list, keep_clear: tuple[np.ndarray, np.ndarray] | None) 
 
 
 def redirects_light(scene, shape) -> bool:
-    """True if ``shape`` has a specular (delta) BSDF, a mirror or glass: moved, it reflects or refracts the lights'
-    light onto places no box or shadow volume of it bounds (a glass block throws a caustic beside its shadow).
-
-    An ``instance`` carries no BSDF of its own (Mitsuba gives it a default diffuse one) and cannot be intersected
-    alone: the BSDFs of the shapes it draws are read where :data:`INSTANCE_PROBE_RAYS` rays cast through the scene
-    at its box, from a sphere around it, meet it (a part no probe meets is hidden inside the others)."""
+    """True if ``shape`` has a specular (delta) BSDF, a mirror or glass (for an ``instance``: one of the shapes it
+    draws, :func:`drawn_parts`): moved, it reflects or refracts the lights' light onto places no box or shadow
+    volume of it bounds (a glass block throws a caustic beside its shadow)."""
     mi = backend.mitsuba()
     specular = int(mi.BSDFFlags.DeltaReflection) | int(mi.BSDFFlags.DeltaTransmission)
+    return any(part.bsdf() is not None and int(part.bsdf().flags()) & specular for part in drawn_parts(scene, shape))
+
+
+INSTANCE_PROBE_RAYS = 1024
+
+
+def drawn_parts(scene, shape) -> list:
+    """The shapes that make ``shape``'s surface: the shape itself, or for an ``instance`` the shapes of the group it
+    draws. An instance holds no link to its group that Python can read (and Mitsuba gives it a diffuse BSDF of its
+    own): its group is the one whose shapes :data:`INSTANCE_PROBE_RAYS` rays, cast through the scene at its box
+    from a sphere around it, meet through it ([] if none is met)."""
     if shape.class_name() != "Instance":
-        bsdf = shape.bsdf()
-        return bsdf is not None and bool(int(bsdf.flags()) & specular)
+        return [shape]
+    mi = backend.mitsuba()
     import drjit as dr
 
     box = shape.bbox()
-    lo, hi = np.array(box.min, dtype=float), np.array(box.max, dtype=float)
+    lo, hi = np.array(box.min, dtype=float).ravel(), np.array(box.max, dtype=float).ravel()
     rng = np.random.default_rng(0)
     towards = rng.uniform(lo, hi, (INSTANCE_PROBE_RAYS, 3))
     away = rng.standard_normal((INSTANCE_PROBE_RAYS, 3))
     away /= np.linalg.norm(away, axis=1)[:, None]
     origins = 0.5 * (lo + hi) + away * (0.51 * np.linalg.norm(hi - lo) + 1e-4)
     ray = mi.Ray3f(mi.Point3f(*(mi.Float(v) for v in origins.T)),
-                   mi.Vector3f(*(mi.Float(v) for v in (towards - origins).T)))
-    ray.d = dr.normalize(ray.d)
+                   dr.normalize(mi.Vector3f(*(mi.Float(v) for v in (towards - origins).T))))
     si = scene.ray_intersect(ray)
     met = si.is_valid() & (si.instance == mi.ShapePtr(shape))
-    flags = mi.UInt32(si.bsdf().flags())
-    return bool(dr.any(met & ((flags & specular) != 0)))
+    hierarchy = mi.traverse(scene).hierarchy
+    groups = [obj for obj, (parent, _) in hierarchy.items()
+              if parent is scene and isinstance(obj, mi.Shape) and obj.class_name() == "ShapeGroupPlugin"]
+    for group in groups:
+        parts = [obj for obj, (parent, _) in hierarchy.items() if parent is group and isinstance(obj, mi.Shape)]
+        if any(dr.any(met & (si.shape == mi.ShapePtr(part))) for part in parts):
+            return parts
+    return []
 
 
-INSTANCE_PROBE_RAYS = 1024
+def delta_face_planes(scene, shape) -> list[list[tuple[np.ndarray, float]]]:
+    """For each shape with a delta BSDF (mirror, glass, null) that makes ``shape``'s surface (:func:`drawn_parts`),
+    its distinct face planes in scene coordinates (:func:`face_planes`; an instance's group's planes under the
+    instance's ``to_world``; [] for a shape that is not a mesh)."""
+    mi = backend.mitsuba()
+    parts = [part for part in drawn_parts(scene, shape)
+             if part.bsdf() is not None and int(part.bsdf().flags()) & int(mi.BSDFFlags.Delta)]
+    if shape.class_name() != "Instance":
+        return [face_planes(part) for part in parts]
+    matrix = np.array(mi.traverse(shape)["to_world"].matrix, dtype=float).reshape(4, 4)
+    turn = np.linalg.inv(matrix[:3, :3]).T  # normals go with the inverse transpose
+    out = []
+    for part in parts:
+        planes = []
+        for normal, offset in face_planes(part):
+            n = turn @ normal
+            n /= np.linalg.norm(n)
+            n *= -1.0 if n[np.abs(n).argmax()] < 0 else 1.0  # one sign per plane, as face_planes
+            planes.append((n, float(n @ (matrix[:3, :3] @ (normal * offset) + matrix[:3, 3]))))
+        out.append(planes)
+    return out
 
 
 def emitters_among(scene, names) -> bool:

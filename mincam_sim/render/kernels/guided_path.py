@@ -212,12 +212,20 @@ def guided_radiance_watched(scene, sampler, ray, max_depth: int, guide, boxes, s
 
 def has_glass(scene) -> bool:
     """True if a shape of ``scene`` (or of both parts of a :class:`.split_scene.SplitScene`) has a BSDF with a
-    delta reflection and a delta transmission (smooth glass: ``dielectric``, ``thindielectric``)."""
+    delta reflection and a delta transmission (smooth glass: ``dielectric``, ``thindielectric``); the shapes that
+    instances draw count too (an instance has a diffuse BSDF of its own: its group's are read from the scene's
+    objects)."""
     mi = backend.mitsuba()
     parts = [scene.static, scene.movers] if hasattr(scene, "movers") else [scene]
     both = int(mi.BSDFFlags.DeltaReflection) | int(mi.BSDFFlags.DeltaTransmission)
-    return any(s.bsdf() is not None and int(s.bsdf().flags()) & both == both
-               for part in parts for s in part.shapes())
+
+    def glass(bsdf) -> bool:
+        return bsdf is not None and int(bsdf.flags()) & both == both
+
+    if any(glass(s.bsdf()) for part in parts for s in part.shapes()):
+        return True
+    return any(isinstance(obj, mi.BSDF) and glass(obj) for part in parts
+               if any(s.class_name() == "Instance" for s in part.shapes()) for obj in mi.traverse(part).hierarchy)
 
 
 def _even_fresnel(mi, dr, ctx, si, bsdf, choice, u, sample, weight, active):

@@ -48,8 +48,9 @@ from mincam_sim.render import backend
 from mincam_sim.render.kernels.change_geometry import (
     MAX_FACE_PLANES,
     changed_shapes,
+    delta_face_planes,
+    drawn_parts,
     emitters_among,
-    face_planes,
     light_bounds,
     merge_parked,
     moving_shapes,
@@ -627,17 +628,22 @@ class _StratifiedRun(_Run):
         return count
 
     def guides_through(self, name: str) -> bool:
-        """A moving glass or mirror mesh with at most ``MAX_FACE_PLANES`` face planes (a block, a slab, a prism),
-        with bounces guided: they are aimed at the lights and at the lights' images in its faces, and smooth glass
-        draws reflection and refraction with even odds (``mincam_sim.render.kernels.guided_path``), so the light
-        it throws is found in every run. Curved glass and moving mirrors are not (only the lights guide there).
+        """A moving glass or mirror mesh with at most ``MAX_FACE_PLANES`` face planes (a block, a slab, a prism; or
+        an instance of a group of such meshes: its planes under the instance's ``to_world``), with bounces guided:
+        they are aimed at the lights and at the lights' images in its faces, and smooth glass draws reflection and
+        refraction with even odds (``mincam_sim.render.kernels.guided_path``), so the light it throws is found in
+        every run. Curved glass and moving mirrors are not (only the lights guide there).
         """
         mi = backend.mitsuba()
         shape = self.shapes.get(name)
-        if not self.can_guide or shape is None or shape.bsdf() is None:
+        if not self.can_guide or shape is None:
             return False
         glass = int(mi.BSDFFlags.DeltaReflection) | int(mi.BSDFFlags.DeltaTransmission)
-        return int(shape.bsdf().flags()) & glass == glass and 0 < len(face_planes(shape)) <= MAX_FACE_PLANES
+        parts = [part for part in drawn_parts(self.r.scene, shape)
+                 if part.bsdf() is not None and int(part.bsdf().flags()) & int(mi.BSDFFlags.Delta)]
+        planes = delta_face_planes(self.r.scene, shape)
+        return (bool(parts) and all(int(part.bsdf().flags()) & glass == glass for part in parts)
+                and all(planes) and 0 < sum(len(p) for p in planes) <= MAX_FACE_PLANES)
 
     def note_fallback(self, name: str, reason: str) -> None:
         self.fallbacks.setdefault(name, f"{reason}; the stratified estimator samples the whole aperture and does not "
