@@ -51,8 +51,9 @@ from mincam_sim.render.kernels.change_geometry import (
     changed_shapes,
     delta_light_spheres,
     delta_surfaces,
+    drawn_parts,
     emitters_among,
-    redirects_light,
+    specular,
 )
 from mincam_sim.render.kernels.change_region import ApertureRegions, mixel_regions_each
 from mincam_sim.render.kernels.frozen import keeps_recording, recordings
@@ -191,7 +192,7 @@ class Simulation:
         self._as_built: dict[str, object] = {}  # each updated parameter's value (world coordinates) before updates
         self._camera_frozen_images, self._camera_traced = 0, False  # camera renders replayed, or traced from now
         self._camera_frozen_windows, self._film_projection = 0, None  # camera windows replayed; their projection
-        self._redirecting: dict[str, bool] = {}  # shape name -> moved, does it redirect light (mirror, glass)
+        self._drawn: dict[str, list] = {}  # shape name -> the shapes that make it (an instance's group's)
         self._last_set: dict[str, np.ndarray] = {}  # the last numpy value each parameter was set to
         self.revisions: dict[str, int] = {}  # how often each parameter was changed (who replays a scene checks it)
         self._traversals: dict = {}  # mi.traverse of the objects buffers_key reads (read afresh every call)
@@ -439,11 +440,15 @@ class Simulation:
         return out
 
     def _redirects_light(self, name: str) -> bool:
-        """:func:`~.kernels.change_geometry.redirects_light` of the named shape, read once (BSDF kinds do not
-        change with updates)."""
-        if name not in self._redirecting:
-            self._redirecting[name] = redirects_light(self.scene, self.shapes_by_id[name])
-        return self._redirecting[name]
+        """:func:`~.kernels.change_geometry.redirects_light` of the named shape. The shapes it is made of are read
+        once (BSDF kinds do not change with updates), unless none were found (an instance hidden where it was
+        probed: asked again where it is next)."""
+        if name not in self._drawn:
+            parts = drawn_parts(self.scene, self.shapes_by_id[name])
+            if not parts:
+                return False
+            self._drawn[name] = parts
+        return any(specular(part) for part in self._drawn[name])
 
     def _camera_windows(self, windows: tuple[Window, ...], spp: int, seed: int) -> tuple[np.ndarray, ...]:
         """The camera's pixels over each of ``windows`` as the world is now."""

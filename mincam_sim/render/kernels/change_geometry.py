@@ -206,9 +206,15 @@ def redirects_light(scene, shape) -> bool:
     """True if ``shape`` has a specular (delta) BSDF, a mirror or glass (for an ``instance``: one of the shapes it
     draws, :func:`drawn_parts`): moved, it reflects or refracts the lights' light onto places no box or shadow
     volume of it bounds (a glass block throws a caustic beside its shadow)."""
+    return any(specular(part) for part in drawn_parts(scene, shape))
+
+
+def specular(shape) -> bool:
+    """True if the shape's own BSDF has a delta reflection or a delta transmission (a mirror, glass)."""
     mi = backend.mitsuba()
-    specular = int(mi.BSDFFlags.DeltaReflection) | int(mi.BSDFFlags.DeltaTransmission)
-    return any(part.bsdf() is not None and int(part.bsdf().flags()) & specular for part in drawn_parts(scene, shape))
+    bsdf = shape.bsdf()
+    return bsdf is not None and bool(int(bsdf.flags()) & (int(mi.BSDFFlags.DeltaReflection)
+                                                          | int(mi.BSDFFlags.DeltaTransmission)))
 
 
 INSTANCE_PROBE_RAYS = 1024
