@@ -68,9 +68,17 @@ def _user_files() -> tuple[str, str]:
     return str(obj), str(png)
 
 
+def _mirror() -> dict:
+    """A vertical perfect mirror at x = 0.22 m facing -x, 40 x 30 cm, its centre 15 cm up."""
+    return {"type": "rectangle",
+            "to_world": sd._transform(Pose((0.22, 0.0, 0.15), (-1.0, 0.0, 0.0)).matrix()
+                                      @ np.diag([0.2, 0.15, 1.0, 1.0])),
+            "bsdf": {"type": "conductor", "material": "none"}}
+
+
 def rare_scene(case: str):
-    """(world, frames, background) for ``case`` in {"far_movers", "mirror", "glass", "glass_instance", "emitter",
-    "textured"}."""
+    """(world, frames, background) for ``case`` in {"far_movers", "mirror", "mirror_instance", "glass",
+    "glass_instance", "emitter", "textured"}."""
     cam = cross_layout(center=Pose((0.0, 0.0, HEIGHT_M), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)))
     elements = {
         "table": {"type": "rectangle", "to_world": sd._transform(np.diag([0.8, 0.8, 1.0, 1.0])),
@@ -87,10 +95,14 @@ def rare_scene(case: str):
         # in view; a small mover there blocks part of that light (a shadow of the light's image, found only by
         # bounces that meet the mirror and then the light) and is seen in the mirror
         elements["light"] = sd.area_light(0.1, 0.1, Pose((0.0, 0.0, 1.0), (0.0, 0.0, -1.0)).matrix(), 90.0)
-        elements["mirror"] = {"type": "rectangle",
-                              "to_world": sd._transform(Pose((0.22, 0.0, 0.15), (-1.0, 0.0, 0.0)).matrix()
-                                                        @ np.diag([0.2, 0.15, 1.0, 1.0])),
-                              "bsdf": {"type": "conductor", "material": "none"}}
+        elements["mirror"] = _mirror()
+        places = {"mover": (0.18, 0.03, 0.0)}
+        sizes = {"mover": (0.02, 0.02, 0.03)}
+    elif case == "mirror_instance":
+        # the same mirror drawn by an instance of a shape group
+        elements["light"] = sd.area_light(0.1, 0.1, Pose((0.0, 0.0, 1.0), (0.0, 0.0, -1.0)).matrix(), 90.0)
+        elements["group"] = {"type": "shapegroup", "sheet": _mirror()}
+        elements["mirror"] = {"type": "instance", "group": {"type": "ref", "id": "group"}}
         places = {"mover": (0.18, 0.03, 0.0)}
         sizes = {"mover": (0.02, 0.02, 0.03)}
     elif case == "glass":

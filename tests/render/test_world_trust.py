@@ -254,6 +254,7 @@ def _allowed_beyond(n_values: int) -> int:
 
 @pytest.mark.parametrize("case, n_seeds", [pytest.param("far_movers", 16, id="far movers"),
                                            pytest.param("mirror", 16, id="mirror"),
+                                           pytest.param("mirror_instance", 16, id="mirror drawn by an instance"),
                                            # 96 seeds of these in the slow suite; 16 here
                                            pytest.param("emitter", 16, id="moving emitter", marks=pytest.mark.slow),
                                            pytest.param("textured", 16, id="OBJ torus on a PNG floor",
@@ -285,7 +286,8 @@ def test_per_run_sigma_is_honest_on_rare_light_paths(case, n_seeds):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("case", ["far_movers", "mirror", "emitter", "textured", "glass", "glass_instance"])
+@pytest.mark.parametrize("case", ["far_movers", "mirror", "mirror_instance", "emitter", "textured", "glass",
+                                  "glass_instance"])
 def test_per_run_sigma_is_honest_on_rare_light_paths_many_seeds(case):
     beyond, zero, z, _, _ = tail_counts(case, range(96), 1 << 14)
     assert zero == 0

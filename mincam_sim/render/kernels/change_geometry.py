@@ -27,20 +27,22 @@ class DeltaSurfaces:
     change into an image the mixels can see; curved ones by their bounding box (rays that reach them may go
     anywhere after)."""
 
-    def __init__(self, planes: dict[str, tuple[np.ndarray, float]], boxes: dict[str, np.ndarray]) -> None:
+    def __init__(self, planes: dict[str | tuple[str, int], tuple[np.ndarray, float]],
+                 boxes: dict[str | tuple[str, int], np.ndarray]) -> None:
         self.planes, self.boxes = planes, boxes
 
     def __contains__(self, name: str) -> bool:
-        return name in self.planes or name in self.boxes
+        return any(_owner(key) == name for key in (*self.planes, *self.boxes))
 
     def images(self, points: np.ndarray, exclude: str = "") -> list[np.ndarray]:
         """Point sets to add to a change's region: its mirror images in each planar delta surface, and the
-        boxes of the curved ones (``exclude``: the moving shape itself)."""
-        return self.reflect(points, exclude) + [box for name, box in self.boxes.items() if name != exclude]
+        boxes of the curved ones (``exclude``: the moving shape itself, an instance's surfaces all)."""
+        return self.reflect(points, exclude) + [box for name, box in self.boxes.items() if _owner(name) != exclude]
 
     def reflect(self, points: np.ndarray, exclude: str = "") -> list[np.ndarray]:
         """``points`` (m, 3) mirrored in each planar delta surface's plane but ``exclude``'s."""
-        return [points - 2.0 * (points @ n - c)[:, None] * n for name, (n, c) in self.planes.items() if name != exclude]
+        return [points - 2.0 * (points @ n - c)[:, None] * n for name, (n, c) in self.planes.items()
+                if _owner(name) != exclude]
 
     def with_images(self, boxes: list, directions: list) -> tuple[list, list]:
         """Light boxes and directions plus their images in each planar delta surface (first-order reflections):
@@ -59,6 +61,11 @@ class DeltaSurfaces:
         boxes += [(np.array(s.bbox().min, dtype=float), np.array(s.bbox().max, dtype=float))
                   for s in scene.shapes() if s.is_emitter()]
         return [guide_sphere(im) for lo, hi in boxes for im in self.reflect(box_corners(lo, hi))]
+
+
+def _owner(key: str | tuple[str, int]) -> str:
+    """The shape a delta surface's key belongs to (``name``, or ``(name, k)``: the k-th surface an instance draws)."""
+    return key[0] if isinstance(key, tuple) else key
 
 
 MAX_FACE_PLANES = 16  # a delta mesh with more distinct face planes (curved glass) is guided toward the lights only
@@ -131,28 +138,53 @@ def delta_light_spheres(scene, moving, taken: int = 0) -> list[tuple[np.ndarray,
 
 
 def delta_surfaces(scene) -> DeltaSurfaces:
-    """The scene's delta surfaces, planar or not, from 64 points sampled on each."""
+    """The scene's delta surfaces, planar or not, from 64 points sampled on each; those an instance draws too
+    (:func:`drawn_parts`, under the instance's ``to_world``; keyed by the instance's name, ``(name, k)`` for its
+    k-th of several), looked for only where a shape group holds one."""
     mi = backend.mitsuba()
+    delta = int(mi.BSDFFlags.Delta)
+
+    def has_delta(part) -> bool:
+        return part.bsdf() is not None and bool(int(part.bsdf().flags()) & delta)
+
+    grouped = None  # does a shape group hold a delta surface? (read once, when an instance is met)
     planes, boxes = {}, {}
     for shape in scene.shapes():
-        bsdf = shape.bsdf()
-        if shape.is_emitter() or shape.is_sensor() or bsdf is None:
+        if shape.is_emitter() or shape.is_sensor():
             continue
-        if not int(bsdf.flags()) & int(mi.BSDFFlags.Delta):
-            continue
-        bb = shape.bbox()
-        lo, hi = np.array(bb.min, dtype=float), np.array(bb.max, dtype=float)
-        g = np.linspace(0.05, 0.95, 8)
-        uu, vv = np.meshgrid(g, g)
-        ps = shape.sample_position(0.0, mi.Point2f(uu.ravel(), vv.ravel()))
-        p = np.array(ps.p, dtype=float).reshape(3, -1).T
-        n = np.array(ps.n, dtype=float).reshape(3, -1).T
-        normal = n[0] / np.linalg.norm(n[0])
-        size = max(float(np.linalg.norm(hi - lo)), 1e-9)
-        if np.all(np.abs(n @ normal) > 1 - 1e-6) and np.all(np.abs((p - p[0]) @ normal) < 1e-6 * size):
-            planes[shape.id()] = (normal, float(p[0] @ normal))
+        matrix = None
+        if shape.class_name() == "Instance":
+            if grouped is None:
+                hierarchy = mi.traverse(scene).hierarchy
+                grouped = any(isinstance(obj, mi.Shape) and isinstance(parent, mi.Shape)
+                              and parent.class_name() == "ShapeGroupPlugin" and has_delta(obj)
+                              for obj, (parent, _) in hierarchy.items())
+            if not grouped:
+                continue
+            parts = [part for part in drawn_parts(scene, shape) if has_delta(part)]
+            matrix = np.array(mi.traverse(shape)["to_world"].matrix, dtype=float).reshape(4, 4)
         else:
-            boxes[shape.id()] = box_corners(lo, hi)
+            parts = [shape] if has_delta(shape) else []
+        for k, part in enumerate(parts):
+            key = shape.id() if len(parts) == 1 else (shape.id(), k)
+            bb = part.bbox()
+            corners = box_corners(np.array(bb.min, dtype=float).ravel(), np.array(bb.max, dtype=float).ravel())
+            g = np.linspace(0.05, 0.95, 8)
+            uu, vv = np.meshgrid(g, g)
+            ps = part.sample_position(0.0, mi.Point2f(uu.ravel(), vv.ravel()))
+            p = np.array(ps.p, dtype=float).reshape(3, -1).T
+            n = np.array(ps.n, dtype=float).reshape(3, -1).T
+            if matrix is not None:  # the group's coordinates -> the scene's
+                p, corners = p @ matrix[:3, :3].T + matrix[:3, 3], corners @ matrix[:3, :3].T + matrix[:3, 3]
+                n = n @ np.linalg.inv(matrix[:3, :3])
+                n /= np.linalg.norm(n, axis=1)[:, None]
+            lo, hi = corners.min(axis=0), corners.max(axis=0)
+            normal = n[0] / np.linalg.norm(n[0])
+            size = max(float(np.linalg.norm(hi - lo)), 1e-9)
+            if np.all(np.abs(n @ normal) > 1 - 1e-6) and np.all(np.abs((p - p[0]) @ normal) < 1e-6 * size):
+                planes[key] = (normal, float(p[0] @ normal))
+            else:
+                boxes[key] = box_corners(lo, hi)
     return DeltaSurfaces(planes, boxes)
 
 
