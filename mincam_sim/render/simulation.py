@@ -342,22 +342,11 @@ class Simulation:
         """:meth:`change_reach` with the regions of each named shape apart (in sorted name order; each one's
         own and its mirror images' bounding rectangle), or ``[whole aperture]`` if a change is unbounded."""
         scene = self.scene if scene is None else scene
-        points, reasons = {}, []
-        names = sorted(moving)
-        for name, (p, why) in zip(names, change_points_each(scene, [[n] for n in names], self._mirrors), strict=True):
-            points[name] = p
-            if why:
-                reasons.append(why)
+        points, regions = self._reach_of_each(sorted(moving), scene)
+        reasons = [why for _, why in regions.values() if why]
         if reasons:
             return [ApertureRegions.full(self.mincam)], None, reasons
-        seen = [[p, *self._mirrors.images(p, exclude=name)] for name, p in points.items()]
-        flat = iter(mixel_regions_each(self.scene_mincam, [q for sets in seen for q in sets]))
-        each = []
-        for sets in seen:  # each shape's own region, then the union with its images' (in that order)
-            regions = next(flat)
-            for _ in sets[1:]:
-                regions = regions.union(next(flat))
-            each.append(regions)
+        each = [r for r, _ in regions.values()]
         spheres = guide_spheres(list(points.values()))
         if spheres:  # light reaching the change through a mirror: bounces aimed at the lights' images find it
             spheres = spheres + self._mirrors.light_image_spheres(scene)
@@ -366,6 +355,31 @@ class Simulation:
             through = delta_light_spheres(scene, moving, taken=len(spheres))
             spheres = spheres_of(spheres + through[:max(0, MAX_GUIDES - len(spheres))])
         return each, (spheres or None), []
+
+    def change_regions_each(self, moving: Sequence[str]) -> dict[str, tuple[ApertureRegions, str]]:
+        """Each named shape's aperture regions on its own (its own and its mirror images' bounding rectangle; the
+        whole aperture where its change is unbounded) and why it is unbounded ("" if not), from one look at the
+        scene: what :meth:`change_reach` of each name alone gives, without the guides."""
+        return self._reach_of_each(sorted(moving), self.scene)[1]
+
+    def _reach_of_each(self, names: list[str], scene) -> tuple[dict, dict]:
+        """(change points of each bounded name, {name: (regions, why unbounded or "")}) for ``names``."""
+        points, reasons = {}, {}
+        for name, (p, why) in zip(names, change_points_each(scene, [[n] for n in names], self._mirrors), strict=True):
+            if why:
+                reasons[name] = why
+            else:
+                points[name] = p
+        seen = [[p, *self._mirrors.images(p, exclude=name)] for name, p in points.items()]
+        flat = iter(mixel_regions_each(self.scene_mincam, [q for sets in seen for q in sets]))
+        regions = {}
+        for name, sets in zip(points, seen, strict=True):  # the shape's own region, then its images' (in order)
+            own = next(flat)
+            for _ in sets[1:]:
+                own = own.union(next(flat))
+            regions[name] = (own, "")
+        full = ApertureRegions.full(self.mincam)
+        return points, {name: regions[name] if name in regions else (full, reasons[name]) for name in names}
 
     def camera_image(self, spp: int = 64, seed: int = 0) -> np.ndarray:
         """The ground-truth camera's image [W m^-2 sr^-1], row 0 at the top (world scenes)."""

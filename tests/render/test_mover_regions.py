@@ -291,3 +291,24 @@ def test_reported_sigma_matches_the_spread_over_16_seeds_of_8_movers():
     lo, hi = stats.chi2.ppf([1e-4, 1 - 1e-4], dof) / dof
     assert lo * (1 - noise) < pooled < hi * (1 + noise), f"pooled ratio {pooled:.2f} ({lo:.2f} .. {hi:.2f})"
 
+
+
+@pytest.mark.parametrize("case", ["far_movers", "mirror", "emitter"])
+def test_each_movers_regions_at_once_equal_one_look_per_mover(case):
+    """``change_regions_each`` (every mover's regions from one look at the scene: what a run reads once for the
+    movers' background places) equals ``change_reach`` of each mover alone, bit for bit: two movers apart, one
+    seen in a mirror (its image's rectangle joined), and a moving emitter (the whole aperture, and why)."""
+    from rare_paths import rare_scene
+
+    world, frames, background = rare_scene(case)
+    world.update({**background, **frames[0]})
+    names = sorted({key.split(".")[0] for key in frames[0]})
+    at_once = world.change_regions_each(names)
+    assert list(at_once) == names
+    for name in names:
+        alone, _, why = world.change_reach([name])
+        regions, reason = at_once[name]
+        assert np.array_equal(regions.base, alone.base) and np.array_equal(regions.slope, alone.slope)
+        assert reason == (why[0] if why else "")
+    if case == "emitter":
+        assert at_once["glow"][1] and np.all(np.isinf(at_once["glow"][0].base))

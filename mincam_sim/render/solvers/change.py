@@ -534,10 +534,10 @@ class _StratifiedRun(_Run):
         self.moving = moving_shapes([background, *frames])
         sim.update(background)
         self.bg_regions = {}
-        for name in self.moving:
-            self.bg_regions[name], _, why = sim.change_reach([name])
-            for reason in why:
-                self.note_fallback(name, reason)
+        for name, (regions, why) in sim.change_regions_each(self.moving).items():
+            self.bg_regions[name] = regions
+            if why:
+                self.note_fallback(name, why)
         self.can_guide = guided and guided_path_supports(sim.mincam_scene.max_depth)
         self.shapes = sim.shapes_by_id
         self.bg_boxes = {name: watch_box(self.shapes[name]) for name in self.moving if name in self.shapes}
