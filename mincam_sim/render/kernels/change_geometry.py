@@ -142,11 +142,6 @@ def delta_surfaces(scene) -> DeltaSurfaces:
     (:func:`drawn_parts`, under the instance's ``to_world``; keyed by the instance's name, ``(name, k)`` for its
     k-th of several), looked for only where a shape group holds one."""
     mi = backend.mitsuba()
-    delta = int(mi.BSDFFlags.Delta)
-
-    def has_delta(part) -> bool:
-        return part.bsdf() is not None and bool(int(part.bsdf().flags()) & delta)
-
     grouped = None  # does a shape group hold a delta surface? (read once, when an instance is met)
     planes, boxes = {}, {}
     for shape in scene.shapes():
@@ -157,14 +152,14 @@ def delta_surfaces(scene) -> DeltaSurfaces:
             if grouped is None:
                 hierarchy = mi.traverse(scene).hierarchy
                 grouped = any(isinstance(obj, mi.Shape) and isinstance(parent, mi.Shape)
-                              and parent.class_name() == "ShapeGroupPlugin" and has_delta(obj)
+                              and parent.class_name() == "ShapeGroupPlugin" and delta_bsdf(obj)
                               for obj, (parent, _) in hierarchy.items())
             if not grouped:
                 continue
-            parts = [part for part in drawn_parts(scene, shape) if has_delta(part)]
+            parts = [part for part in drawn_parts(scene, shape) if delta_bsdf(part)]
             matrix = np.array(mi.traverse(shape)["to_world"].matrix, dtype=float).reshape(4, 4)
         else:
-            parts = [shape] if has_delta(shape) else []
+            parts = [shape] if delta_bsdf(shape) else []
         for k, part in enumerate(parts):
             key = shape.id() if len(parts) == 1 else (shape.id(), k)
             bb = part.bbox()
@@ -241,6 +236,13 @@ def redirects_light(scene, shape) -> bool:
     return any(specular(part) for part in drawn_parts(scene, shape))
 
 
+def delta_bsdf(shape) -> bool:
+    """True if the shape's own BSDF has a delta component (a mirror, glass, a null BSDF)."""
+    mi = backend.mitsuba()
+    bsdf = shape.bsdf()
+    return bsdf is not None and bool(int(bsdf.flags()) & int(mi.BSDFFlags.Delta))
+
+
 def specular(shape) -> bool:
     """True if the shape's own BSDF has a delta reflection or a delta transmission (a mirror, glass)."""
     mi = backend.mitsuba()
@@ -288,8 +290,7 @@ def delta_face_planes(scene, shape) -> list[list[tuple[np.ndarray, float]]]:
     its distinct face planes in scene coordinates (:func:`face_planes`; an instance's group's planes under the
     instance's ``to_world``; [] for a shape that is not a mesh)."""
     mi = backend.mitsuba()
-    parts = [part for part in drawn_parts(scene, shape)
-             if part.bsdf() is not None and int(part.bsdf().flags()) & int(mi.BSDFFlags.Delta)]
+    parts = [part for part in drawn_parts(scene, shape) if delta_bsdf(part)]
     if shape.class_name() != "Instance":
         return [face_planes(part) for part in parts]
     matrix = np.array(mi.traverse(shape)["to_world"].matrix, dtype=float).reshape(4, 4)

@@ -48,6 +48,7 @@ from mincam_sim.render import backend
 from mincam_sim.render.kernels.change_geometry import (
     MAX_FACE_PLANES,
     changed_shapes,
+    delta_bsdf,
     delta_face_planes,
     drawn_parts,
     emitters_among,
@@ -639,8 +640,7 @@ class _StratifiedRun(_Run):
         if not self.can_guide or shape is None:
             return False
         glass = int(mi.BSDFFlags.DeltaReflection) | int(mi.BSDFFlags.DeltaTransmission)
-        parts = [part for part in drawn_parts(self.r.scene, shape)
-                 if part.bsdf() is not None and int(part.bsdf().flags()) & int(mi.BSDFFlags.Delta)]
+        parts = [part for part in drawn_parts(self.r.scene, shape) if delta_bsdf(part)]
         planes = delta_face_planes(self.r.scene, shape)
         return (bool(parts) and all(int(part.bsdf().flags()) & glass == glass for part in parts)
                 and all(planes) and 0 < sum(len(p) for p in planes) <= MAX_FACE_PLANES)
