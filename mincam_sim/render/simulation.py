@@ -51,9 +51,8 @@ from mincam_sim.render.kernels.change_geometry import (
     changed_shapes,
     delta_light_spheres,
     delta_surfaces,
-    drawn_parts,
     emitters_among,
-    specular,
+    redirects_light,
 )
 from mincam_sim.render.kernels.change_region import ApertureRegions, mixel_regions_each
 from mincam_sim.render.kernels.frozen import keeps_recording, recordings
@@ -186,13 +185,13 @@ class Simulation:
         warn_if_implausible_size(self.scene, self.scene_mincam, skip, self.unit_m)
         warn_if_inside(self.scene, self.scene_mincam, skip)
         self._params = WorldParameters(self)
-        self._mirrors = delta_surfaces(self.scene)
+        self.known_parts: dict[str, list] = {}  # instance name -> the shapes of the group it draws (change_geometry)
+        self._mirrors = delta_surfaces(self.scene, self.known_parts)
         self._content_key: str | None = None
         self._content_key = self._content_fingerprint()  # before any update: the scene as built
         self._as_built: dict[str, object] = {}  # each updated parameter's value (world coordinates) before updates
         self._camera_frozen_images, self._camera_traced = 0, False  # camera renders replayed, or traced from now
         self._camera_frozen_windows, self._film_projection = 0, None  # camera windows replayed; their projection
-        self._drawn: dict[str, list] = {}  # shape name -> the shapes that make it (an instance's group's)
         self._last_set: dict[str, np.ndarray] = {}  # the last numpy value each parameter was set to
         self.revisions: dict[str, int] = {}  # how often each parameter was changed (who replays a scene checks it)
         self._traversals: dict = {}  # mi.traverse of the objects buffers_key reads (read afresh every call)
@@ -218,7 +217,7 @@ class Simulation:
             self.revisions[key] = self.revisions.get(key, 0) + 1
         self.mincam_scene.update(self._in_scene(updates))
         if any(key.split(".", 1)[0] in self._mirrors for key in updates):
-            self._mirrors = delta_surfaces(self.scene)
+            self._mirrors = delta_surfaces(self.scene, self.known_parts)
 
     def scene_updates(self, updates: Updates) -> dict:
         """``updates`` (world coordinates, as :meth:`update` takes them) checked and in scene coordinates, as the
@@ -352,7 +351,7 @@ class Simulation:
             spheres = spheres + self._mirrors.light_image_spheres(scene)
             # light a moving glass block throws: bounces aimed at the lights and their images in its faces, as many
             # as fit beside the others (the lights first); more would merge all into one sphere holding the view
-            through = delta_light_spheres(scene, moving, taken=len(spheres))
+            through = delta_light_spheres(scene, moving, taken=len(spheres), known=self.known_parts)
             spheres = spheres_of(spheres + through[:max(0, MAX_GUIDES - len(spheres))])
         return each, (spheres or None), []
 
@@ -364,22 +363,27 @@ class Simulation:
 
     def _reach_of_each(self, names: list[str], scene) -> tuple[dict, dict]:
         """(change points of each bounded name, {name: (regions, why unbounded or "")}) for ``names``."""
-        points, reasons = {}, {}
-        for name, (p, why) in zip(names, change_points_each(scene, [[n] for n in names], self._mirrors), strict=True):
-            if why:
-                reasons[name] = why
-            else:
-                points[name] = p
-        seen = [[p, *self._mirrors.images(p, exclude=name)] for name, p in points.items()]
-        flat = iter(mixel_regions_each(self.scene_mincam, [q for sets in seen for q in sets]))
+        hulls = self._hull_sets(names, scene)
+        bounded = {name: sets for name, (sets, _) in hulls.items() if sets is not None}
+        flat = iter(mixel_regions_each(self.scene_mincam, [q for sets in bounded.values() for q in sets]))
         regions = {}
-        for name, sets in zip(points, seen, strict=True):  # the shape's own region, then its images' (in order)
+        for name, sets in bounded.items():  # the shape's own region, then its images' (in order)
             own = next(flat)
             for _ in sets[1:]:
                 own = own.union(next(flat))
             regions[name] = (own, "")
         full = ApertureRegions.full(self.mincam)
-        return points, {name: regions[name] if name in regions else (full, reasons[name]) for name in names}
+        return ({name: sets[0] for name, sets in bounded.items()},
+                {name: regions[name] if name in regions else (full, hulls[name][1]) for name in names})
+
+    def _hull_sets(self, names: list[str], scene) -> dict[str, tuple[list | None, str]]:
+        """Per name, the corner points [m] of the shape's change hull as ``scene`` is now followed by those of its
+        images in the delta surfaces (mirror images, boxes of curved ones), or None and why the change is
+        unbounded."""
+        out = {}
+        for name, (p, why) in zip(names, change_points_each(scene, [[n] for n in names], self._mirrors), strict=True):
+            out[name] = (None, why) if p is None else ([p, *self._mirrors.images(p, exclude=name)], "")
+        return out
 
     def camera_image(self, spp: int = 64, seed: int = 0) -> np.ndarray:
         """The ground-truth camera's image [W m^-2 sr^-1], row 0 at the top (world scenes)."""
@@ -444,25 +448,8 @@ class Simulation:
         """Per name, the corner points [m] of the shape's change hull as the world is now and of its mirror
         images ([None] where the change is unbounded: a moving light, an environment light, or a moving mirror or
         glass, whose reflected and refracted light lands beyond its shadow)."""
-        out = []
-        for name, (points, _) in zip(names, change_points_each(self.scene, [[n] for n in names], self._mirrors),
-                                     strict=True):
-            if points is None or self._redirects_light(name):
-                out.append([None])
-            else:
-                out.append([points, *self._mirrors.images(points, exclude=name)])
-        return out
-
-    def _redirects_light(self, name: str) -> bool:
-        """:func:`~.kernels.change_geometry.redirects_light` of the named shape. The shapes it is made of are read
-        once (BSDF kinds do not change with updates), unless none were found (an instance hidden where it was
-        probed: asked again where it is next)."""
-        if name not in self._drawn:
-            parts = drawn_parts(self.scene, self.shapes_by_id[name])
-            if not parts:
-                return False
-            self._drawn[name] = parts
-        return any(specular(part) for part in self._drawn[name])
+        return [[None] if sets is None or redirects_light(self.scene, self.shapes_by_id[name], self.known_parts)
+                else sets for name, (sets, _) in self._hull_sets(names, self.scene).items()]
 
     def _camera_windows(self, windows: tuple[Window, ...], spp: int, seed: int) -> tuple[np.ndarray, ...]:
         """The camera's pixels over each of ``windows`` as the world is now."""

@@ -164,8 +164,7 @@ def run_world_config(cfg: WorldConfig, show_progress: bool = False, overwrite: b
         columns = dict(job.columns)
         if cfg.camera is not None:
             key = fingerprint({"run": ch.dp.meta["identity_key"], "camera": cfg.camera, "method": GROUND_TRUTH_METHOD})
-            rows, cols = _ground_truth(job.sim, cfg.camera, job.frames, job.background, out,
-                                       None if overwrite else key, key, say)
+            rows, cols = _ground_truth(job.sim, cfg.camera, job.frames, job.background, out, key, not overwrite, say)
             columns["change_centroid_row_px"], columns["change_centroid_col_px"] = rows, cols
         ch.frame_columns = columns
         plot_changes(ch, out / "dP.png")
@@ -284,8 +283,8 @@ def _camera_dict(camera: CameraSpec) -> dict:
     return sd.pinhole_camera(pose.matrix(), camera.fov_deg, camera.width_px, camera.height_px, spp=camera.spp)
 
 
-def _ground_truth(sim: Simulation, camera: CameraSpec, frames, background, out: Path, reuse_key: str | None = None,
-                  key: str = "", say: Callable[[str], None] | None = None):
+def _ground_truth(sim: Simulation, camera: CameraSpec, frames, background, out: Path, key: str = "",
+                  reuse: bool = False, say: Callable[[str], None] | None = None):
     """Images of the background and every frame, and the centroid (row, col) [px] of each frame's change:
     background subtraction, |change| > threshold x the background's brightest pixel that is no light seen
     directly (:func:`~mincam_sim.render.scene.world_checks.light_pixels`: a lamp or a sky in view would set the
@@ -294,11 +293,12 @@ def _ground_truth(sim: Simulation, camera: CameraSpec, frames, background, out: 
     films with the window's change, both at the camera's samples a pixel.
 
     ``OUT/camera.npz`` holds them with ``key`` (what determines them: the run's identity, the camera's settings
-    and :data:`GROUND_TRUTH_METHOD`); a file that holds ``reuse_key`` is read back instead of rendering."""
+    and :data:`GROUND_TRUTH_METHOD`); with ``reuse``, a file that holds the same ``key`` is read back instead of
+    rendering."""
     path = out / "camera.npz"
-    kept = _kept_ground_truth(path, reuse_key) if reuse_key else None
+    kept = _kept_ground_truth(path, key) if reuse and key else None
     if kept is None:
-        if reuse_key and path.is_file() and say is not None:
+        if reuse and key and path.is_file() and say is not None:
             say(f"mincam-sim: {path} was rendered for other settings (camera, scene or method): rendering it again")
         kept = _render_ground_truth(sim, camera, frames, background)
         atomic_save_npz(path, background=kept["background"], frames=kept["frames"],

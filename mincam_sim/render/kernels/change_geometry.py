@@ -103,14 +103,14 @@ def light_boxes(scene) -> list[tuple[np.ndarray, np.ndarray]]:
                     for s in scene.shapes() if s.is_emitter()]
 
 
-def delta_light_point_sets(scene, moving) -> tuple[list[np.ndarray], list[np.ndarray]]:
+def delta_light_point_sets(scene, moving, known: dict | None = None) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """Where a bounce meets a light through a moving delta shape (glass, a mirror): the lights' corners (a slab
     with parallel faces shifts a ray but keeps its direction, so light refracted through it comes from the lights'
     directions), and their images in each face plane of the moving delta meshes, an instance's included
     (:func:`delta_face_planes`: light the faces reflect, Fresnel's share for glass), one point set per light and
-    per light and plane; ([], []) when no moving shape has a delta BSDF."""
+    per light and plane; ([], []) when no moving shape has a delta BSDF. ``known``: as :func:`drawn_parts`."""
     delta = [planes for s in scene.shapes() if s.id() in moving and not s.is_emitter()
-             for planes in delta_face_planes(scene, s)]
+             for planes in delta_face_planes(scene, s, known)]
     boxes = light_boxes(scene) if delta else []
     if not boxes:
         return [], []
@@ -124,11 +124,11 @@ def delta_light_point_sets(scene, moving) -> tuple[list[np.ndarray], list[np.nda
     return lights, images
 
 
-def delta_light_spheres(scene, moving, taken: int = 0) -> list[tuple[np.ndarray, float]]:
+def delta_light_spheres(scene, moving, taken: int = 0, known: dict | None = None) -> list[tuple[np.ndarray, float]]:
     """Guide spheres around :func:`delta_light_point_sets`: one around the lights, and around their images
     (compact groups merged) as many as :data:`~.guided_path.MAX_GUIDES` leaves beside ``taken`` (the spheres
     the movers already use) and the lights' (at least one)."""
-    lights, images = delta_light_point_sets(scene, moving)
+    lights, images = delta_light_point_sets(scene, moving, known)
     if not lights:
         return []
     spheres = [guide_sphere(np.concatenate(lights))]
@@ -137,10 +137,10 @@ def delta_light_spheres(scene, moving, taken: int = 0) -> list[tuple[np.ndarray,
     return spheres
 
 
-def delta_surfaces(scene) -> DeltaSurfaces:
+def delta_surfaces(scene, known: dict | None = None) -> DeltaSurfaces:
     """The scene's delta surfaces, planar or not, from 64 points sampled on each; those an instance draws too
     (:func:`drawn_parts`, under the instance's ``to_world``; keyed by the instance's name, ``(name, k)`` for its
-    k-th of several), looked for only where a shape group holds one."""
+    k-th of several), looked for only where a shape group holds one. ``known``: as :func:`drawn_parts`."""
     mi = backend.mitsuba()
     grouped = None  # does a shape group hold a delta surface? (read once, when an instance is met)
     planes, boxes = {}, {}
@@ -156,7 +156,7 @@ def delta_surfaces(scene) -> DeltaSurfaces:
                               for obj, (parent, _) in hierarchy.items())
             if not grouped:
                 continue
-            parts = [part for part in drawn_parts(scene, shape) if delta_bsdf(part)]
+            parts = [part for part in drawn_parts(scene, shape, known) if delta_bsdf(part)]
             matrix = np.array(mi.traverse(shape)["to_world"].matrix, dtype=float).reshape(4, 4)
         else:
             parts = [shape] if delta_bsdf(shape) else []
@@ -229,11 +229,11 @@ def merge_parked(boxes: list, keep_clear: tuple[np.ndarray, np.ndarray] | None) 
     return [b for b in boxes if not outside(*b)] + [merged]
 
 
-def redirects_light(scene, shape) -> bool:
+def redirects_light(scene, shape, known: dict | None = None) -> bool:
     """True if ``shape`` has a specular (delta) BSDF, a mirror or glass (for an ``instance``: one of the shapes it
     draws, :func:`drawn_parts`): moved, it reflects or refracts the lights' light onto places no box or shadow
     volume of it bounds (a glass block throws a caustic beside its shadow)."""
-    return any(specular(part) for part in drawn_parts(scene, shape))
+    return any(specular(part) for part in drawn_parts(scene, shape, known))
 
 
 def delta_bsdf(shape) -> bool:
@@ -254,13 +254,19 @@ def specular(shape) -> bool:
 INSTANCE_PROBE_RAYS = 1024
 
 
-def drawn_parts(scene, shape) -> list:
+def drawn_parts(scene, shape, known: dict | None = None) -> list:
     """The shapes that make ``shape``'s surface: the shape itself, or for an ``instance`` the shapes of the group it
     draws. An instance holds no link to its group that Python can read (and Mitsuba gives it a diffuse BSDF of its
     own): its group is the one whose shapes :data:`INSTANCE_PROBE_RAYS` rays, cast through the scene at its box
-    from a sphere around it, meet through it ([] if none is met)."""
+    from a sphere around it, meet through it ([] if none is met).
+
+    ``known`` (a dict the caller keeps for one scene) holds the parts found, by the instance's name: the group an
+    instance draws never changes, so it is probed once; a probe that met nothing (an instance hidden where it
+    stands) is not kept, and the next call probes where it stands then."""
     if shape.class_name() != "Instance":
         return [shape]
+    if known is not None and shape.id() in known:
+        return known[shape.id()]
     mi = backend.mitsuba()
     import drjit as dr
 
@@ -281,16 +287,18 @@ def drawn_parts(scene, shape) -> list:
     for group in groups:
         parts = [obj for obj, (parent, _) in hierarchy.items() if parent is group and isinstance(obj, mi.Shape)]
         if any(dr.any(met & (si.shape == mi.ShapePtr(part))) for part in parts):
+            if known is not None:
+                known[shape.id()] = parts
             return parts
     return []
 
 
-def delta_face_planes(scene, shape) -> list[list[tuple[np.ndarray, float]]]:
+def delta_face_planes(scene, shape, known: dict | None = None) -> list[list[tuple[np.ndarray, float]]]:
     """For each shape with a delta BSDF (mirror, glass, null) that makes ``shape``'s surface (:func:`drawn_parts`),
     its distinct face planes in scene coordinates (:func:`face_planes`; an instance's group's planes under the
     instance's ``to_world``; [] for a shape that is not a mesh)."""
     mi = backend.mitsuba()
-    parts = [part for part in drawn_parts(scene, shape) if delta_bsdf(part)]
+    parts = [part for part in drawn_parts(scene, shape, known) if delta_bsdf(part)]
     if shape.class_name() != "Instance":
         return [face_planes(part) for part in parts]
     matrix = np.array(mi.traverse(shape)["to_world"].matrix, dtype=float).reshape(4, 4)

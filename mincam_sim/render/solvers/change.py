@@ -448,7 +448,8 @@ class _Run:
         (on a glass block in view, ~10x in one run of 32), which no diagnostic inside one run can see."""
         shapes = self.r.shapes_by_id
         for name in sorted(moving):
-            if name in shapes and redirects_light(self.r.scene, shapes[name]) and not self.guides_through(name):
+            if (name in shapes and redirects_light(self.r.scene, shapes[name], self.r.known_parts)
+                    and not self.guides_through(name)):
                 self.fallbacks[f"delta:{name}"] = (
                     f"'{name}' is glass or a mirror (or an instance of one) and moves, and is curved, a mirror, an "
                     "instance or not guided: the light it refracts or reflects onto the scene is found only by delta "
@@ -640,8 +641,8 @@ class _StratifiedRun(_Run):
         if not self.can_guide or shape is None:
             return False
         glass = int(mi.BSDFFlags.DeltaReflection) | int(mi.BSDFFlags.DeltaTransmission)
-        parts = [part for part in drawn_parts(self.r.scene, shape) if delta_bsdf(part)]
-        planes = delta_face_planes(self.r.scene, shape)
+        parts = [part for part in drawn_parts(self.r.scene, shape, self.r.known_parts) if delta_bsdf(part)]
+        planes = delta_face_planes(self.r.scene, shape, self.r.known_parts)
         return (bool(parts) and all(int(part.bsdf().flags()) & glass == glass for part in parts)
                 and all(planes) and 0 < sum(len(p) for p in planes) <= MAX_FACE_PLANES)
 
