@@ -31,6 +31,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from mincam_sim.storage.atomic import atomic_write_text
+
 _RANGE_TOLERANCE = 1e-9  # relative to the fitted range: points this close to its boundary are not flagged
 
 
@@ -99,7 +101,7 @@ def _warn_extrapolation(calibration: Calibration1D | Calibration2D, n_outside: i
 
 
 def _write_json(path: str | Path, payload: dict[str, Any]) -> None:
-    Path(path).write_text(json.dumps(payload, indent=2) + "\n")
+    atomic_write_text(path, json.dumps(payload, indent=2) + "\n")
 
 
 def _read_json(path: str | Path, kind: str) -> dict[str, Any]:

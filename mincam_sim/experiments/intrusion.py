@@ -38,6 +38,7 @@ from mincam_sim.paper import (
 from mincam_sim.plotting.plots import plot_calibration_1d, plot_overlays
 from mincam_sim.render.scene.elements import toy_updates
 from mincam_sim.scene import objects
+from mincam_sim.storage.atomic import atomic_save_npz
 
 
 @dataclass(frozen=True)
@@ -220,7 +221,7 @@ class Intrusion(Experiment):
                       [(np.array([line, a["predicted_m"][i]]), np.array([line, a["truth_m"][i]])) for i in chosen],
                       camera.half_extent_m, out_dir / "intrusion_frames.png", frame_numbers=chosen,
                       boundary_x_m=line, title="intrusion at the finish line", field_m=setup.field_m)
-        np.savez(out_dir / "intrusion_data.npz", **a)
+        atomic_save_npz(out_dir / "intrusion_data.npz", **a)
         return ExperimentResult.from_rates(self.name, found.summary, self.paper, {
             "calibration_rms_residual_m": calibration.rms_residual_m,
             "calibration_mc_worst_rel_stderr": cal["mc_rel_stderr"],

@@ -42,6 +42,7 @@ from mincam_sim.plotting.plots import plot_spacing
 from mincam_sim.progress import progress
 from mincam_sim.render.simulation import Simulation
 from mincam_sim.scene.display import Screen, Sweep
+from mincam_sim.storage.atomic import atomic_write_text
 
 
 @dataclass(frozen=True)
@@ -194,7 +195,7 @@ class Spacing(Experiment):
         study = {"spacing_m": list(params.spacings_m), "depths_m": list(params.depths_m),
                  "calibration_depth_m": setup.depth_m, "positions_per_sweep": params.positions,
                  "by_depth": by_depth, "setup": setup.as_dict()}
-        (out_dir / "spacing_study.json").write_text(json.dumps(study, indent=1, default=float))
+        atomic_write_text(out_dir / "spacing_study.json", json.dumps(study, indent=1, default=float))
         plot_spacing(study, out_dir / "spacing_study.png")
         return ExperimentResult(self.name, None, None, None, None, study)
 

@@ -55,6 +55,7 @@ from mincam_sim.render.simulation import Simulation
 from mincam_sim.render.solvers import PlaneReplay
 from mincam_sim.scene import objects
 from mincam_sim.scene.road import Road
+from mincam_sim.storage.atomic import atomic_path, atomic_write_text
 
 
 @dataclass(frozen=True)
@@ -668,7 +669,7 @@ def run_display_timing_study(path: str | Path, out_dir: str | Path, quick: bool 
     rows = [{"label": label, **row} for label, row in zip(fields, rows, strict=True)]
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "speed_display_timing.json").write_text(json.dumps(rows, indent=1))
+    atomic_write_text(out / "speed_display_timing.json", json.dumps(rows, indent=1))
     plot_display_timing_study(rows, out / "speed_display_timing.png")
     return rows
 
@@ -699,8 +700,7 @@ def plot_display_timing_study(rows: list[dict], path: Path) -> Path:
     handles, labels = axes[0].get_legend_handles_labels()
     fig.tight_layout(rect=(0, 0.06, 1, 1))
     fig.legend(handles, labels, loc="lower center", ncol=4, fontsize=8, frameon=False)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _save_figure(fig, path)
     return path
 
 
@@ -744,6 +744,17 @@ def plot_mask_period_study(rows: list[dict], path: Path) -> Path:
     handles, labels = axes[0].get_legend_handles_labels()
     fig.tight_layout(rect=(0, 0.12, 1, 1))
     fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=8, frameon=False)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _save_figure(fig, path)
     return path
+
+
+def _save_figure(fig, path: Path) -> None:
+    """Save ``fig`` as a PNG atomically (a temporary file beside ``path``, moved into place) and close it."""
+    import matplotlib.pyplot as plt
+
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=120, format="png")
+    finally:
+        plt.close(fig)
+

@@ -35,6 +35,7 @@ from mincam_sim.paper import CALIBRATION_SQUARE_M, TRACKING_AVG_ERROR_PCT, TRACK
 from mincam_sim.plotting.plots import plot_calibration_2d, plot_overlays, plot_tracks
 from mincam_sim.render.scene.elements import toy_updates
 from mincam_sim.scene import objects
+from mincam_sim.storage.atomic import atomic_save_npz
 
 
 @dataclass(frozen=True)
@@ -204,7 +205,7 @@ class Tracking(Experiment):
         plot_overlays([found.images[i] for i in chosen], [(predicted[i], truth[i]) for i in chosen],
                       camera.half_extent_m, out_dir / "tracking_frames.png", frame_numbers=chosen,
                       title="tracking wind-up toys", field_m=setup.field_m)
-        np.savez(out_dir / "tracking_data.npz", **a)
+        atomic_save_npz(out_dir / "tracking_data.npz", **a)
         return ExperimentResult.from_rates(self.name, found.summary, self.paper, {
             "toys": list(params.toys),
             "calibration_points": len(cal["true_m"]),
