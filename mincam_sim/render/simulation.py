@@ -26,6 +26,7 @@ coordinates only (:attr:`Simulation.params`, :meth:`Simulation.update`).
 
 from __future__ import annotations
 
+import contextlib
 import difflib
 import functools
 import os
@@ -70,7 +71,12 @@ from mincam_sim.render.scene.world_checks import (
     warn_if_implausible_size,
     warn_if_inside,
 )
-from mincam_sim.render.scene.world_input import check_radiant_params, check_update, expand_elements
+from mincam_sim.render.scene.world_input import (
+    check_radiant_params,
+    check_update,
+    check_update_keys,
+    expand_elements,
+)
 from mincam_sim.render.solvers import Aperture, ResponseMap, Solver, StratifiedChange
 from mincam_sim.scene.display import FrameSource, Screen, as_frame_source
 from mincam_sim.storage.identity import display_frames_identity, fingerprint, scene_file_digests, updates_fingerprint
@@ -229,6 +235,7 @@ class Simulation:
         self._require_world("parameters and updates")
         if not isinstance(updates, Mapping):
             raise InputError(f"an update must be a dict 'name.parameter' -> value, got {type(updates).__name__}")
+        check_update_keys(updates, "update")
         scene_params = self.mincam_scene.params
         for key, value in updates.items():
             if key not in scene_params or key.split(".", 1)[0] in self._own:
@@ -411,7 +418,7 @@ class Simulation:
         ``elsewhere_spp`` > 0 the whole film of each frame and of the background is rendered too, with that many
         samples a pixel and the same seed, and their difference outside the windows is kept
         (``CameraChange.elsewhere``: for sums over the whole film). Frames first, then the background's windows
-        (one update a frame); the world is left at the background."""
+        (one update a frame); the world is left as it was before the call."""
         self._require_world("ground-truth cameras")
         if self.camera is None:
             raise InputError("this world has no ground-truth camera; pass camera=pinhole_camera(...)")
@@ -419,30 +426,31 @@ class Simulation:
             if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < least:
                 raise InputError(f"camera_changes: {name} (samples per pixel) must be an integer >= {least}, got "
                                  f"{value!r}")
-        if self._film_projection is None:
-            self._film_projection = FilmProjection(self.camera)
-        self.update(background)
-        names = [sorted(changed_shapes(frame, background)) for frame in frames]
-        moved = sorted(set().union(*names))
-        at_background = dict(zip(moved, self._change_hulls(moved), strict=True))
-        windows, frame_pixels, frame_films = [], [], []
-        for frame, changed in zip(progress(frames, desc="ground truth: frames", disable=not show_progress), names,
-                                  strict=True):
-            self.update({**background, **frame})
-            hulls = [h for per_name in (*(at_background[name] for name in changed), *self._change_hulls(changed))
-                     for h in per_name]
-            windows.append(change_windows(self._film_projection, hulls))
-            frame_pixels.append(self._camera_windows(windows[-1], spp, seed))
-            frame_films.append(self.camera_image(elsewhere_spp, seed) if elsewhere_spp else None)
-        self.update(background)
-        background_film = self.camera_image(elsewhere_spp, seed) if elsewhere_spp else None
-        changes = []
-        for k in progress(range(len(frames)), desc="ground truth: background", disable=not show_progress):
-            elsewhere = None if background_film is None else outside(frame_films[k] - background_film, windows[k])
-            frame_films[k] = None  # one film a frame held at a time beyond the differences
-            changes.append(CameraChange(windows[k], frame_pixels[k], self._camera_windows(windows[k], spp, seed),
-                                        elsewhere))
-        return changes
+        with self._world_kept():
+            if self._film_projection is None:
+                self._film_projection = FilmProjection(self.camera)
+            self.update(background)
+            names = [sorted(changed_shapes(frame, background)) for frame in frames]
+            moved = sorted(set().union(*names))
+            at_background = dict(zip(moved, self._change_hulls(moved), strict=True))
+            windows, frame_pixels, frame_films = [], [], []
+            for frame, changed in zip(progress(frames, desc="ground truth: frames", disable=not show_progress), names,
+                                      strict=True):
+                self.update({**background, **frame})
+                hulls = [h for per_name in (*(at_background[name] for name in changed), *self._change_hulls(changed))
+                         for h in per_name]
+                windows.append(change_windows(self._film_projection, hulls))
+                frame_pixels.append(self._camera_windows(windows[-1], spp, seed))
+                frame_films.append(self.camera_image(elsewhere_spp, seed) if elsewhere_spp else None)
+            self.update(background)
+            background_film = self.camera_image(elsewhere_spp, seed) if elsewhere_spp else None
+            changes = []
+            for k in progress(range(len(frames)), desc="ground truth: background", disable=not show_progress):
+                elsewhere = None if background_film is None else outside(frame_films[k] - background_film, windows[k])
+                frame_films[k] = None  # one film a frame held at a time beyond the differences
+                changes.append(CameraChange(windows[k], frame_pixels[k], self._camera_windows(windows[k], spp, seed),
+                                            elsewhere))
+            return changes
 
     def _change_hulls(self, names: list[str]) -> list:
         """Per name, the corner points [m] of the shape's change hull as the world is now and of its mirror
@@ -572,10 +580,26 @@ class Simulation:
             require_light(self.scene)
         self._warn_ignored_budget(solver, budget)
         sink = MemorySink() if sink is None else sink
-        plan = solver.plan(self, frames, budget, background=background, cache=sink.cache,
-                           show_progress=show_progress)
-        table = sink.open(plan.n_rows, plan.columns)
-        return plan.result(*collect(plan.rows(table.pending()), table))
+        with self._world_kept():
+            plan = solver.plan(self, frames, budget, background=background, cache=sink.cache,
+                               show_progress=show_progress)
+            table = sink.open(plan.n_rows, plan.columns)
+            return plan.result(*collect(plan.rows(table.pending()), table))
+
+    @contextlib.contextmanager
+    def _world_kept(self) -> Iterator[None]:
+        """Puts every world parameter a run sets back to its value before the run when the run ends (also by an
+        error or an interrupt): a run's frames and background are its own, and the next run starts from the
+        world as the caller left it (as built, plus what :meth:`update` set)."""
+        if self.kind != "world":
+            yield
+            return
+        before = {key: self.world_value(key) for key in self._as_built}
+        try:
+            yield
+        finally:
+            # a parameter first set during the run was as built before it
+            self.update({key: before.get(key, value) for key, value in self._as_built.items()})
 
     def _warn_ignored_budget(self, solver: Solver, budget: Budget) -> None:
         """One warning naming the budget fields ``solver`` does not read on this scene (nothing is refused)."""

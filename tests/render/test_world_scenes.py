@@ -17,6 +17,7 @@ from conftest import assert_close_mc
 import mincam_sim as ms
 from mincam_sim import Pose, masks
 from mincam_sim.errors import ConfigError, InputError
+from mincam_sim.frames import MemorySink
 from mincam_sim.model.optics import Mincam, Mixel
 from mincam_sim.oracles.quadrature import open_aperture_view_factor_irradiance
 from mincam_sim.render import backend
@@ -273,6 +274,45 @@ def test_lights_move_and_are_taken_out(tmp_path):
     moved = {"bulb.position": np.array([0.05, 0.0, 0.3]), "bulb.intensity.value": sim.params["bulb.intensity.value"]}
     ch = sim.measure_changes([moved], sim.without("bulb"), ms.PlainChange(), ms.Budget(spp=1 << 12, seed=1))
     assert np.all(ch.dp.irradiance_w_m2 > 5 * ch.dp.stderr_w_m2)
+
+
+class _StopAfterFirstRow(MemorySink):
+    """A sink whose table stops the run (as Ctrl-C would) when the first row arrives."""
+
+    def open(self, n_frames, columns):
+        table = super().open(n_frames, columns)
+
+        def write(indices, values, stderr):
+            raise KeyboardInterrupt
+
+        table.write = write
+        return table
+
+
+def test_a_run_leaves_the_world_as_it_found_it(tmp_path):
+    """A change run's background and frames are its own: after a run against a background without the card, or
+    without the lamp, and after a run stopped on its first frame, the next run measures the world as the caller
+    left it, the same numbers bit for bit (the card stayed taken out, the lamp stayed dark: every later run read
+    0 or the scene without the card). What the caller sets with ``update`` stays."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", WorldWarning)
+        sim = ms.Simulation(CAM, world=_write(tmp_path), unit_m=0.01)
+    budget = ms.Budget(spp=1 << 12, seed=3, replicates=8)
+    as_built = sim.measure([{}], budget=budget).irradiance_w_m2
+    moved = sim.params["card.to_world"].copy()
+    moved[0, 3] += 0.04
+    frames = [{"card.to_world": moved}, {"card.to_world": sim.params["card.to_world"]}]
+    dp = sim.measure_changes(frames, sim.without("card"), ms.PlainChange(), budget).dp.irradiance_w_m2
+    assert np.all(dp < 0)
+    np.testing.assert_array_equal(sim.measure([{}], budget=budget).irradiance_w_m2, as_built)
+    sim.measure_changes(frames, sim.without("lamp"), ms.PlainChange(), budget)
+    np.testing.assert_array_equal(sim.measure([{}], budget=budget).irradiance_w_m2, as_built)
+    with pytest.raises(KeyboardInterrupt):
+        sim.measure_changes(frames, sim.without("card"), ms.PlainChange(), budget, sink=_StopAfterFirstRow())
+    np.testing.assert_array_equal(sim.measure([{}], budget=budget).irradiance_w_m2, as_built)
+    sim.update(sim.without("lamp"))  # the caller's own change stays through runs
+    sim.measure_changes(frames, {}, ms.PlainChange(), budget)
+    assert np.all(sim.measure([{}], budget=budget).irradiance_w_m2 == 0.0)
 
 
 def _measure_after(sim: ms.Simulation, update: dict):

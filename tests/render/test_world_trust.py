@@ -144,6 +144,9 @@ BAD_UPDATES = {
     "wrong vertex count": ({"toy.vertex_positions": np.zeros(12)}, "mesh has 3 vertices"),
     "negative radiance": ({"lamp.emitter.radiance.value": np.array([-1.0])}, "negative power"),
     "singular transform": ({"floor.to_world": np.zeros((4, 4))}, "singular"),
+    "projective transform": ({"floor.to_world": np.vstack([np.eye(4)[:3], [0.5, 0.0, 0.0, 1.0]])},
+                             r"last row of a transform must be \[0, 0, 0, 1\]"),
+    "a key that is no string": ({1: np.eye(4)}, "a key must be a 'name.parameter' string"),
     "unknown key": ({"toy.vertex_position": np.zeros(9)}, "did you mean 'toy.vertex_positions'"),
     "the mincam's own body": ({"mincam_bodies.vertex_positions": np.zeros(120)}, "mincam's own body"),
 }
@@ -157,6 +160,16 @@ def test_bad_updates_are_one_clear_error(case):
         world.update(update)
 
 
+def test_no_frames_measure_nothing():
+    """An empty frame list is (0, n_mixels) from every world solver (the aperture solver crashed in numpy)."""
+    world, _ = _simple_world()
+    budget = ms.Budget(spp=64, seed=1)
+    for solver in (ms.Aperture(), ms.PlaneReplay("floor")):
+        m = world.measure([], solver=solver, budget=budget)
+        assert m.irradiance_w_m2.shape == m.stderr_w_m2.shape == (0, len(world.mincam))
+    assert world.measure_changes([], budget=budget).dp.irradiance_w_m2.shape == (0, len(world.mincam))
+
+
 def test_bad_world_inputs_are_one_clear_error():
     world, tri = _simple_world()
     frame = vertex_update("toy", tri + [0.01, 0, 0])
@@ -168,6 +181,11 @@ def test_bad_world_inputs_are_one_clear_error():
         changes(world, [np.zeros(3)], {}, spp=64)
     with pytest.raises(InputError, match="needs a change solver"):
         changes(world, [frame], {}, spp=64, solver=ms.Aperture())
+    for frames, background, where in (([{1: np.eye(4)}], {}, r"frames\[0\]"), ([frame], {2: 1.0}, "background")):
+        with pytest.raises(InputError, match=f"{where}: a key must be a 'name.parameter' string"):
+            changes(world, frames, background, spp=64)
+    with pytest.raises(InputError, match=r"frames\[0\]: a key must be"):
+        world.measure([{1: np.eye(4)}], solver=ms.Aperture())
     cam = cross_layout()
     with pytest.raises(InputError, match="must be a Mincam"):
         ms.Simulation([cam[0]], world={})

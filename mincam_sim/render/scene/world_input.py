@@ -164,6 +164,9 @@ def check_update(key: str, current, value) -> None:
         if scales.max() == 0 or scales.min() <= 1e-7 * scales.max():
             raise InputError(f"{key}: the transform is singular (zero scale along some axis: scales "
                              f"{np.round(scales, 9).tolist()}); fix the matrix")
+        if not np.allclose(value[3], (0.0, 0.0, 0.0, 1.0), rtol=0.0, atol=1e-9):
+            raise InputError(f"{key}: the last row of a transform must be [0, 0, 0, 1] (an affine map; a projective "
+                             f"row is not applied to shapes), got {value[3].tolist()}; fix the matrix")
         return
     if key.endswith(".vertex_positions"):
         import drjit as dr
@@ -186,6 +189,16 @@ def check_frames(frames, background) -> None:
     for i, frame in enumerate(frames):
         if not isinstance(frame, Mapping):
             raise InputError(f"frames[{i}] must be a dict 'name.parameter' -> value, got {type(frame).__name__}")
+        check_update_keys(frame, f"frames[{i}]")
     if not isinstance(background, Mapping):
         raise InputError(f"background must be a dict 'name.parameter' -> value ({{}} = the scene as built), got "
                          f"{type(background).__name__}")
+    check_update_keys(background, "background")
+
+
+def check_update_keys(updates: Mapping, where: str) -> None:
+    """Refuse a key of ``updates`` that is not a ``"name.parameter"`` string (``where`` names the dict)."""
+    for key in updates:
+        if not isinstance(key, str):
+            raise InputError(f"{where}: a key must be a 'name.parameter' string (e.g. 'box.to_world'), got {key!r} "
+                             f"({type(key).__name__})")

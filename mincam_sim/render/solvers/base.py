@@ -197,11 +197,10 @@ def finish_display(result: Measurements, solver: Solver, target: float, used: in
 
 
 def check_update_frames(frames) -> Sequence:
-    """World frames as a list of parameter-update dicts."""
-    from collections.abc import Mapping
+    """World frames as a list of parameter-update dicts (:func:`.world_input.check_frames`)."""
+    from mincam_sim.render.scene.world_input import check_frames
 
-    if isinstance(frames, Mapping) or not isinstance(frames, Sequence):
-        raise InputError("frames must be a list of parameter-update dicts (one per frame)")
+    check_frames(frames, {})
     return frames
 
 

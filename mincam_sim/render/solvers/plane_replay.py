@@ -241,8 +241,8 @@ class ReplayPlan(Plan):
     def result(self, values: np.ndarray, errors: np.ndarray) -> Measurements:
         meta = {"solver": self.solver.name, "form": "fast_world", "seed": self.budget.seed,
                 "replicates": self.replicates, "spp_per_mixel_per_frame": self.budget.rays()}
-        return Measurements(values.reshape(self.n_rows, -1), errors.reshape(self.n_rows, -1), self.sim.mincam.names,
-                            meta)
+        shape = (self.n_rows, len(self.columns))  # (0, n_mixels) for no frames
+        return Measurements(values.reshape(shape), errors.reshape(shape), self.sim.mincam.names, meta)
 
 
 def _any(mask) -> bool:
