@@ -14,7 +14,9 @@
   ``OUT/points/<index>.json`` (written atomically) holding what was stored. A rerun reuses a point only if its
   record matches the store variable by variable; a damaged point is named and computed again.
 * ``OUT`` is locked while a study runs: a second study there is refused, naming the holder. The store's
-  attributes hold the study's identity; a different study in the same directory is refused unless ``overwrite``.
+  attributes hold the study's identity (for a render config, its text and what every file it names holds, as
+  ``mincam-sim render`` identifies them); a different study in the same directory is refused, naming what
+  changed, unless ``overwrite``.
 * A failed write (a full disk) raises :class:`~mincam_sim.errors.StoreError` naming the file; the point then
   has no completion record, so nothing half-written is ever reused. A store that lacks a variable or a
   coordinate, or whose coordinates no longer hold the study's values, is refused (``--overwrite`` recomputes).
@@ -41,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mincam_sim.errors import ConfigError, OutDirLockedError, StaleResultError, StoreError
+from mincam_sim.errors import ConfigError, IgnoredSettingWarning, OutDirLockedError, StaleResultError, StoreError
 from mincam_sim.experiments.registry import study_target
 from mincam_sim.experiments.study_targets import unit_of
 from mincam_sim.progress import progress
@@ -113,11 +115,48 @@ def compute_point(ref: dict, params: dict, seeds: list[int], quick: bool, metric
     return out
 
 
+def render_config_inputs(config: str | Path) -> dict:
+    """What a render config's numbers are computed from beyond its own text, as ``mincam-sim render``
+    identifies them: the ``scene`` (the mincam, each mixel's mask by its content -- ``file:`` images included --
+    and the screen) and the ``frames`` (a generated sweep's description, or a ``kind = "npy"`` stack's content).
+
+    Built by the render job's own identity code (:func:`~mincam_sim.runs.jobs.display_job`,
+    :meth:`~mincam_sim.render.simulation.Simulation.identity` and
+    :meth:`~mincam_sim.render.simulation.Simulation.frames_identity`), so every file that changes a render's
+    identity changes a study's; nothing is rendered and Mitsuba is not loaded.
+
+    Parameters
+    ----------
+    config : str or Path
+        The render config file (relative paths in it resolve against its folder).
+
+    Returns
+    -------
+    dict
+        ``{"scene": ..., "frames": ...}`` (JSON-able).
+
+    Raises
+    ------
+    ConfigError
+        The config, or a file it names, is no longer valid (a missing mask image, a malformed frame stack).
+    """
+    from mincam_sim.configuration.config import load_config
+    from mincam_sim.runs.jobs import display_job
+
+    with warnings.catch_warnings():  # its ignored keys were named when the study loaded its target
+        warnings.simplefilter("ignore", IgnoredSettingWarning)
+        job = display_job(load_config(Path(config)))
+    return {"scene": job.sim.identity(), "frames": job.sim.frames_identity(job.frames)}
+
+
 def study_identity(spec: StudySpec, quick: bool) -> dict:
-    """Everything that determines the study's numbers."""
+    """Everything that determines the study's numbers: for a render config, its text and the content of every
+    file it names (:func:`render_config_inputs`), not its path."""
     target = dict(spec.experiment.ref)
-    if "config" in target:  # a render config: its content, not its path
-        target = {"name": target["name"], "config": fingerprint(Path(target["config"]).read_text(encoding="utf-8"))}
+    if "config" in target:
+        path = Path(target["config"])
+        target = {"name": target["name"], "config": fingerprint(path.read_text(encoding="utf-8")),
+                  **render_config_inputs(path)}
     return canonical(build_identity("study", {
         "experiment": target, "dims": spec.dims, "points": spec.points, "metrics": list(spec.metrics),
         "seed": spec.seed, "replicates": spec.replicates, "common_random_numbers": spec.common_random_numbers,
@@ -435,7 +474,8 @@ def _run_locked(spec: StudySpec, out: Path, plan: _Plan, say: Callable[[str], No
     if store.exists():
         ds, old = _open(store)
         if old != identity:
-            changed = ", ".join(diff_identities(old, identity)) or "its identity"
+            # deep enough to name a render config's changed file: experiment.scene.masks, experiment.frames...
+            changed = ", ".join(diff_identities(old, identity, depth=3)) or "its identity"
             raise StaleResultError(f"{store} holds a different study (changed: {changed}); use another --out or "
                                    "--overwrite to replace it")
         _check_layout(spec, store, ds)

@@ -14,7 +14,7 @@ import pytest
 from study_fixtures import TINY, run_quick
 
 from mincam_sim.errors import ConfigError, OutDirLockedError, StaleResultError, StoreError
-from mincam_sim.studies import load_study, plot_study
+from mincam_sim.studies import load_study, plot_study, run_study
 from mincam_sim.studies import runner as runner_mod
 from mincam_sim.studies.plots import display_scale
 
@@ -157,6 +157,55 @@ def test_a_different_study_in_the_same_dir_is_refused(tmp_path):
     other = {**TINY, "study": {**TINY["study"], "seed": 4}}
     with pytest.raises(StaleResultError, match="different study.*seed"):
         run_quick(load_study(other, quick=True), tmp_path, workers=1)
+
+
+def _render_study(tmp_path: Path) -> dict:
+    """A one-point study over a render config whose mixel's mask is a ``file:`` PNG and whose frames are a
+    ``kind = "npy"`` stack (both beside the config)."""
+    from mincam_sim.storage.imageio import write_png
+
+    write_png(tmp_path / "m.png", np.tile(np.linspace(0.0, 1.0, 16), (16, 1)))
+    frames = np.full((2, 18, 32), 0.5)
+    frames[0, :, :8] = frames[1, :, 8:16] = 2.0  # bright on the left: a mirrored mask sees other numbers
+    np.save(tmp_path / "frames.npy", frames)
+    (tmp_path / "cfg.toml").write_text(
+        '[run]\nsolver = "dot_product"\n[mincam]\nlayout = "custom"\n'
+        '[[mixel]]\nname = "a"\nmask = "file:m.png"\nposition_m = [0.0, 0.0, 0.0]\n'
+        '[screen]\nresolution = [32, 18]\ndistance_m = 0.5\n[frames]\nkind = "npy"\npath = "frames.npy"\n')
+    return {"study": {"name": "files", "experiment": "render", "config": str(tmp_path / "cfg.toml"), "seed": 0},
+            "grid": {"mincam": {"d_f_m": [0.001, 0.002]}}}
+
+
+@pytest.mark.filterwarnings("ignore:.*seed is ignored.*dot_product")  # the study sets each point's run seed
+def test_a_changed_file_of_a_render_config_refuses_the_store_and_an_unchanged_one_reuses_it(tmp_path):
+    """The study's identity holds what every file its render config names holds (a ``file:`` mask, an ``npy``
+    frame stack), as ``mincam-sim render`` identifies them: a changed file refuses the store naming what changed,
+    like a changed seed; ``overwrite`` computes the new numbers; an unchanged rerun reuses every point."""
+    from mincam_sim.storage.imageio import write_png
+
+    raw = _render_study(tmp_path)
+    out = tmp_path / "out"
+
+    def run(**kw):
+        return run_study(load_study(raw), workers=1, out_dir=out, show_progress=False, **kw)
+
+    first, summary = run()
+    metric = "a.mean_irradiance_w_m2"
+    assert summary["points_computed"] == 2 and np.all(np.isfinite(first[metric].values))
+    assert run()[1]["points_reused"] == 2  # nothing changed: reused
+
+    write_png(tmp_path / "m.png", np.tile(np.linspace(1.0, 0.0, 16), (16, 1)))  # the mask file, mirrored
+    with pytest.raises(StaleResultError, match=r"different study \(changed: experiment\.scene\.masks.*--overwrite"):
+        run()
+    mirrored, summary = run(overwrite=True)
+    assert summary["points_computed"] == 2 and not np.allclose(mirrored[metric].values, first[metric].values)
+    assert run()[1]["points_reused"] == 2
+
+    np.save(tmp_path / "frames.npy", 2.0 * np.load(tmp_path / "frames.npy"))  # the frame stack, brighter
+    with pytest.raises(StaleResultError, match=r"changed: experiment\.frames\.content_sha256\)"):
+        run()
+    brighter, _ = run(overwrite=True)
+    np.testing.assert_allclose(brighter[metric].values, 2.0 * mirrored[metric].values, rtol=1e-9)
 
 
 REFUSED = [
