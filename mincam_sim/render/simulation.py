@@ -85,6 +85,7 @@ Updates = Mapping[str, np.ndarray]
 DEFAULT_SOLVERS = {"display": ResponseMap, "world": Aperture}  # Simulation.measure's solver by scene kind
 DEFAULT_MAX_DEPTH = 3  # world scenes without a given depth or a file's integrator: one inter-reflection
 MAX_FILE_DEPTH = 16  # a file's unbounded (-1) or longer max_depth is taken as this
+MOVING_SUFFIXES = (".to_world", ".vertex_positions", ".position")  # the parameters that move a shape or light
 
 
 class Simulation:
@@ -279,7 +280,7 @@ class Simulation:
         positions, point and spot lights (not the ground-truth camera, an environment, shapes a loaded scene gave
         without an id, or the mincam's bodies)."""
         keys = set(self._params.keys())
-        names = {key.split(".", 1)[0] for key in keys if key.endswith((".to_world", ".vertex_positions", ".position"))}
+        names = {key.split(".", 1)[0] for key in keys if key.endswith(MOVING_SUFFIXES)}
         directional = {e.id() for e in self.scene.emitters() if e.is_environment() or
                        int(e.flags()) & int(backend.mitsuba().EmitterFlags.Infinite)}
         return sorted(names - directional - {CAMERA_KEY} - self._own - self._loaded.static)
@@ -789,8 +790,15 @@ def _unknown_parameter(key: str, known, own: bool) -> str:
     if own:
         return (f"{key!r} belongs to the mincam's own body or sensor; move the mixels through the Mincam, not the "
                 "scene")
-    close = difflib.get_close_matches(str(key), list(known), n=3)
-    hint = f"; did you mean {', '.join(map(repr, close))}?" if close else "; see the renderer's params.keys()"
+    name = str(key).split(".", 1)[0]
+    own_keys = sorted((k for k in known if k.split(".", 1)[0] == name),
+                      key=lambda k: (not k.endswith(MOVING_SUFFIXES), k))
+    if own_keys:  # a known shape or light: what it has (a cube, a mesh, moves by its vertex positions)
+        more = f" and {len(own_keys) - 4} more" if len(own_keys) > 4 else ""
+        hint = f"; '{name}' has {', '.join(map(repr, own_keys[:4]))}{more}"
+    else:
+        close = difflib.get_close_matches(str(key), list(known), n=3)
+        hint = f"; did you mean {', '.join(map(repr, close))}?" if close else "; see the renderer's params.keys()"
     return f"unknown scene parameter {key!r}{hint}"
 
 

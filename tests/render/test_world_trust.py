@@ -147,7 +147,7 @@ BAD_UPDATES = {
     "projective transform": ({"floor.to_world": np.vstack([np.eye(4)[:3], [0.5, 0.0, 0.0, 1.0]])},
                              r"last row of a transform must be \[0, 0, 0, 1\]"),
     "a key that is no string": ({1: np.eye(4)}, "a key must be a 'name.parameter' string"),
-    "unknown key": ({"toy.vertex_position": np.zeros(9)}, "did you mean 'toy.vertex_positions'"),
+    "unknown key": ({"toy.vertex_position": np.zeros(9)}, "'toy' has 'toy.vertex_positions'"),
     "the mincam's own body": ({"mincam_bodies.vertex_positions": np.zeros(120)}, "mincam's own body"),
 }
 
@@ -158,6 +158,13 @@ def test_bad_updates_are_one_clear_error(case):
     update, message = BAD_UPDATES[case]
     with pytest.raises(InputError, match=message):
         world.update(update)
+
+
+def test_a_cube_moved_by_its_transform_is_told_its_vertices():
+    """Mitsuba's cube is a mesh: its ``to_world`` is applied when it is built, so an update names the vertices."""
+    world, _ = _simple_world(cube={"type": "cube", "to_world": sd._transform(np.diag([0.02, 0.02, 0.02, 1.0]))})
+    with pytest.raises(InputError, match="unknown scene parameter 'cube.to_world'; 'cube' has 'cube.vertex_positions'"):
+        world.update({"cube.to_world": np.eye(4)})
 
 
 def test_no_frames_measure_nothing():
