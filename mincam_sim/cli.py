@@ -122,6 +122,15 @@ def _fail_line(message: str, code: int = 2) -> typer.Exit:
     return typer.Exit(code)
 
 
+class _CarriedBug(Exception):
+    """A bug's error carried past click's ``main``, which would answer an ``EOFError`` with "aborted" (meant for an
+    input prompt at the end of stdin; no command here prompts) and drop its traceback; raised again as it was."""
+
+    def __init__(self, error: BaseException) -> None:
+        super().__init__(repr(error))
+        self.error = error
+
+
 class _MincamGroup(TyperGroup):
     """Top-level command group: turns user errors into one line on stderr and exit code 2, in one place."""
 
@@ -135,6 +144,8 @@ class _MincamGroup(TyperGroup):
                 # a Ctrl-C that landed in an import can come out as another error (a module left half-imported)
                 raise KeyboardInterrupt from None
             if isinstance(err, KeyboardInterrupt | SystemExit) or _state["debug"] or not _is_user_error(err):
+                if isinstance(err, EOFError):  # a reader that let a file's end through: a bug, with its traceback
+                    raise _CarriedBug(err) from None
                 raise
             raise _fail_line(user_error_message(err)) from None
 
@@ -147,10 +158,13 @@ class _MincamGroup(TyperGroup):
         recording = signal.getsignal(signal.SIGINT) is signal.default_int_handler
         if recording:  # SIGINT left as Python's (not ignored, not the caller's own handler): counted as well
             signal.signal(signal.SIGINT, interrupts.recording_handler)
+        bug: BaseException | None = None
         try:
             rv = super().main(args=args, prog_name=prog_name, complete_var=complete_var, standalone_mode=False,
                               **extra)
             code = rv if isinstance(rv, int) else 0
+        except _CarriedBug as carried:
+            bug = carried.error
         except ClickException as err:
             ctx = getattr(err, "ctx", None)
             if type(err).__name__ == "NoArgsIsHelpError":  # a bare command group: its help, as usual
@@ -166,6 +180,8 @@ class _MincamGroup(TyperGroup):
         finally:
             if recording:
                 signal.signal(signal.SIGINT, signal.default_int_handler)
+        if bug is not None:
+            raise bug  # outside the handler: its traceback and its own cause as they were
         if code == 130:  # Ctrl-C (typer turns KeyboardInterrupt into exit code 130)
             typer.echo("error: interrupted; results written so far are kept, and the same command resumes", err=True)
         if standalone_mode:
@@ -386,8 +402,8 @@ def render(
     from mincam_sim.configuration.config import solver_name
     from mincam_sim.configuration.toml_files import read_document
     from mincam_sim.plotting.plots import plot_render, plot_response_maps
-    from mincam_sim.render.solvers import Reference, ResponseMap
-    from mincam_sim.runs.jobs import check_budget, config_summary, run_render_config
+    from mincam_sim.render.solvers import Reference
+    from mincam_sim.runs.jobs import MAP_SOLVERS, check_budget, config_summary, run_render_config
 
     if not (np.isfinite(time_limit_s) and time_limit_s > 0):
         raise ConfigError(f"--time-limit-s must be a positive number of seconds, got {time_limit_s}")
@@ -424,8 +440,10 @@ def render(
     figures = [plot_render(m, out / "measurements.png", cfg.frame_positions_m, cfg.frames_kind)]
     if maps is not None:
         figures.append(plot_response_maps(maps, cfg.screen, out / "response_maps.png"))
-    elif isinstance(cfg.run.solver, ResponseMap) and (out / "response_maps.png").is_file():
-        figures.append(out / "response_maps.png")  # a finished run shown again: its maps' figure is still there
+    elif isinstance(cfg.run.solver, MAP_SOLVERS) and (out / "response_maps.png").is_file():
+        # a finished run shown again: its maps' figure is still there (run_render_config returns the maps when
+        # one of their outputs is missing; --overwrite deletes the figure of the run it replaces)
+        figures.append(out / "response_maps.png")
     np.set_printoptions(precision=6, suppress=False, linewidth=120)
     typer.echo(f"# {m.n_frames} frames x {len(m.mixel_names)} mixels, irradiance [W/m^2] +/- stderr, "
                f"variant {m.meta.get('variant')}, worst relative stderr {m.meta['reached_rel_stderr']:.2e}")

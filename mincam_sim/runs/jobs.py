@@ -23,9 +23,9 @@ CSV.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import warnings
-import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,7 +37,7 @@ from mincam_sim.budget import Budget
 from mincam_sim.changes import Changes
 from mincam_sim.configuration.config import RenderConfig, solver_name, traced_samples
 from mincam_sim.configuration.world_config import CameraSpec, WorldConfig, is_gltf
-from mincam_sim.errors import ConfigError
+from mincam_sim.errors import ConfigError, StoreError
 from mincam_sim.measurements import Measurements
 from mincam_sim.render import backend
 from mincam_sim.render.scene import scene_dicts as sd
@@ -54,7 +54,7 @@ from mincam_sim.render.solvers import (
     Solver,
     StratifiedChange,
 )
-from mincam_sim.runs.run import Run
+from mincam_sim.runs.run import UNREADABLE_NPZ, Run
 from mincam_sim.storage.atomic import atomic_path, atomic_save_npz
 from mincam_sim.storage.identity import fingerprint
 
@@ -95,10 +95,13 @@ def run_render_config(cfg: RenderConfig, show_progress: bool = False, overwrite:
 
     With ``time_limit_s``, a render estimated to take longer (:func:`check_budget`) is refused before anything is
     written. The output directory is one :class:`~mincam_sim.runs.run.Run`: a rerun resumes or returns the finished
-    result, a different run is refused unless ``overwrite``. ``say`` is told when the sample count traced
-    differs from the one asked (:func:`~mincam_sim.configuration.config.traced_samples`). ``maps`` are the response
-    maps the
-    measurements used (the ``response_map`` solver; also written as ``response_maps/*.exr``), else None.
+    result, a different run is refused unless ``overwrite`` (which first deletes the outputs this package wrote
+    there, :func:`remove_outputs`). ``say`` is told when the sample count traced differs from the one asked
+    (:func:`~mincam_sim.configuration.config.traced_samples`), when a finished result is shown again or was
+    damaged, and when missing response maps are written again. ``maps`` are the response maps the measurements
+    used (the ``response_map`` and ``dot_product`` solvers; also written as ``response_maps/*.exr``), else None;
+    after a rerun of a finished run they are None unless one of their outputs (:func:`maps_outputs`) was
+    missing: then they are made again (the run's map cache holds the traced ones) and returned.
     """
     if time_limit_s is not None:
         check_budget(cfg, backend.variant(), time_limit_s)
@@ -108,10 +111,20 @@ def run_render_config(cfg: RenderConfig, show_progress: bool = False, overwrite:
     if rounding is not None and say is not None and (overwrite or not (out / RESULT).is_dir()):
         say(f"mincam-sim: {rounding}")  # on a fresh start only: a resumed run said it when it started
     with Run(out, overwrite=overwrite, show_progress=show_progress) as run:
+        if overwrite:
+            remove_outputs(out)
         m = run.measure(job.sim, job.frames, job.solver, job.budget, name=RESULT)
         _say_if_reused(run, out, say)
-        # the ResponseMap solver's result carries the maps it used (None after a reuse: their figure stays)
+        # the map solvers' result carries the maps it used; a finished run shown again has none: they are made
+        # again only if an output of theirs is missing (a run killed, or a disk full, after measurements.npz)
         maps = getattr(m, "maps", None)
+        if maps is None and isinstance(job.solver, MAP_SOLVERS):
+            missing = [p for p in maps_outputs(out, m.mixel_names) if not p.is_file()]
+            if missing:
+                if say is not None:
+                    say(f"mincam-sim: {out} lacks this run's {', '.join(_rel(p, out) for p in missing)}: making "
+                        "the response maps again (from the run's map cache, tracing what it lacks)")
+                maps = _maps_again(job, run, show_progress)
         if maps is not None:
             maps.save_exr(out / "response_maps")
         if "positions_m" in job.columns:
@@ -125,8 +138,77 @@ def run_render_config(cfg: RenderConfig, show_progress: bool = False, overwrite:
     return m, maps
 
 
+#: The solvers whose result carries response maps (``m.maps``): written as ``response_maps/*.exr`` (and by
+#: ``render`` as ``response_maps.png``).
+MAP_SOLVERS = (ResponseMap, DotProduct)
+#: The files a render writes into its output directory besides its store (``OUT/measurements/``):
+#: :func:`remove_outputs` deletes these (and ``response_maps/response_*.exr``) before an overwrite.
+OUTPUT_FILES = (f"{RESULT}.npz", f"{RESULT}.csv", f"{RESULT}.png", "response_maps.png", "dP.png", "camera.npz")
+
+
+def maps_outputs(out: Path, mixel_names) -> list[Path]:
+    """The response maps' outputs of a display run in ``out``: one OpenEXR per mixel, named as
+    ``ResponseMaps.save_exr`` names it (``response_<mixel>.exr``, characters other than letters, digits, ``-`` and
+    ``_`` replaced by ``_``), and ``response_maps.png``."""
+    def safe(name: str) -> str:
+        return "".join(c if c.isalnum() or c in "-_" else "_" for c in name)
+
+    return [*(out / "response_maps" / f"response_{safe(name)}.exr" for name in mixel_names),
+            out / "response_maps.png"]
+
+
+def remove_outputs(out: Path) -> list[Path]:
+    """Delete the outputs an earlier run wrote in ``out`` (:data:`OUTPUT_FILES` and ``response_maps/
+    response_*.exr``; ``response_maps/`` itself once empty) before an overwrite replaces the run, so none of
+    them is left beside the new run's; return what was deleted. Other files are left alone; the store is
+    replaced by the run itself (:class:`~mincam_sim.storage.store.ResultStore`).
+
+    Raises
+    ------
+    StoreError
+        A file cannot be deleted (naming it).
+    """
+    maps_dir = out / "response_maps"
+    paths = [out / name for name in OUTPUT_FILES]
+    if maps_dir.is_dir():
+        paths += sorted(maps_dir.glob("response_*.exr"))
+    removed = []
+    for path in paths:
+        if path.is_file() or path.is_symlink():
+            try:
+                path.unlink()
+            except OSError as err:
+                raise StoreError(f"cannot delete {path} (an output of the run --overwrite replaces): "
+                                 f"{err.strerror or err}; delete it by hand or choose another output directory") \
+                    from None
+            removed.append(path)
+    if maps_dir.is_dir() and not any(maps_dir.iterdir()):
+        with contextlib.suppress(OSError):  # left in place: empty, nothing stale in it
+            maps_dir.rmdir()
+    return removed
+
+
+def _maps_again(job: Job, run: Run, show_progress: bool) -> Any:
+    """The response maps a finished run of ``job`` used, made again as its solver made them: the response map
+    solver's from the run's map cache (``OUT/measurements/cache``; traced again where it lacks them, to the same
+    numbers), the dot-product model's computed again (exact)."""
+    if isinstance(job.solver, ResponseMap):
+        maps, _ = job.solver.maps(job.sim, job.budget, job.frames, run.sink(RESULT).cache, show_progress)
+        return maps
+    return job.solver.maps(job.sim.mincam, job.sim.screen, show_progress)
+
+
+def _rel(path: Path, out: Path) -> str:
+    return path.relative_to(out).as_posix()
+
+
 def _say_if_reused(run: Run, out: Path, say: Callable[[str], None] | None) -> None:
-    if RESULT in run.reused and say is not None:
+    if say is None:
+        return
+    if RESULT in run.unreadable:
+        say(f"mincam-sim: {out / RESULT}.npz is damaged or unreadable ({run.unreadable[RESULT]}): it was computed "
+            "again (from the run's per-frame store where it holds the frames) and replaced")
+    if RESULT in run.reused:
         say(f"mincam-sim: {out} holds this same run, finished: its results are shown again without rendering "
             "(--overwrite recomputes)")
 
@@ -159,6 +241,8 @@ def run_world_config(cfg: WorldConfig, show_progress: bool = False, overwrite: b
     out = Path(cfg.run.out_dir)
     with Run(out, overwrite=overwrite, show_progress=show_progress) as run:
         job = world_job(cfg)
+        if overwrite:  # once the scene is built: a scene that fails leaves the earlier run's outputs as they were
+            remove_outputs(out)
         ch = run.measure_changes(job.sim, job.frames, job.background, job.solver, job.budget, name=RESULT)
         _say_if_reused(run, out, say)
         columns = dict(job.columns)
@@ -296,10 +380,10 @@ def _ground_truth(sim: Simulation, camera: CameraSpec, frames, background, out: 
     and :data:`GROUND_TRUTH_METHOD`); with ``reuse``, a file that holds the same ``key`` is read back instead of
     rendering."""
     path = out / "camera.npz"
-    kept = _kept_ground_truth(path, key) if reuse and key else None
+    kept, why = _kept_ground_truth(path, key) if reuse and key else (None, "")
     if kept is None:
-        if reuse and key and path.is_file() and say is not None:
-            say(f"mincam-sim: {path} was rendered for other settings (camera, scene or method): rendering it again")
+        if why and say is not None:
+            say(f"mincam-sim: {path} {why}: rendering it again")
         kept = _render_ground_truth(sim, camera, frames, background)
         atomic_save_npz(path, background=kept["background"], frames=kept["frames"],
                         change_centroid_row_px=kept["rows"], change_centroid_col_px=kept["cols"],
@@ -309,17 +393,22 @@ def _ground_truth(sim: Simulation, camera: CameraSpec, frames, background, out: 
     return kept["rows"], kept["cols"]
 
 
-def _kept_ground_truth(path: Path, key: str) -> dict | None:
-    """The ground truth in ``path`` if it was written with ``key`` (else None: absent, another key, unreadable)."""
+def _kept_ground_truth(path: Path, key: str) -> tuple[dict | None, str]:
+    """(the ground truth in ``path`` if it was written with ``key``, else None; why not, for the user: ``""``
+    when there is no file, else that it was rendered for other settings or is damaged or unreadable)."""
+    if not path.is_file():
+        return None, ""
     try:
         with np.load(path) as data:
             if str(data["identity_key"]) != key:
-                return None
+                return None, "was rendered for other settings (camera, scene or method)"
             return {"background": data["background"], "frames": data["frames"],
                     "rows": data["change_centroid_row_px"], "cols": data["change_centroid_col_px"],
-                    "scale": float(data["threshold_scale_w_m2_sr"])}
-    except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile):  # absent, older, damaged: render anew
-        return None
+                    "scale": float(data["threshold_scale_w_m2_sr"])}, ""
+    except KeyError as err:  # an npz without an array this one has: another program's, or older code's
+        return None, f"is not a camera file of this version ({err.args[0] if err.args else 'an array is missing'})"
+    except UNREADABLE_NPZ as err:  # damaged: torn, empty, not an npz
+        return None, f"is damaged or unreadable ({type(err).__name__}: {err})".replace(": )", ")")
 
 
 def _render_ground_truth(sim: Simulation, camera: CameraSpec, frames, background) -> dict:

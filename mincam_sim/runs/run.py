@@ -20,6 +20,9 @@ the number of stores in it. An in-memory measurement (``sim.measure(...)`` witho
 
 from __future__ import annotations
 
+import tokenize
+import zipfile
+import zlib
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -33,6 +36,13 @@ from mincam_sim.render.solvers import Solver
 from mincam_sim.storage import identity
 from mincam_sim.storage.identity import run_key
 from mincam_sim.storage.store import DirLock, StoreSink, check_identity, clear_store, lock_out_dir
+
+#: What reading a damaged or foreign ``.npz`` result raises (numpy and zipfile; found by cutting a result short at
+#: every length and changing bytes in it): an empty file ``EOFError``, one cut short ``zipfile.BadZipFile``, a
+#: changed byte ``BadZipFile`` (CRC), ``ValueError``, ``KeyError``, ``NotImplementedError`` (a compression
+#: method), ``tokenize.TokenError`` or ``SyntaxError`` (an array's header). Such a file is computed again.
+UNREADABLE_NPZ = (OSError, ValueError, KeyError, EOFError, NotImplementedError, SyntaxError, zipfile.BadZipFile,
+                  zlib.error, tokenize.TokenError)
 
 
 def run_identity(sim: Simulation, frames, solver: Solver, budget: Budget, background=None) -> dict:
@@ -67,6 +77,9 @@ class Run:
         self._recorded: Any = None  # the identity record_identity last recorded or checked
         #: Names of the results this run returned as they were, finished by an earlier run (nothing rendered).
         self.reused: list[str] = []
+        #: Results whose finished file was damaged or unreadable (name -> what reading it raised): computed again
+        #: (from the per-frame store where it holds the frames) and written anew.
+        self.unreadable: dict[str, str] = {}
 
     def __enter__(self) -> Run:
         self._lock = lock_out_dir(self.out_dir, self.what)
@@ -112,18 +125,23 @@ class Run:
 
     def _finished(self, name: str, key: str, kind):
         """The finished result in ``out_dir/name.npz`` if it carries this identity key (else None); a result
-        returned is named in :attr:`reused`."""
+        returned is named in :attr:`reused`, a damaged or unreadable file (torn, empty, foreign) in
+        :attr:`unreadable` (it is computed again and replaced). Its CSV, if missing, is written again."""
         path = self.out_dir / f"{name}.npz"
         if self.overwrite or not path.is_file():
             return None
         try:
             done = kind.load_npz(path)
-        except (OSError, ValueError, KeyError):
+        except UNREADABLE_NPZ as err:
+            self.unreadable[name] = f"{type(err).__name__}: {err}".rstrip(": ")
             return None
         meta = done.dp.meta if isinstance(done, Changes) else done.meta
         if meta.get("identity_key") != key:
             return None
         self.reused.append(name)
+        csv = self.out_dir / f"{name}.csv"
+        if not csv.is_file():
+            done.save_csv(csv)
         return done
 
     def _open_sink(self, name: str, identity: dict, lock: DirLock) -> StoreSink:

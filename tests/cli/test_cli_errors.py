@@ -117,6 +117,15 @@ def _unlink(rel: str) -> Callable[[Path], None]:
     return lambda tmp: (tmp / rel).unlink(missing_ok=True)
 
 
+def _cut(rel: str) -> Callable[[Path], None]:
+    """Cut a file to half its length (as a copy or a disk that failed halfway leaves it)."""
+    def act(tmp: Path) -> None:
+        data = (tmp / rel).read_bytes()
+        (tmp / rel).write_bytes(data[: len(data) // 2])
+
+    return act
+
+
 R = ["render", "c.toml"]
 SINE = '{kind = "sinusoid", omega_rad_per_m = 3000.0, a0 = 0.5, a1 = 0.5, phase_rad = %s}'
 
@@ -260,6 +269,14 @@ CASES: list[Case] = [
     Case("rerun_after_wrong_shape_values_npy", R, {"c.toml": toml()}, pre=[R],
          between=_both(_unlink("out/measurements.npz"), _write("out/measurements/values.npy", _npy(np.zeros((5, 5))))),
          keywords=("values.npy",)),
+    Case("rerun_after_empty_measurements_npz", R, {"c.toml": toml()}, pre=[R],
+         between=_write("out/measurements.npz", b""), expect="ok", notes=("measurements.npz is damaged",),
+         outputs=("out/measurements.npz",)),
+    Case("rerun_after_torn_measurements_npz", R, {"c.toml": toml()}, pre=[R], between=_cut("out/measurements.npz"),
+         expect="ok", notes=("measurements.npz is damaged",), outputs=("out/measurements.npz",)),
+    Case("rerun_after_the_response_maps_were_lost", R, {"c.toml": toml()}, pre=[R],
+         between=_both(_unlink("out/response_maps.png"), _unlink("out/response_maps/response_x.exr")), expect="ok",
+         notes=("response maps again",), outputs=("out/response_maps.png", "out/response_maps/response_x.exr")),
     # --- inputs a new user tried (outputs, print sheets, budgets, what runs)
     Case("config_with_utf8_bom", R, {"c.toml": b"\xef\xbb\xbf" + toml().encode()}, expect="ok"),
     Case("reproduce_bit_depth_1", ["reproduce", "intrusion", "--quick", "--bit-depth", "1"],
