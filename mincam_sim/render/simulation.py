@@ -31,7 +31,7 @@ import difflib
 import functools
 import os
 import warnings
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from os import PathLike
 from pathlib import Path
 
@@ -191,6 +191,7 @@ class Simulation:
         skip = self._own | {CAMERA_KEY}
         warn_if_implausible_size(self.scene, self.scene_mincam, skip, self.unit_m)
         warn_if_inside(self.scene, self.scene_mincam, skip)
+        self._restore: dict[str, object] = {}  # what the last run set, to put back with the next update
         self._params = WorldParameters(self)
         self.known_parts: dict[str, list] = {}  # instance name -> the shapes of the group it draws (change_geometry)
         self._mirrors = delta_surfaces(self.scene, self.known_parts)
@@ -211,12 +212,15 @@ class Simulation:
     def params(self) -> WorldParameters:
         """The world's parameters in world coordinates (read-only mapping; see :class:`WorldParameters`)."""
         self._require_world("parameters and updates")
+        self._put_back()
         return self._params
 
     def update(self, updates: Updates) -> None:
         """Set world parameters (numpy arrays or Mitsuba values; positions in world coordinates [m], as
         :attr:`params` reads them) and apply them without reloading."""
         self._check_updates(updates)
+        if self._restore:  # what the last run set goes back with this update, in one rebuild
+            updates, self._restore = {**self._restore, **updates}, {}
         for key in updates:
             self._remember_as_built(key)
         updates = self._new_values(updates)
@@ -273,7 +277,7 @@ class Simulation:
 
     def _remember_as_built(self, key: str) -> None:
         if key not in self._as_built and key in self._params:
-            self._as_built[key] = self._params[key]
+            self._as_built[key] = self._world_value(key)  # never set before: as built, with nothing to put back
 
     def movable(self) -> list[str]:
         """Names of the user's shapes and lights that updates can move: shapes with a ``to_world`` or vertex
@@ -321,6 +325,10 @@ class Simulation:
         """Parameter ``key`` as :meth:`update` takes it back, in world coordinates: positions (``to_world``
         as a 4 x 4 matrix, ``vertex_positions`` flat (3 n,), a point light's ``position``) as float64 numpy,
         anything else as a copy of the Mitsuba value."""
+        self._put_back()
+        return self._world_value(key)
+
+    def _world_value(self, key: str):
         value = _param_value(self.mincam_scene.params[key])
         return _shift(key, value, self.scene_origin_m) if key in self._shifted else value
 
@@ -338,6 +346,7 @@ class Simulation:
     def change_reach(self, moving: Sequence[str], scene=None) -> tuple[ApertureRegions, list | None, list[str]]:
         """:meth:`change_regions`, :meth:`change_guide` and why a change is unbounded, from one look at the
         scene (``scene``: the world as a static split has it, else the world scene)."""
+        self._put_back()
         each, spheres, reasons = self.change_reach_each(moving, scene)
         regions = ApertureRegions.empty(self.mincam)
         for part in each:
@@ -348,6 +357,7 @@ class Simulation:
                           scene=None) -> tuple[list[ApertureRegions], list | None, list[str]]:
         """:meth:`change_reach` with the regions of each named shape apart (in sorted name order; each one's
         own and its mirror images' bounding rectangle), or ``[whole aperture]`` if a change is unbounded."""
+        self._put_back()
         scene = self.scene if scene is None else scene
         points, regions = self._reach_of_each(sorted(moving), scene)
         reasons = [why for _, why in regions.values() if why]
@@ -367,6 +377,7 @@ class Simulation:
         """Each named shape's aperture regions on its own (its own and its mirror images' bounding rectangle; the
         whole aperture where its change is unbounded) and why it is unbounded ("" if not), from one look at the
         scene: what :meth:`change_reach` of each name alone gives, without the guides."""
+        self._put_back()
         return self._reach_of_each(sorted(moving), self.scene)[1]
 
     def _reach_of_each(self, names: list[str], scene) -> tuple[dict, dict]:
@@ -396,6 +407,7 @@ class Simulation:
     def camera_image(self, spp: int = 64, seed: int = 0) -> np.ndarray:
         """The ground-truth camera's image [W m^-2 sr^-1], row 0 at the top (world scenes)."""
         self._require_world("ground-truth cameras")
+        self._put_back()
         key = self._camera_freeze_key()
         image = self.mincam_scene.camera_image(spp, seed, freeze=key)
         if key is not None:
@@ -427,7 +439,7 @@ class Simulation:
             if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < least:
                 raise InputError(f"camera_changes: {name} (samples per pixel) must be an integer >= {least}, got "
                                  f"{value!r}")
-        with self._world_kept():
+        with self._world_kept({*background, *(key for frame in frames for key in frame)}):
             if self._film_projection is None:
                 self._film_projection = FilmProjection(self.camera)
             self.update(background)
@@ -581,26 +593,46 @@ class Simulation:
             require_light(self.scene)
         self._warn_ignored_budget(solver, budget)
         sink = MemorySink() if sink is None else sink
-        with self._world_kept():
+        sets = () if self.kind != "world" else {
+            *(background or {}), *(key for frame in (frames if isinstance(frames, Sequence) else ())
+                                   if isinstance(frame, Mapping) for key in frame)}
+        with self._world_kept(sets):
             plan = solver.plan(self, frames, budget, background=background, cache=sink.cache,
                                show_progress=show_progress)
             table = sink.open(plan.n_rows, plan.columns)
             return plan.result(*collect(plan.rows(table.pending()), table))
 
     @contextlib.contextmanager
-    def _world_kept(self) -> Iterator[None]:
-        """Puts every world parameter a run sets back to its value before the run when the run ends (also by an
-        error or an interrupt): a run's frames and background are its own, and the next run starts from the
-        world as the caller left it (as built, plus what :meth:`update` set)."""
+    def _world_kept(self, sets: Iterable[str] = ()) -> Iterator[None]:
+        """A run's frames and background are its own: when the run ends (also by an error or an interrupt) every
+        world parameter it set goes back to its value before the run, and the next run, :attr:`params`, the
+        camera and the change regions see the world as the caller left it (as built, plus what :meth:`update`
+        set). The values go back with the next update (a next run that sets the same background rebuilds
+        nothing) or before the world is next read; ``sets`` (the keys this run sets) wait for the run's own
+        first update, the others go back now."""
         if self.kind != "world":
             yield
             return
-        before = {key: self.world_value(key) for key in self._as_built}
+        sets = set(sets)
+        if self._restore and any(key not in sets for key in self._restore):
+            now = {key: value for key, value in self._restore.items() if key not in sets}
+            later = {key: value for key, value in self._restore.items() if key in sets}
+            self._restore = {}
+            self.update(now)
+            self._restore = later
+        before = {key: self._restore[key] if key in self._restore else self._world_value(key)
+                  for key in self._as_built}
         try:
             yield
         finally:
             # a parameter first set during the run was as built before it
-            self.update({key: before.get(key, value) for key, value in self._as_built.items()})
+            self._restore = {key: before.get(key, value) for key, value in self._as_built.items()
+                             if not _same_value(self._last_set.get(key), before.get(key, value))}
+
+    def _put_back(self) -> None:
+        """Apply what the last run leaves to put back (:meth:`_world_kept`) before the world is read."""
+        if self._restore:
+            self.update({})
 
     def _warn_ignored_budget(self, solver: Solver, budget: Budget) -> None:
         """One warning naming the budget fields ``solver`` does not read on this scene (nothing is refused)."""
@@ -784,6 +816,12 @@ def _param_value(value):
     if isinstance(value, (bool, int, float)):
         return value
     return type(value)(np.array(value))
+
+
+def _same_value(last, value) -> bool:
+    """True if ``last`` (the value an update set last, or None) is known to equal ``value`` (numpy values only)."""
+    return (isinstance(last, np.ndarray) and isinstance(value, np.ndarray) and last.shape == value.shape
+            and bool(np.array_equal(last, value)))
 
 
 def _unknown_parameter(key: str, known, own: bool) -> str:

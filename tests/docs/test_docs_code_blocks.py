@@ -158,7 +158,7 @@ def _readme_prints_the_sweep(out: str) -> None:
 def _python_api_prints_its_refusals(out: str) -> None:
     # the errors block prints each refusal: three InputErrors and one ConfigError, each naming the fix
     assert out.count("InputError:") >= 4 and "ConfigError:" in out, out
-    assert "did you mean 'toy_car.vertex_positions'" in out, out
+    assert "'toy_car' has 'toy_car.vertex_positions'" in out, out
 
 
 CHECKS: dict[str, Callable[[str], None]] = {"README.md": _readme_prints_the_sweep,

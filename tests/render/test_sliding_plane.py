@@ -212,7 +212,7 @@ def test_the_front_door_replays_what_the_aperture_solver_traces():
     assert replayed.meta["solver"] == "plane_replay"
     with pytest.raises(InputError, match=r"frames\[0\] sets \['sky.radiance.value'\]"):
         sim.measure([{"sky.radiance.value": 2.0}], solver=ms.PlaneReplay("road"), budget=budget)
-    with pytest.raises(InputError, match=r"frames\[1\] must be a parameter-update dict, got list"):
+    with pytest.raises(InputError, match=r"frames\[1\] must be a dict 'name.parameter' -> value, got list"):
         sim.measure([{}, ["road.to_world"]], solver=ms.PlaneReplay("road"), budget=budget)
     with pytest.raises(InputError, match="no parameter 'lawn.to_world'"):
         sim.measure(frames, solver=ms.PlaneReplay("lawn"), budget=budget)

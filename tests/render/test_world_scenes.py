@@ -302,8 +302,10 @@ def test_a_run_leaves_the_world_as_it_found_it(tmp_path):
     moved = sim.params["card.to_world"].copy()
     moved[0, 3] += 0.04
     frames = [{"card.to_world": moved}, {"card.to_world": sim.params["card.to_world"]}]
+    card = sim.params["card.to_world"]
     dp = sim.measure_changes(frames, sim.without("card"), ms.PlainChange(), budget).dp.irradiance_w_m2
     assert np.all(dp < 0)
+    np.testing.assert_array_equal(sim.params["card.to_world"], card)
     np.testing.assert_array_equal(sim.measure([{}], budget=budget).irradiance_w_m2, as_built)
     sim.measure_changes(frames, sim.without("lamp"), ms.PlainChange(), budget)
     np.testing.assert_array_equal(sim.measure([{}], budget=budget).irradiance_w_m2, as_built)

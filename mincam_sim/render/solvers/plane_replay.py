@@ -19,7 +19,7 @@ Mitsuba's own lookup, so it equals the traced frame up to float32 rounding, not 
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -219,9 +219,7 @@ class ReplayPlan(Plan):
         if key not in sim.params:
             raise InputError(f"PlaneReplay(plane={plane!r}): the scene has no parameter {key!r}; name the textured "
                              "rectangle's element")
-        for i, frame in enumerate(self.frames):
-            if not isinstance(frame, Mapping):
-                raise InputError(f"frames[{i}] must be a parameter-update dict, got {type(frame).__name__}")
+        for i, frame in enumerate(self.frames):  # dicts: check_update_frames
             other = sorted(k for k in frame if k != key)
             if other:
                 raise InputError(f"frames[{i}] sets {other}: the PlaneReplay solver replays frames that move only "
