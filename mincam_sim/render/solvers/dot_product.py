@@ -42,7 +42,7 @@ from mincam_sim.progress import progress
 from mincam_sim.render.kernels.map_tracing import FRAME_CHUNK_BYTES, ResponseMaps
 from mincam_sim.render.kernels.mask_eval import mask_model_meta
 from mincam_sim.render.solvers.base import Plan, Row, Solver
-from mincam_sim.scene.display import Screen
+from mincam_sim.scene.display import Screen, check_visible
 
 FRAME_CHUNK = 64  # frames per row chunk (at most FRAME_CHUNK_BYTES of frame data)
 MAX_NODES = 16
@@ -101,6 +101,7 @@ class DotProduct(Solver):
             if m.optics != "geometric":
                 raise InputError(f"mixel {m.name!r} has optics = {m.optics!r}; the dot-product model is geometric: "
                                  "use ResponseMap or Aperture for wave optics")
+        check_visible(screen, mincam)  # the set-ups the ray solvers refuse: a mixel behind the screen, in it, blind
         centre = np.asarray(mincam.centre_m, dtype=np.float64)
         rows, cols = screen.shape
         weights = np.zeros((len(mincam), rows, cols))

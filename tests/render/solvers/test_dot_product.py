@@ -230,3 +230,17 @@ def test_the_tracking_cross_calibrated_on_the_ideal_model_misses_the_physics_unt
     assert spaced["closer"]["avg_error_pct"] < spaced["parallax"]["avg_error_pct"] < spaced["bare"]["avg_error_pct"]
     co_located = _calibrated_on_model_tested_on_physics("cross", 0.0, {"bare": ms.DotProduct()})["bare"]
     assert co_located["avg_error_pct"] <= 0.1 and co_located["max_error_pct"] <= 0.2
+
+
+@pytest.mark.parametrize("where", ["behind the screen", "passes through mixel 'm0''s body"])
+def test_the_idealised_model_refuses_what_the_ray_solvers_refuse(where):
+    """A mixel behind the screen, or a screen through its body: one InputError from every display solver (the
+    dot product, which builds no scene, measured 0 and 0.34 W/m^2 there)."""
+    turned = np.radians(89.9)
+    forward, up = (np.sin(turned), 0.0, np.cos(turned)), (0.0, 1.0, 0.0)
+    screen = ms.Screen(resolution=(16, 9), pose=(ms.Pose((0.0, 0.0, -0.5), (0.0, 0.0, -1.0)) if "behind" in where
+                                                 else ms.Pose((0.0, 0.0, -0.5), forward, up)))
+    sim = ms.Simulation(ms.single(), screen=screen)
+    for solver in (ms.DotProduct(parallax=True, vignetting=True, detector_blur=True), ms.ResponseMap()):
+        with pytest.raises(InputError, match=where):
+            sim.measure([np.ones(screen.shape)], solver=solver)
