@@ -312,7 +312,7 @@ def spectrum(
     is_local_max[1:-1] = (magnitude[1:-1] >= magnitude[:-2]) & (magnitude[1:-1] >= magnitude[2:])
     candidates = np.flatnonzero(is_local_max & (freqs >= f_lo) & (freqs <= f_hi))
     if candidates.size == 0 or magnitude[candidates].max() == 0:
-        raise ValueError(
+        raise NoSpectralPeakError(
             f"no spectral peak between {f_lo:.6g} Hz and {f_hi:.6g} Hz; the signal may be constant or too "
             "short (it needs a few cycles of the sinusoid), or the frequency limits exclude the peak"
         )
@@ -373,6 +373,11 @@ def scene_frequency(omega_df_rad_per_m: float, d_f_m: float, depth_m: ArrayLike)
         raise ValueError(f"depth_m and d_f_m must be finite and > 0, got depth_m={depth_m!r}, d_f_m={d_f_m}")
     result = omega_df_rad_per_m * d_f_m / depth
     return float(result) if result.ndim == 0 else result
+
+
+class NoSpectralPeakError(ValueError):
+    """A signal's spectrum holds no peak in the frequency band searched (a constant signal, or one too short to
+    hold a period of the sinusoid)."""
 
 
 class AliasingError(ValueError):

@@ -31,6 +31,7 @@ from mincam_sim.configuration.toml_files import read_toml_file
 from mincam_sim.errors import ConfigError
 from mincam_sim.estimation.estimators import (
     AliasingError,
+    NoSpectralPeakError,
     check_below_nyquist,
     nyquist_speed,
     scene_frequency,
@@ -173,8 +174,15 @@ def _speed(signal: np.ndarray, rate_hz: float, omega_d: float, v_min: float, ord
     and 1.5 x the fastest speed of interest (the band a speedometer is built for)."""
     f_min = 0.5 * omega_d * v_min / (2 * np.pi)
     f_max = None if v_max is None else min(rate_hz / 2, 1.5 * omega_d * v_max / (2 * np.pi))
-    return float(speed_from_signal(np.diff(signal, n=order), rate_hz, omega_d, min_frequency_hz=f_min,
-                                   max_frequency_hz=f_max))
+    try:
+        return float(speed_from_signal(np.diff(signal, n=order), rate_hz, omega_d, min_frequency_hz=f_min,
+                                       max_frequency_hz=f_max))
+    except NoSpectralPeakError as err:
+        periods = omega_d * v_min * len(signal) / rate_hz / (2 * np.pi)
+        raise ConfigError(f"{err}: the slowest speed crosses {periods:.3g} periods of the mask's sinusoid in its "
+                          f"{len(signal)}-sample record; use more frames (video_frames, vehicle_frames, "
+                          "turn_frames), faster speeds, a shorter [speed] mask_period_m or a nearer [setup] "
+                          "depth_m (the road video's period on the screen grows with the depth)") from None
 
 
 def road_irradiance_by_shift(maps, road: np.ndarray, cols: int, n_shifts: int) -> np.ndarray:

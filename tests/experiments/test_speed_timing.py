@@ -201,3 +201,14 @@ def test_full_mode_errors_jump_with_the_mask_period_so_the_default_stays():
     assert above["draws_with_a_speed_off_by_over_20_pct"] == 0 and above["draws_within_factor_two_of_paper"] < 0.5
     assert above["avg_error_pct_median"] > 2 * SPEED_AVG_ERROR_PCT
     assert within["draws_within_factor_two_of_paper"] > 0.5
+
+
+def test_a_record_too_short_for_the_mask_is_one_config_error():
+    """A signal with no spectral peak in the band searched (the road video at [setup] depth_m = 20 m in quick
+    mode crosses 0.28 periods of the mask; here a flat one): one ConfigError naming what to change, not the
+    estimator's ValueError traceback."""
+    from mincam_sim.experiments.speed import _speed
+
+    rate_hz, omega_d, v = 30.0, 0.005, 60.0  # rad per px and px/s: 0.204 periods in 128 samples
+    with pytest.raises(ConfigError, match=r"crosses 0.204 periods .* nearer \[setup\] depth_m"):
+        _speed(np.ones(128), rate_hz, omega_d, v, order=1, v_max=3 * v)
