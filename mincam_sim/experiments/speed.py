@@ -152,8 +152,15 @@ class SpeedParams:
                 raise ValueError(f"{key} must be > 0, got {getattr(self, key)!r}")
         if min(self.video_shifts_px) < 1 or min(self.vehicle_speeds_m_s) <= 0:
             raise ValueError("video_shifts_px must be >= 1 px and vehicle_speeds_m_s > 0")
-        if len(self.video_resolution) != 2:
-            raise ValueError(f"video_resolution must be [columns, rows], got {list(self.video_resolution)}")
+        if len(self.video_resolution) != 2 or min(self.video_resolution) < 1:
+            raise ValueError(f"video_resolution must be [columns, rows], two positive integers, got "
+                             f"{list(self.video_resolution)}")
+        if self.video_samples_per_texel < 2:
+            raise ValueError(f"video_samples_per_texel must be >= 2 (the spread of its samples gives the response "
+                             f"map's standard error), got {self.video_samples_per_texel!r}")
+        for key in ("vehicle_spp", "turn_spp"):
+            if getattr(self, key) < 2:
+                raise ValueError(f"{key} must be >= 2 rays per mixel and frame, got {getattr(self, key)!r}")
         rendered_px = max(self.video_shifts_px) * self.video_frames
         if self.display_shift_px < 0 or not 0 <= self.display_road_px <= rendered_px:
             raise ValueError(f"display_shift_px must be >= 0 (got {self.display_shift_px!r}) and display_road_px in "
