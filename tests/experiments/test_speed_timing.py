@@ -85,6 +85,9 @@ def test_a_displayed_video_needs_the_road_it_shows():
     ({"display_road_px": 10**6}, "display_road_px"),
     ({"display_shift_px": -1}, "display_shift_px"),
     ({"display_road_px": 64}, "fewer than 16 readings"),
+    ({"video_resolution": (0, 0)}, "video_resolution must be"),
+    ({"video_samples_per_texel": 0}, "video_samples_per_texel must be >= 2"),
+    ({"vehicle_spp": 1}, "vehicle_spp must be >= 2"),
 ])
 def test_bad_display_video_fields_are_refused_naming_the_field(fields, message):
     with pytest.raises(ValueError, match=message):
