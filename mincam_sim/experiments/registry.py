@@ -15,12 +15,13 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from mincam_sim.configuration.config import dataclass_from_section, read_sections
-from mincam_sim.errors import ConfigError, StaleResultError, StoreError
+from mincam_sim.errors import ConfigError, IgnoredSettingWarning, StaleResultError, StoreError
 from mincam_sim.experiments.base import Experiment, ExperimentResult
 from mincam_sim.experiments.intrusion import Intrusion
 from mincam_sim.experiments.setup import Setup
@@ -85,6 +86,9 @@ def load_reproduce_config(source: str | Path | dict | None, quick: bool = False,
     if setup_overrides:
         setup = dataclass_from_section("command line", setup_overrides, setup)
     if quick:
+        if sections.get("setup", {}).get("quick") is False:
+            warnings.warn("[setup] quick = false is ignored: --quick runs quick mode", IgnoredSettingWarning,
+                          stacklevel=2)
         setup = dataclasses.replace(setup, quick=True)
     params = {name: e.params(setup.quick, sections.get(name)) for name, e in REGISTRY.items()}
     return setup, params

@@ -36,3 +36,13 @@ def test_every_setup_field_is_covered():
 def test_every_setup_option_runs_through_the_pipeline(tmp_path, field):
     results = reproduce(["intrusion", "tracking"], Setup(**{**SMALL, field: OTHER[field]}), tmp_path)
     assert set(results) >= {"intrusion", "tracking"}
+
+
+def test_quick_over_a_file_that_says_full_is_said():
+    """--quick wins over ``[setup] quick = false``, and says so (it was silent)."""
+    from mincam_sim.errors import IgnoredSettingWarning
+    from mincam_sim.experiments import load_reproduce_config
+
+    with pytest.warns(IgnoredSettingWarning, match=r"\[setup\] quick = false is ignored"):
+        setup, _ = load_reproduce_config({"setup": {"quick": False}}, quick=True)
+    assert setup.quick
