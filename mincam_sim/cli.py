@@ -13,7 +13,7 @@ import re
 import signal
 import sys
 import traceback
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any
@@ -461,7 +461,11 @@ def export_maps_command(
                                                         "instead of the physics (response maps)")] = False,
 ) -> None:
     """Write each mixel's response map (W/m^2 per W m^-2 sr^-1 of each screen texel) as NumPy arrays with a JSON
-    sidecar (units, screen, geometry), at the config's [run] samples_per_texel, for other tools."""
+    sidecar (units, screen, geometry), at the config's [run] samples_per_texel, for other tools.
+
+    The folder holds one export: files of an earlier export there that this one does not write (maps of mixels
+    no longer there, psfs.npy without --psf-grid) are removed, saying so; other files are kept. A second export
+    into the folder while one runs is refused."""
     from mincam_sim.configuration.toml_files import read_document
     from mincam_sim.render.simulation import Simulation
     from mincam_sim.render.solvers import DotProduct
@@ -478,8 +482,10 @@ def export_maps_command(
         cfg.run.variant = check_variant(cfg.run.variant)
         _announce_variant()
     sim = Simulation(cfg.mincam, screen=cfg.screen)
-    sidecar = sim.export_maps(out_dir, cfg.run.budget, solver=DotProduct() if ideal else None, psf_grid=psf_grid,
-                              show_progress=_show_progress())
+    with lock_out_dir(out_dir, "export folder"):  # one export at a time in a folder
+        sidecar = sim.export_maps(out_dir, cfg.run.budget, solver=DotProduct() if ideal else None,
+                                  psf_grid=psf_grid, show_progress=_show_progress(),
+                                  say=lambda msg: _say(f"mincam-sim: {msg}"))
     typer.echo(f"# {len(cfg.mincam)} response maps ({'dot_product' if ideal else 'response_map'}) of "
                f"{cfg.screen.shape[0]} x {cfg.screen.shape[1]} texels written to {out_dir} (sidecar {sidecar.name})")
 
@@ -906,31 +912,61 @@ def design_schema():
                   "line win).", (Part("tracking", TrackingTask),))
 
 
-def _design_overrides(config: Path | None, **options) -> dict:
-    """Task fields from a ``[tracking]`` section of a TOML file, checked by :func:`design_schema`, and the
-    command line (which wins)."""
+#: The design command's options that set a field of the task's record, by field (the value of
+#: ``--object-size-cm`` is in centimetres, the field's in metres).
+_DESIGN_OPTIONS = {"seed": "--seed", "dpi": "--dpi", "object_size_range_m": "--object-size-cm (object_size_range_m, in "
+                   "metres)", "background_radiances": "--backgrounds", "depth_range_m": "--depth-range-m",
+                   "spacing_m": "--spacing-m", "d_f_m": "--d-f-m", "film_t_min": "--film-t-min",
+                   "film_t_max": "--film-t-max"}
+
+
+def _design_overrides(config: Path | None, **options) -> tuple[dict, set[str]]:
+    """Task fields from a ``[tracking]`` section of a TOML file, each checked for its type by
+    :func:`design_schema` (the ranges are the task's own checks), and the command line (which wins), with the
+    names of the fields the file gave."""
     from dataclasses import fields
 
+    from mincam_sim.configuration.schema import field_check, refuse_unknown
     from mincam_sim.configuration.toml_files import read_document
 
     overrides: dict = {}
+    from_file: set[str] = set()
     if config is not None:
         raw, _, _ = read_document(Path(config), None, kind="--config")
         schema = design_schema()
-        known = {f.name for f in fields(schema.part("tracking").cls)}
+        known = {f.name: f for f in fields(schema.part("tracking").cls)}
         loose = sorted(k for k in raw if k in known)
         if loose:
             raise ConfigError(f"--config {config}: put {', '.join(loose)} in a [tracking] section (the design "
                               "task's fields)")
         given = schema.tables(raw)["tracking"]
-        task = schema.read("tracking", given)
-        overrides.update({key: getattr(task, key) for key in given})
+        refuse_unknown("tracking", given, list(known))
+        overrides.update({key: field_check(known[key])("tracking", key, value) for key, value in given.items()})
+        from_file = set(given)
     overrides.update({k: v for k, v in options.items() if v is not None})
-    return overrides
+    return overrides, from_file
 
 
-def _design_scene_task(task: str, out_dir: Path, quick: bool, seed: int, overwrite: bool, tracking_only: dict,
-                       **options) -> None:
+@contextmanager
+def _design_fields_named(options: dict, from_file: Collection[str] = ()) -> Iterator[None]:
+    """A bad field of the design task's record (:class:`~mincam_sim.design.checks.FieldError`) as one line naming
+    it as the user gave it: its option when given on the command line (``options``: field -> value or None),
+    ``[tracking] key`` when given in the ``--config`` file, else the field and "(default)"."""
+    from mincam_sim.design.checks import FieldError
+
+    def name_of(field: str) -> str:
+        if options.get(field) is not None:
+            return _DESIGN_OPTIONS.get(field, field)
+        return f"[tracking] {field}" if field in from_file else f"{field} (default)"
+
+    try:
+        yield
+    except FieldError as err:
+        raise ConfigError(err.named(name_of)) from None
+
+
+def _design_scene_task(task: str, out_dir: Path, quick: bool, seed: int | None, overwrite: bool,
+                       tracking_only: dict, **options) -> None:
     """``mincam-sim design counting|depth``: the scene tasks (:mod:`mincam_sim.design.scene_run`)."""
     from mincam_sim.design.scene_run import make_sizes
     from mincam_sim.design.tasks import get_task
@@ -942,7 +978,10 @@ def _design_scene_task(task: str, out_dir: Path, quick: bool, seed: int, overwri
                           "--seed, --dpi, --spacing-m, --d-f-m, --film-t-min, --film-t-max")
     spec_task = get_task(task)
     overrides = {k: v for k, v in options.items() if v is not None}
-    make_sizes(spec_task.spec, quick, seed, **overrides)  # one clear error for a bad field before anything runs
+    named = {**options, "seed": seed}
+    seed = 0 if seed is None else seed
+    with _design_fields_named(named):  # one clear error for a bad field before anything runs
+        make_sizes(spec_task.spec, quick, seed, **overrides)
     check_variant()
     check_out_dir(out_dir)
     _announce_variant()
@@ -969,7 +1008,8 @@ def design(
     out_dir: Annotated[Path, typer.Option("--out", help="output folder (design.json, PNG masks, plots)")] = Path(
         "out/design"),
     quick: Annotated[bool, typer.Option("--quick", help="smaller training and held-out sets (minutes)")] = False,
-    seed: Annotated[int, typer.Option(help="seed of the training and held-out draws and of the noise")] = 0,
+    seed: Annotated[int | None, typer.Option(help="seed of the training and held-out draws and of the noise "
+                                                  "[default 0; tracking: the --config file's seed]")] = None,
     dpi: Annotated[float | None, typer.Option(help="printer resolution of the film and the PNG masks "
                                                    "[dots/inch]; default 600")] = None,
     config: Annotated[Path | None, typer.Option("--config", help="TOML of TrackingTask fields ([tracking] "
@@ -1001,10 +1041,6 @@ def design(
 
     if task not in TASKS:
         raise ConfigError(f"unknown design task {task!r}: choose one of {', '.join(TASKS)}")
-    if seed < 0:
-        raise ConfigError(f"--seed must be an integer >= 0, got {seed}")
-    if dpi is not None and not (np.isfinite(dpi) and 50 <= dpi <= 4800):
-        raise ConfigError(f"--dpi must be a printer resolution of 50 to 4800 dots per inch, got {dpi}")
     bg = None
     if backgrounds is not None:
         try:
@@ -1018,13 +1054,15 @@ def design(
                            tracking_only={"--config": config, "--object-size-cm": object_size_cm,
                                           "--backgrounds": backgrounds, "--depth-range-m": depth_range_m})
         return
-    overrides = _design_overrides(config, object_size_range_m=_pair(object_size_cm, "--object-size-cm", 0.01),
-                                  background_radiances=bg, depth_range_m=_pair(depth_range_m, "--depth-range-m"),
-                                  spacing_m=spacing_m, d_f_m=d_f_m, film_t_min=film_t_min, film_t_max=film_t_max,
-                                  dpi=dpi)
-    from mincam_sim.design.run import make_task
+    options = dict(object_size_range_m=_pair(object_size_cm, "--object-size-cm", 0.01), background_radiances=bg,
+                   depth_range_m=_pair(depth_range_m, "--depth-range-m"), spacing_m=spacing_m, d_f_m=d_f_m,
+                   film_t_min=film_t_min, film_t_max=film_t_max, dpi=dpi, seed=seed)
+    overrides, from_file = _design_overrides(config, **options)
+    seed = overrides.pop("seed", 0)  # an explicit --seed wins over the file's, as every option does
+    from mincam_sim.design.run import check_printable, make_task
 
-    make_task(quick, seed, **dict(overrides))  # one clear error for a bad field before anything runs
+    with _design_fields_named(options, from_file):  # one clear error for a bad field before anything runs
+        check_printable(make_task(quick, seed, **dict(overrides)))
     check_variant()
     check_out_dir(out_dir)
     _announce_variant()

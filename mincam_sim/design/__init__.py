@@ -25,6 +25,8 @@ renderer itself).
 Files:
 
 * ``tracking.py``: the task ``tracking``: four mixels 3.3 cm apart (paper Sec. 4.2) and its training distribution.
+* ``checks.py``: the range checks of every task's sizes (geometry, film and seed shared by all), one
+  ``FieldError`` naming the field and its range before anything runs.
 * ``parameterization.py``: masks as a coarse grid of logits onto the printer's dots and grey values.
 * ``problem.py``: the design problem as plain arrays (linear forward model, film, sensor noise, targets).
 * ``optimiser.py``: Adam on the mask logits through the forward model, with a decoder fitted in the loop.

@@ -52,6 +52,12 @@ def _sheet_offsets_m(task: tr.TrackingTask) -> list[tuple[float, float]]:
     return [(dx / tr.SPACING_M * task.spacing_m, dy / tr.SPACING_M * task.spacing_m) for dx, dy in tr.OFFSETS_M]
 
 
+def check_printable(task: tr.TrackingTask) -> None:
+    """Refuse a task whose print sheet (the four masks at its spacing and dpi) would be too large: what the run
+    writes last, refused before any work (:func:`~mincam_sim.masks.sheet.check_print_sheet`)."""
+    check_print_sheet(task.baseline_masks(), _sheet_offsets_m(task), task.dpi, task.film())
+
+
 def make_task(quick: bool = False, seed: int = 0, **overrides) -> tr.TrackingTask:
     """The task of a run: :meth:`TrackingTask.quick` or the full one, with ``overrides`` (task fields; a
     ``depth_range_m`` alone spreads the training planes evenly over it)."""
@@ -169,13 +175,12 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
 
         return get_task(task_name).run(out_dir, quick=quick, seed=seed, show_progress=show_progress,
                                        overwrite=overwrite, baselines=baselines, **overrides)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     task = make_task(quick, seed, **overrides)
     offsets_m = _sheet_offsets_m(task)
-    # the sheet is written last: what it would refuse (a dpi whose sheet is too large) is refused before any work
-    check_print_sheet(task.baseline_masks(), offsets_m, task.dpi, task.film())
+    check_printable(task)  # the sheet is written last: what it would refuse is refused before any work
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
     identity = design_identity(task_name, task, quick, seed, baselines)
     _refuse_another_design(out, identity, overwrite)
     grad = check_gradients(seed=seed)

@@ -19,6 +19,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from mincam_sim.design import tracking as tr
+from mincam_sim.design.checks import Range, check_ranges, check_shared
 from mincam_sim.design.optimise import TrainingFrames
 from mincam_sim.errors import ConfigError
 from mincam_sim.estimation.polynomial import poly_terms
@@ -188,6 +189,13 @@ class TaskSpec:
         return d
 
 
+#: The allowed values of :class:`Sizes`' run sizes (the geometry, film and seed: :data:`~.checks.SHARED`).
+SIZE_RANGES = {"frames_per_depth": Range(2, 20000, integer=True), "strata": Range(2, 64, integer=True),
+               "grid": Range(2, 64, integer=True), "iterations": Range(2, 100000, integer=True),
+               "learning_rate": Range(0, 10, low_open=True, why="Adam's step on the logits"),
+               "suite_frames": Range(2, 10000, integer=True)}
+
+
 @dataclass(frozen=True)
 class Sizes(tr.PrintedSizes):
     """Sizes and geometry of one run of a scene task (``quick`` for the CLI's ``--quick``).
@@ -223,15 +231,8 @@ class Sizes(tr.PrintedSizes):
     seed: int = 0
 
     def __post_init__(self) -> None:
-        for field in ("frames_per_depth", "strata", "grid", "iterations", "suite_frames"):
-            v = getattr(self, field)
-            if isinstance(v, bool) or int(v) != v or v < 2:
-                raise ConfigError(f"Sizes.{field} must be an integer >= 2, got {v!r}")
-        if not (0 <= self.film_t_min < self.film_t_max <= 1):
-            raise ConfigError(f"Sizes.film_t_min/film_t_max must satisfy 0 <= t_min < t_max <= 1, got "
-                              f"{self.film_t_min}, {self.film_t_max}")
-        if not (np.isfinite(self.dpi) and 50 <= self.dpi <= 4800):
-            raise ConfigError(f"Sizes.dpi must be 50 to 4800 dots per inch, got {self.dpi!r}")
+        check_shared(self)
+        check_ranges(self, SIZE_RANGES)
 
     @classmethod
     def quick(cls, seed: int = 0, **overrides) -> Sizes:

@@ -11,12 +11,14 @@ Pure numpy.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
 from mincam_sim import masks as masks_mod
 from mincam_sim import paper
+from mincam_sim.design import checks
 from mincam_sim.masks import Mask, PrintedFilm
 from mincam_sim.model.geometry import Pose
 from mincam_sim.model.optics import Mincam, layout, seen_whole_by_every_mixel
@@ -55,6 +57,10 @@ class PrintedSizes:
 @dataclass(frozen=True)
 class TrackingTask(PrintedSizes):
     """Sizes of one design run (``quick`` for the CLI's ``--quick``).
+
+    Every field is checked on construction (the sizes' ranges: :func:`size_ranges`; the geometry, film and seed
+    shared by every task: :data:`~.checks.SHARED`); a bad one is a :class:`~.checks.FieldError` naming it and its
+    range.
 
     Attributes
     ----------
@@ -111,7 +117,10 @@ class TrackingTask(PrintedSizes):
         Distance of each mixel from the centre [m].
     d_f_m : float
         Mask-to-detector distance [m].
+    suite_frames, suite_texels, suite_samples_per_texel : int
+        Frames per held-out suite case, texels per side of its displays, response-map samples per texel.
     seed : int
+        0 to 2^32 - 1.
     """
 
     train_depths_m: tuple[float, ...] = (0.35, 0.42, 0.49, 0.56, 0.63, 0.7)
@@ -146,40 +155,55 @@ class TrackingTask(PrintedSizes):
     seed: int = 0
 
     def __post_init__(self) -> None:
-        from mincam_sim.errors import ConfigError
-
         def bad(field: str, what: str) -> None:
-            raise ConfigError(f"TrackingTask.{field} {what}, got {getattr(self, field)!r}")
+            checks.refuse(self, (field,), what)
 
+        checks.check_shared(self)
         if self.decoder not in FEATURES:
             bad("decoder", f"must be one of {', '.join(FEATURES)}")
         if self.decoder_fit not in ("noiseless", "noisy"):
             bad("decoder_fit", "must be 'noiseless' or 'noisy'")
+        checks.check_ranges(self, size_ranges())
         for field in ("object_size_range_m", "bar_width_range_m", "contrast_range", "background_contrast_range",
                       "depth_range_m"):
             v = tuple(getattr(self, field))
-            if len(v) != 2 or not all(np.isfinite(v)) or not 0 < v[0] <= v[1]:
+            if len(v) != 2 or not all(checks.Range(0, np.inf, low_open=True).accepts(x) for x in v) or v[0] > v[1]:
                 bad(field, "must be (min, max) with 0 < min <= max")
         if self.object_size_range_m[1] > 0.3:
             bad("object_size_range_m", "must stay <= 0.3 m (objects of the working field)")
+        if self.bar_width_range_m[1] > 0.1:
+            bad("bar_width_range_m", "must stay <= 0.1 m (bars narrower than the working field)")
+        for field in ("contrast_range", "background_contrast_range"):
+            if getattr(self, field)[1] > 1.0:
+                bad(field, "must stay <= 1 W m^-2 sr^-1 (the display's white)")
         if not (0.1 <= self.depth_range_m[0] and self.depth_range_m[1] <= 3.0):
             bad("depth_range_m", "must lie within 0.1-3 m")
-        if not all(self.depth_range_m[0] - 1e-9 <= d <= self.depth_range_m[1] + 1e-9 for d in self.train_depths_m):
+        depths = tuple(self.train_depths_m)
+        if not 1 <= len(depths) <= MAX_TRAIN_DEPTHS or not all(checks.Range(0, 3).accepts(d) for d in depths):
+            bad("train_depths_m", f"must be 1 to {MAX_TRAIN_DEPTHS} plane depths [m]")
+        if not all(self.depth_range_m[0] - 1e-9 <= d <= self.depth_range_m[1] + 1e-9 for d in depths):
             bad("train_depths_m", f"must lie in depth_range_m {self.depth_range_m}")
         for field in ("bar_fraction", "two_object_fraction"):
-            if not 0 <= getattr(self, field) <= 1:
+            if not checks.Range(0, 1).accepts(getattr(self, field)):
                 bad(field, "must be a fraction in [0, 1]")
         bg = tuple(self.background_radiances)
-        if not bg or not all(np.isfinite(bg)) or min(bg) < 0 or max(bg) >= 1:
+        if not bg or not all(checks.Range(0, 1).accepts(b) and b < 1 for b in bg):
             bad("background_radiances", "must be radiances in [0, 1) (0 = black plane)")
-        if not (np.isfinite(self.spacing_m) and 0.005 <= self.spacing_m <= 0.2):
-            bad("spacing_m", "must be 0.005-0.2 m")
-        if not (np.isfinite(self.d_f_m) and 2e-4 <= self.d_f_m <= 0.02):
-            bad("d_f_m", "must be 0.2-20 mm (in metres)")
-        if not (0 <= self.film_t_min < self.film_t_max <= 1):
-            bad("film_t_max", f"and film_t_min ({self.film_t_min}) must satisfy 0 <= t_min < t_max <= 1")
-        if not (np.isfinite(self.dpi) and 50 <= self.dpi <= 4800):
-            bad("dpi", "must be a printer resolution of 50 to 4800 dots per inch")
+        n_terms = DECODER_TERMS[self.decoder]
+        if self.frames_per_depth * len(depths) < n_terms:
+            bad("frames_per_depth", f"x the {len(depths)} training depth(s) must give at least {n_terms} training "
+                                    f"frames (the {self.decoder} decoder's cubic has {n_terms} coefficients per "
+                                    "coordinate)")
+        n_dots = int(np.prod(self.dot_shape()))
+        checks.check_memory(self, ("frames_per_depth", "dpi"),
+                            checks.memory_bytes(self.frames_per_depth * len(depths), n_dots, len(NAMES)),
+                            "a training model (frames x printer dots x mixels)")
+        checks.check_memory(self, ("eval_frames_per_depth", "screen_texels"),
+                            checks.memory_bytes(self.eval_frames_per_depth, self.screen_texels**2),
+                            "held-out frames (frames x texels^2)")
+        checks.check_memory(self, ("suite_frames", "suite_texels"),
+                            checks.memory_bytes(SUITE_CASES, self.suite_frames, self.suite_texels**2),
+                            f"suite frames ({SUITE_CASES} cases x frames x texels^2)")
 
     @classmethod
     def quick(cls, seed: int = 0, **overrides) -> TrackingTask:
@@ -266,6 +290,53 @@ def calibration_positions(n_per_axis: int) -> np.ndarray:
 
 
 CALIBRATION_SQUARE_M = paper.CALIBRATION_SQUARE_M  # [m] side of the calibration squares (as the experiments')
+
+MAX_TRAIN_DEPTHS = 64  # training planes of one run
+DECODER_TERMS = {"eq7": 10, "learned": 20}  # coefficients per coordinate of a cubic in 2 (Eq. 7) or 3 features
+HELD_OUT_SCREEN_SIDE_M = 1.3 * FIELD_M  # [m] side of the held-out display at 0.5 m (.evaluate)
+# the held-out suite's size (.suite.SUITE, which reads this module; a test keeps the two equal)
+SUITE_CASES, SUITE_MOST_DEPTHS = 14, 4  # its cases, and the most depths one case shows
+SUITE_SCREEN_SIDE_M = 2.0 * (0.6 * CALIBRATION_DEPTH_M + 0.05)  # [m] side of the suite's display at 0.5 m (.suite)
+
+
+def min_texels(screen_side_m: float) -> int:
+    """The fewest texels per side of a display of side ``screen_side_m`` [m] at 0.5 m whose texels are no larger
+    than a calibration square (coarser texels smear the sweep's squares over shared texels, and its cubic fit
+    loses rank: 4 texels per side already cannot determine its 10 coefficients)."""
+    return int(np.ceil(screen_side_m / CALIBRATION_SQUARE_M - 1e-9))
+
+
+@functools.lru_cache(maxsize=1)
+def size_ranges() -> dict:
+    """The allowed values of :class:`TrackingTask`'s numeric sizes (:class:`~.checks.Range` per field): the
+    smallest values with which a run works and maxima that keep it within hours and memory."""
+    from mincam_sim.budget import DEFAULT_MAP_REPLICATES
+    Range = checks.Range  # noqa: N806 - the class, by its name
+    spt = Range(DEFAULT_MAP_REPLICATES, 1024, integer=True,
+                why=f"the response maps' {DEFAULT_MAP_REPLICATES} replicate blocks need a sample each")
+    min_cal = next(n for n in range(2, 50) if len(calibration_positions(n)) >= DECODER_TERMS["eq7"])
+    case_depths = SUITE_MOST_DEPTHS
+    return {
+        "frames_per_depth": Range(1, 20000, integer=True),
+        "strata": Range(1, 64, integer=True, why="strata^2 samples per training object"),
+        "grid": Range(2, 64, integer=True, why="logit nodes per mask side; a mask needs 2 to vary"),
+        "iterations": Range(1, 100000, integer=True, why="Adam steps per start"),
+        "learning_rate": Range(0, 10, low_open=True, why="Adam's step on the logits"),
+        "eval_depths": Range(1, 100, integer=True),
+        "eval_frames_per_depth": Range(1, 10000, integer=True),
+        "screen_texels": Range(min_texels(HELD_OUT_SCREEN_SIDE_M), 1024, integer=True,
+                               why="texels no larger than the 3 cm calibration squares"),
+        "samples_per_texel": spt,
+        "calibration_grid": Range(min_cal, 50, integer=True,
+                                  why=f"{min_cal} gives {len(calibration_positions(min_cal))} squares in the working "
+                                      f"disc, {min_cal - 1} only {len(calibration_positions(min_cal - 1))}; the "
+                                      "cubic calibration has 10 coefficients"),
+        "suite_frames": Range(case_depths, 10000, integer=True,
+                              why=f"at least one per depth of a suite case with {case_depths} depths"),
+        "suite_texels": Range(min_texels(SUITE_SCREEN_SIDE_M), 1024, integer=True,
+                              why="texels no larger than the 3 cm calibration squares"),
+        "suite_samples_per_texel": spt,
+    }
 
 
 def features(dn, xp=np):

@@ -31,7 +31,7 @@ import difflib
 import functools
 import os
 import warnings
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from os import PathLike
 from pathlib import Path
 
@@ -687,7 +687,8 @@ class Simulation:
         return maps
 
     def export_maps(self, out_dir: str | PathLike, budget: Budget | None = None, *, solver: Solver | None = None,
-                    psf_grid: tuple[int, int] | None = None, show_progress: bool = False) -> Path:
+                    psf_grid: tuple[int, int] | None = None, show_progress: bool = False,
+                    say: Callable[[str], None] | None = None) -> Path:
         """Write each mixel's response map as NumPy arrays with a JSON sidecar (display scenes), for other tools.
 
         ``maps/<mixel>.npy`` (rows, cols) [sr: W/m^2 per W m^-2 sr^-1 of each texel] and its standard error,
@@ -695,10 +696,15 @@ class Simulation:
         point sources on that grid, and ``maps.json`` (units, conventions, screen, geometry, how they were made).
         ``solver``: :class:`~.solvers.ResponseMap` (default, the physics at the budget's samples per texel) or
         :class:`~.solvers.DotProduct` (the idealised model). Returns the sidecar's path.
+
+        The folder holds one export: the files of an earlier export there that this one does not write (the maps
+        of mixels no longer there, ``psfs.npy`` without a grid) are removed, as the earlier ``maps.json`` lists
+        them; no other file is touched. ``say`` is told so in one line. ``mincam-sim export-maps`` also locks the
+        folder while it exports (a second process is refused, naming the holder); from Python, hold
+        :func:`mincam_sim.storage.store.lock_out_dir` around the call where several processes share a folder.
         """
         from mincam_sim.render.kernels.map_export import export_maps
         from mincam_sim.render.solvers import DotProduct
-
         if self.kind != "display":
             raise InputError("response maps are maps over a screen's texels: display scenes only")
         if psf_grid is not None:
@@ -706,13 +712,13 @@ class Simulation:
             if len(grid) != 2 or any(isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1
                                      for n in grid):
                 raise InputError(f"psf_grid must be two positive integers (nx, ny), got {psf_grid!r}")
+        if not (solver is None or isinstance(solver, DotProduct | ResponseMap)):
+            raise InputError(f"export_maps takes the ResponseMap or DotProduct solver, got {type(solver).__name__}")
         if isinstance(solver, DotProduct):
             maps = solver.maps(self.mincam, self.screen, show_progress)
-        elif solver is None or isinstance(solver, ResponseMap):
-            maps = self.response_maps(budget, show_progress=show_progress)
         else:
-            raise InputError(f"export_maps takes the ResponseMap or DotProduct solver, got {type(solver).__name__}")
-        return export_maps(maps, self.mincam, self.screen, out_dir, psf_grid)
+            maps = self.response_maps(budget, show_progress=show_progress)
+        return export_maps(maps, self.mincam, self.screen, out_dir, psf_grid, say)
 
 
 class WorldParameters(Mapping):

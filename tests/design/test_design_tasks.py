@@ -186,7 +186,7 @@ def test_cli_refuses_tracking_options_for_other_tasks(tmp_path):
     assert r.exit_code == 2
     assert "--object-size-cm only apply to the tracking task" in r.output and "Traceback" not in r.output
     r = CliRunner().invoke(app, ["design", "counting", "--film-t-min", "0.95", "--out", str(tmp_path / "e")])
-    assert r.exit_code == 2 and "film_t_min" in r.output
+    assert r.exit_code == 2 and "--film-t-min and film_t_max (default) must satisfy" in r.output
 
 
 @pytest.mark.slow
@@ -232,3 +232,12 @@ def test_texture_fraction_mixes_textured_planes_in():
     textured = [all(f.patch[di][ai] for di, ai, _ in atoms) and len(atoms) > 20 for atoms in f.planes.frame_atoms]
     assert 5 < sum(textured) < 35
     assert all(c == 0 for c, t in zip(f.count, textured, strict=True) if t)
+
+
+def test_the_tasks_idea_of_the_suite_is_the_suite():
+    """``tracking`` checks sizes against the suite's case count and depths without importing it (no cycle)."""
+    from mincam_sim.design import tracking
+    from mincam_sim.design.suite import SUITE
+
+    assert tracking.SUITE_CASES == len(SUITE)
+    assert tracking.SUITE_MOST_DEPTHS == max(len(case.depths_m) for case in SUITE)
