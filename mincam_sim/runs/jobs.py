@@ -37,7 +37,7 @@ from mincam_sim.budget import Budget
 from mincam_sim.changes import Changes
 from mincam_sim.configuration.config import RenderConfig, solver_name, traced_samples
 from mincam_sim.configuration.world_config import CameraSpec, WorldConfig, is_gltf
-from mincam_sim.errors import ConfigError, StoreError
+from mincam_sim.errors import ConfigError
 from mincam_sim.measurements import Measurements
 from mincam_sim.render import backend
 from mincam_sim.render.scene import scene_dicts as sd
@@ -55,7 +55,7 @@ from mincam_sim.render.solvers import (
     StratifiedChange,
 )
 from mincam_sim.runs.run import UNREADABLE_NPZ, Run
-from mincam_sim.storage.atomic import atomic_path, atomic_save_npz
+from mincam_sim.storage.atomic import atomic_path, atomic_save_npz, remove_files
 from mincam_sim.storage.identity import fingerprint
 
 #: The store and result name of a job in its output directory: ``OUT/measurements/`` (per-frame rows, resume),
@@ -172,16 +172,8 @@ def remove_outputs(out: Path) -> list[Path]:
     paths = [out / name for name in OUTPUT_FILES]
     if maps_dir.is_dir():
         paths += sorted(maps_dir.glob("response_*.exr"))
-    removed = []
-    for path in paths:
-        if path.is_file() or path.is_symlink():
-            try:
-                path.unlink()
-            except OSError as err:
-                raise StoreError(f"cannot delete {path} (an output of the run --overwrite replaces): "
-                                 f"{err.strerror or err}; delete it by hand or choose another output directory") \
-                    from None
-            removed.append(path)
+    removed = remove_files(paths, "an output of the run --overwrite replaces",
+                           "delete it by hand or choose another output directory")
     if maps_dir.is_dir() and not any(maps_dir.iterdir()):
         with contextlib.suppress(OSError):  # left in place: empty, nothing stale in it
             maps_dir.rmdir()

@@ -17,11 +17,13 @@ import contextlib
 import json
 import os
 import secrets
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
+
+from mincam_sim.errors import StoreError
 
 TMP_MARK = ".tmp-"
 
@@ -175,6 +177,31 @@ def leftover_temporaries(directory: str | Path) -> list[Path]:
     return sorted(p for p in directory.iterdir() if p.name.startswith(".") and TMP_MARK in p.name)
 
 
+def remove_files(paths: Iterable[Path], why: str = "", fix: str = "") -> list[Path]:
+    """Delete those of ``paths`` that are files (or links) and ``fsync`` their folders; return those deleted.
+
+    Raises
+    ------
+    StoreError
+        A file that cannot be deleted, named with ``why`` (what it is) and ``fix`` (what to do).
+    """
+    removed = []
+    for path in map(Path, paths):
+        if not (path.is_file() or path.is_symlink()):
+            continue
+        try:
+            path.unlink()
+        except FileNotFoundError:
+            continue
+        except OSError as err:
+            raise StoreError(f"cannot delete {path}{f' ({why})' if why else ''}: {err.strerror or err}"
+                             f"{f'; {fix}' if fix else ''}") from None
+        removed.append(path)
+    for folder in sorted({path.parent for path in removed}):
+        fsync_dir(folder)
+    return removed
+
+
 __all__ = [
     "atomic_open",
     "atomic_path",
@@ -185,4 +212,5 @@ __all__ = [
     "atomic_write_text",
     "fsync_dir",
     "leftover_temporaries",
+    "remove_files",
 ]

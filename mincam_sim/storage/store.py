@@ -36,7 +36,7 @@ import numpy as np
 
 from mincam_sim.errors import OutDirLockedError, StaleResultError, StoreError
 from mincam_sim.measurements import json_default
-from mincam_sim.storage.atomic import atomic_open, atomic_path, atomic_write_json, fsync_dir
+from mincam_sim.storage.atomic import atomic_open, atomic_path, atomic_write_json, remove_files
 from mincam_sim.storage.identity import canonical, diff_identities, fingerprint, run_key
 
 STORE_FORMAT = "mincam_sim.result_store"
@@ -501,18 +501,7 @@ def clear_store(directory: str | Path, extra: Sequence[str] = ()) -> list[Path]:
     """Delete a run directory's store files (``run.json`` first, so a half-cleared store is never taken for a
     committed one) and the named ``extra`` files; return what was deleted. Other files are left alone."""
     directory = Path(directory)
-    removed = []
-    for name in (*STORE_FILES, *extra):
-        path = directory / name
-        if path.is_file() or path.is_symlink():
-            try:
-                path.unlink()
-            except OSError as err:
-                raise StoreError(f"cannot delete {path}: {err.strerror or err}") from None
-            removed.append(path)
-    if removed:
-        fsync_dir(directory)
-    return removed
+    return remove_files(directory / name for name in (*STORE_FILES, *extra))
 
 
 IDENTITY_FORMAT = "mincam_sim.storage.identity"

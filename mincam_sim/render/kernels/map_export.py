@@ -18,8 +18,9 @@ that it does not write itself (the maps of mixels no longer there, ``psfs.npy`` 
 what the earlier ``maps.json`` lists, and only by the names this module writes; no other file is touched. While
 an export writes, ``.maps_export_pending.json`` lists every file it or the earlier export may have left, and
 ``maps.json`` (written last) is absent: an export that is interrupted leaves no sidecar describing a mixed
-folder, and the next export removes what the interrupted one left. The caller holds the folder's lock
-(:meth:`mincam_sim.Simulation.export_maps` does).
+folder, and the next export removes what the interrupted one left. Several processes exporting into one folder
+hold its lock around the export (:func:`~mincam_sim.storage.store.lock_out_dir`: ``mincam-sim export-maps``
+does).
 """
 
 from __future__ import annotations
@@ -30,11 +31,10 @@ from pathlib import Path
 
 import numpy as np
 
-from mincam_sim.errors import StoreError
 from mincam_sim.render.kernels.map_tracing import ResponseMaps, _safe
 from mincam_sim.render.scene.mincam_scene import geometry_meta
 from mincam_sim.scene.display import Screen
-from mincam_sim.storage.atomic import atomic_path, atomic_write_json, fsync_dir
+from mincam_sim.storage.atomic import atomic_path, atomic_write_json, remove_files
 
 UNITS_MAP = "sr (W/m^2 averaged over the detector per W m^-2 sr^-1 of a texel's radiance)"
 UNITS_PSF = "m^-2 sr (W/m^2 averaged over the detector per W/sr of a point source's intensity along the screen normal)"
@@ -78,7 +78,8 @@ def export_maps(maps: ResponseMaps, mincam, screen: Screen, out_dir: str | Path,
     screen : Screen
         The screen the maps are over.
     out_dir : str or Path
-        The folder (created if needed). The caller holds its lock (:func:`~mincam_sim.storage.store.lock_out_dir`).
+        The folder (created if needed); where several processes may export into it, the caller holds its lock
+        (:func:`~mincam_sim.storage.store.lock_out_dir`).
     psf_grid : tuple of int, optional
         ``(nx, ny)``: also write ``psfs.npy``, the responses to unit point sources on that grid.
     say : callable, optional
@@ -191,24 +192,9 @@ def _read_json(path: Path) -> object:
 
 def _remove(out: Path, rels: Iterable[str]) -> list[str]:
     """Delete these files of ``out`` (names relative to it) where they are; return those deleted."""
-    removed = []
-    for rel in rels:
-        path = out / rel
-        if not (path.is_file() or path.is_symlink()):
-            continue
-        try:
-            path.unlink()
-        except FileNotFoundError:
-            continue
-        except OSError as err:
-            raise StoreError(f"cannot delete {path} (a file of the earlier export in {out} that this export "
-                             f"replaces): {err.strerror or err}; delete it by hand or choose another folder") \
-                from None
-        removed.append(rel)
-    if removed:
-        fsync_dir(out)
-        fsync_dir(out / "maps")
-    return removed
+    removed = remove_files([out / rel for rel in rels], f"a file of the earlier export in {out} that this export "
+                           "replaces", "delete it by hand or choose another folder")
+    return [path.relative_to(out).as_posix() for path in removed]
 
 
 def _listing(rels: list[str], limit: int = 6) -> str:
