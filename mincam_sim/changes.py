@@ -9,7 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mincam_sim.measurements import Measurements, json_default
+from mincam_sim.errors import StoreError
+from mincam_sim.measurements import MEASUREMENTS_KEYS, Measurements, json_default, read_npz
 from mincam_sim.storage.atomic import atomic_open, atomic_save_npz
 
 
@@ -93,19 +94,24 @@ class Changes:
 
     @classmethod
     def load_npz(cls, path: str | Path) -> Changes:
-        with np.load(path, allow_pickle=False) as data:
+        """The change run :meth:`save_npz` wrote (``StoreError`` naming the file for anything else: a torn file,
+        or measurements without dP, which ``Measurements.load_npz`` reads)."""
+        with read_npz(path, (*MEASUREMENTS_KEYS, "delta_irradiance_w_m2", "delta_stderr_w_m2"),
+                      "Changes.save_npz") as (data, meta):
+            info = meta.pop("run_info", None)
+            if not isinstance(info, dict):
+                raise StoreError(f"{path} is not a file written by Changes.save_npz: its metadata has no run_info "
+                                 "(measurements without dP: read it with Measurements.load_npz)")
             names = [str(s) for s in data["mixel_names"]]
-            meta = json.loads(str(data["meta_json"]))
-            info = meta.pop("run_info")
             columns = {k[len("frame_"):]: data[k] for k in data.files if k.startswith("frame_")}
             dp = Measurements(data["delta_irradiance_w_m2"], data["delta_stderr_w_m2"], names, dict(meta))
             p = Measurements(data["irradiance_w_m2"], data["stderr_w_m2"], names, dict(meta))
-        info["retried_frames"] = tuple(info["retried_frames"])
-        info["heavy_tailed"] = tuple(tuple(x) for x in info["heavy_tailed"])
-        info["fallbacks"] = tuple(info["fallbacks"])
-        if "estimator" in info:  # files written before 0.6.0 name the solver "estimator": "plain" | "stratified"
-            info["solver"] = f"{info.pop('estimator')}_change"
-        return cls(dp, p, RunInfo(**info), columns)
+            info["retried_frames"] = tuple(info["retried_frames"])
+            info["heavy_tailed"] = tuple(tuple(x) for x in info["heavy_tailed"])
+            info["fallbacks"] = tuple(info["fallbacks"])
+            if "estimator" in info:  # files written before 0.6.0 name the solver "estimator": "plain" | "stratified"
+                info["solver"] = f"{info.pop('estimator')}_change"
+            return cls(dp, p, RunInfo(**info), columns)
 
     def save_csv(self, path: str | Path) -> Path:
         """One row per frame: frame, the frame columns, then per mixel ``<m>_dP_w_m2``, ``<m>_dP_stderr_w_m2``,

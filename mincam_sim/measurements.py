@@ -8,13 +8,27 @@ from __future__ import annotations
 
 import csv
 import json
+import tokenize
+import zipfile
+import zlib
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from mincam_sim.errors import MincamError, StoreError
 from mincam_sim.storage.atomic import atomic_open, atomic_save_npz
+
+#: What reading a damaged ``.npz`` raises (numpy and zipfile; found by cutting a result short at every length and
+#: changing bytes in it): an empty file ``EOFError``, one cut short ``zipfile.BadZipFile``, a changed byte
+#: ``BadZipFile`` (CRC), ``ValueError``, ``KeyError``, ``NotImplementedError`` (a compression method),
+#: ``tokenize.TokenError`` or ``SyntaxError`` (an array's header); a file holding objects ``ValueError`` (never
+#: unpickled).
+NPZ_DAMAGE = (OSError, ValueError, KeyError, EOFError, NotImplementedError, SyntaxError, zipfile.BadZipFile,
+              zlib.error, tokenize.TokenError)
 
 
 @dataclass
@@ -84,13 +98,9 @@ class Measurements:
 
     @classmethod
     def load_npz(cls, path: str | Path) -> Measurements:
-        with np.load(path, allow_pickle=False) as data:
-            return cls(
-                data["irradiance_w_m2"],
-                data["stderr_w_m2"],
-                [str(s) for s in data["mixel_names"]],
-                json.loads(str(data["meta_json"])),
-            )
+        """The measurements :meth:`save_npz` wrote (``StoreError`` naming the file for anything else)."""
+        with read_npz(path, MEASUREMENTS_KEYS, "Measurements.save_npz") as (data, meta):
+            return cls(data["irradiance_w_m2"], data["stderr_w_m2"], [str(s) for s in data["mixel_names"]], meta)
 
     def frame_columns(self) -> dict[str, np.ndarray]:
         """Per-frame columns known from ``meta``: ``time_s`` (``meta["frame_times_s"]``) and the frame's position
@@ -126,6 +136,51 @@ class Measurements:
                     row += [repr(float(self.irradiance_w_m2[i, k])), repr(float(self.stderr_w_m2[i, k]))]
                 writer.writerow(row)
         return path
+
+
+MEASUREMENTS_KEYS = ("irradiance_w_m2", "stderr_w_m2", "mixel_names", "meta_json")
+
+
+@contextmanager
+def read_npz(path: str | Path, keys: Sequence[str], writer: str) -> Iterator[tuple[Any, dict]]:
+    """The arrays of an npz file that ``writer`` wrote, and its ``meta_json`` parsed, checked before use.
+
+    Raises
+    ------
+    FileNotFoundError
+        No file at ``path``.
+    StoreError
+        The file is torn, empty or not an npz, lacks one of ``keys``, its metadata is not a JSON object, or its
+        arrays do not fit one another (the message names the file, what is wrong and which writer it expects).
+    """
+    path = Path(path)
+    what = f"{path} is not a file written by {writer}"
+    try:
+        data = np.load(path, allow_pickle=False)
+    except FileNotFoundError:
+        raise
+    except NPZ_DAMAGE as err:
+        raise StoreError(f"{what}: it cannot be read as an npz ({type(err).__name__}: {err})") from None
+    with data:
+        try:
+            files = set(data.files)
+            missing = [k for k in keys if k not in files]
+            if missing:
+                held = ", ".join(sorted(files)) or "nothing"
+                raise StoreError(f"{what}: it lacks {', '.join(missing)} (it holds {held})")
+            meta = json.loads(str(data["meta_json"])) if "meta_json" in keys else {}
+            if not isinstance(meta, dict):
+                raise StoreError(f"{what}: its meta_json is not a JSON object")
+        except NPZ_DAMAGE as err:
+            if isinstance(err, StoreError):
+                raise
+            raise StoreError(f"{what}: an array of it cannot be read ({type(err).__name__}: {err})") from None
+        try:
+            yield data, meta
+        except (*NPZ_DAMAGE, TypeError) as err:
+            if isinstance(err, MincamError):
+                raise
+            raise StoreError(f"{what}: its contents do not fit together ({type(err).__name__}: {err})") from None
 
 
 def json_default(obj):

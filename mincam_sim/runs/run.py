@@ -20,29 +20,23 @@ the number of stores in it. An in-memory measurement (``sim.measure(...)`` witho
 
 from __future__ import annotations
 
-import tokenize
-import zipfile
-import zlib
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from mincam_sim.budget import Budget
 from mincam_sim.changes import Changes
-from mincam_sim.errors import InputError
-from mincam_sim.measurements import Measurements
+from mincam_sim.errors import InputError, StoreError
+from mincam_sim.measurements import NPZ_DAMAGE, Measurements
 from mincam_sim.render.simulation import Simulation
 from mincam_sim.render.solvers import Solver
 from mincam_sim.storage import identity
 from mincam_sim.storage.identity import run_key
 from mincam_sim.storage.store import DirLock, StoreSink, check_identity, clear_store, lock_out_dir
 
-#: What reading a damaged or foreign ``.npz`` result raises (numpy and zipfile; found by cutting a result short at
-#: every length and changing bytes in it): an empty file ``EOFError``, one cut short ``zipfile.BadZipFile``, a
-#: changed byte ``BadZipFile`` (CRC), ``ValueError``, ``KeyError``, ``NotImplementedError`` (a compression
-#: method), ``tokenize.TokenError`` or ``SyntaxError`` (an array's header). Such a file is computed again.
-UNREADABLE_NPZ = (OSError, ValueError, KeyError, EOFError, NotImplementedError, SyntaxError, zipfile.BadZipFile,
-                  zlib.error, tokenize.TokenError)
+#: What reading a damaged or foreign ``.npz`` result raises: a ``StoreError`` naming the file (and what is wrong
+#: with it) from ``load_npz``. Such a file is computed again.
+UNREADABLE_NPZ = (StoreError, *NPZ_DAMAGE)
 
 
 def run_identity(sim: Simulation, frames, solver: Solver, budget: Budget, background=None) -> dict:
