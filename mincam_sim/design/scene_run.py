@@ -24,7 +24,8 @@ IDENTITY_FILE = "design_identity.json"
 
 def make_sizes(spec: st.TaskSpec, quick: bool = False, seed: int = 0, **overrides) -> st.Sizes:
     """The sizes of a run (:meth:`Sizes.quick` or the full ones, training frames per plane and grid from the
-    task's ``frames_per_depth``, ``grid`` and ``learning_rate``), with ``overrides`` (fields of ``Sizes``)."""
+    task's ``frames_per_depth``, ``grid`` and ``learning_rate``), with ``overrides`` (fields of ``Sizes``);
+    sizes whose arrays would not fit in memory are refused naming the fields (:func:`~.scene_tasks.check_sizes_fit`)."""
     known = {f.name for f in fields(st.Sizes)}
     unknown = sorted(set(overrides) - known)
     if unknown:
@@ -34,7 +35,9 @@ def make_sizes(spec: st.TaskSpec, quick: bool = False, seed: int = 0, **override
     overrides.setdefault("frames_per_depth", spec.frames_per_depth[0 if quick else 1])
     overrides.setdefault("grid", spec.grid)
     overrides.setdefault("learning_rate", spec.learning_rate)
-    return replace(base, **overrides)
+    sizes = replace(base, **overrides)
+    st.check_sizes_fit(spec, sizes)
+    return sizes
 
 
 def refuse_another_design(out: Path, identity: dict, overwrite: bool) -> None:

@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from mincam_sim.design import tracking as tr
-from mincam_sim.design.checks import Range, check_ranges, check_shared
+from mincam_sim.design.checks import Range, check_memory, check_ranges, check_shared, memory_bytes
 from mincam_sim.design.optimise import TrainingFrames
 from mincam_sim.errors import ConfigError
 from mincam_sim.estimation.polynomial import poly_terms
@@ -243,6 +243,27 @@ class Sizes(tr.PrintedSizes):
 
     def mincam(self, masks: list[Mask]) -> Mincam:
         return tr.mincam(masks, self.spacing_m, self.d_f_m)
+
+
+#: [B] one traced sample takes while a plane's samples are traced (Dr.Jit's lanes and numpy's bins; measured: 200
+#: B at 2.4 M samples a call, more per sample on small calls).
+TRACED_SAMPLE_BYTES = 200.0
+
+
+def check_sizes_fit(spec: TaskSpec, sizes: Sizes) -> None:
+    """Refuse ``sizes`` whose arrays would not fit in memory (:data:`~.checks.MEMORY_LIMIT_BYTES`), naming the
+    fields: the training model and a held-out case's model (frames x printer dots x the four mixels, float64), and
+    the samples of a training plane traced at once (its frames x the most objects a frame holds x ``strata``^2)."""
+    dots = int(np.prod(sizes.dot_shape()))
+    n_train = sizes.frames_per_depth * len(spec.train.depths_m)
+    check_memory(sizes, ("frames_per_depth", "dpi"), memory_bytes(n_train, dots, len(tr.NAMES)),
+                 f"a training model ({n_train} frames x {dots} printer dots x {len(tr.NAMES)} mixels)")
+    check_memory(sizes, ("suite_frames", "dpi"), memory_bytes(sizes.suite_frames, dots, len(tr.NAMES)),
+                 f"a held-out case's model ({sizes.suite_frames} frames x {dots} printer dots x {len(tr.NAMES)} "
+                 "mixels)")
+    samples = sizes.frames_per_depth * max(1, max(spec.train.counts)) * sizes.strata**2
+    check_memory(sizes, ("frames_per_depth", "strata"), samples * TRACED_SAMPLE_BYTES,
+                 f"{samples} traced samples of a training plane at once (frames x objects x strata^2)")
 
 
 @dataclass

@@ -77,6 +77,20 @@ def test_bad_sizes_name_the_field():
         make_sizes(DEPTH, True, 0, object_size_range_m=(0.01, 0.02))
 
 
+@pytest.mark.parametrize("overrides, fields", [
+    ({"frames_per_depth": 20000}, "frames_per_depth and dpi"),  # 160,000 training frames x 2,209 dots: 10.5 GiB
+    ({"suite_frames": 10000, "dpi": 4800}, "suite_frames and dpi"),  # 10,000 x 142,884 dots: 42.6 GiB
+    ({"frames_per_depth": 12000, "strata": 64}, "frames_per_depth and strata"),  # 49 M samples a plane: 9.2 GiB
+])
+def test_sizes_that_do_not_fit_in_memory_are_refused_before_anything_runs(overrides, fields):
+    from mincam_sim.design.scene_run import make_sizes
+
+    with pytest.raises(ConfigError, match=f"^Sizes.{fields}.* GiB .at most 8 GiB.: lower them"):
+        make_sizes(DEPTH, True, 0, **overrides)
+    make_sizes(DEPTH, True, 0, dpi=4800)  # the largest printer: 768 frames x 142,884 dots, 3.3 GiB, runs
+    make_sizes(COUNTING, False, 0, strata=64)  # 512 frames x 3 objects x 4,096 samples: 1.2 GiB
+
+
 def test_frames_carry_their_labels_and_repeat():
     _needs_jit()
     a = st.draw_frames(COUNTING.train, 60, [3, 11])
