@@ -370,9 +370,14 @@ def test_tracking_paths_equal_aspect_and_linked(monkeypatch):
     fig = plots.tracks_figure(pred, truth, np.array(["a"] * 10))
     ax = fig.axes[0]
     assert ax.get_aspect() == 1.0
-    links = [ln for ln in ax.lines if len(ln.get_xdata()) == 2]
-    assert len(links) == 10  # one segment per estimate, to its own frame's truth
+    (links,) = ax.collections
+    segments = links.get_segments()
+    assert len(segments) == 10  # one segment per estimate, to its own frame's truth
+    assert all(np.allclose(seg, 100 * np.array([t, p])) for seg, t, p in zip(segments, truth, pred, strict=True))
     assert any(t.get_text() == "0" for t in ax.texts)
+    pred[3] = np.nan  # a frame without an estimate has no link
+    (links,) = plots.tracks_figure(pred, truth, np.array(["a"] * 10)).axes[0].collections
+    assert len(links.get_segments()) == 9
 
 
 def test_calibration_2d_right_panel_has_axis_labels(monkeypatch):
