@@ -66,13 +66,15 @@ from mincam_sim.render.scene.scene_dicts import mincam_body_keys
 from mincam_sim.render.scene.scene_files import SceneFile, check_parameters, in_metres
 from mincam_sim.render.scene.updates import removal_updates
 from mincam_sim.render.scene.world_checks import (
+    check_far_from_origin,
     check_unit,
     require_light,
+    require_triangles,
     warn_if_implausible_size,
     warn_if_inside,
 )
 from mincam_sim.render.scene.world_input import (
-    check_radiant_params,
+    check_built_params,
     check_update,
     check_update_keys,
     expand_elements,
@@ -181,7 +183,7 @@ class Simulation:
         self.camera = self.mincam_scene.sensor(CAMERA_KEY)
         self._own = mincam_body_keys(self.scene_mincam) | {SENSOR_KEY}  # built in scene coordinates
         scene_params = self.mincam_scene.params
-        check_radiant_params(scene_params)
+        check_built_params(scene_params)
         self._shifted = _shifted_keys(self.scene, scene_params, self._own)
         shape_ids = {s.id() for s in self.scene.shapes()}
         # file units -> metres once (not the camera, given in metres), then the scene is built around the mincam
@@ -189,6 +191,8 @@ class Simulation:
             key, scene_params[key], self.unit_m, shape_ids), -self.scene_origin_m)
             for key in self._shifted})
         skip = self._own | {CAMERA_KEY}
+        require_triangles(self.scene, skip)
+        check_far_from_origin(self.scene, self.scene_origin_m, skip, self.unit_m)
         warn_if_implausible_size(self.scene, self.scene_mincam, skip, self.unit_m)
         warn_if_inside(self.scene, self.scene_mincam, skip)
         self._restore: dict[str, object] = {}  # what the last run set, to put back with the next update
@@ -594,7 +598,7 @@ class Simulation:
         self._warn_ignored_budget(solver, budget)
         sink = MemorySink() if sink is None else sink
         sets = () if self.kind != "world" else {
-            *(background or {}), *(key for frame in (frames if isinstance(frames, Sequence) else ())
+            *(background if isinstance(background, Mapping) else {}), *(key for frame in (frames if isinstance(frames, Sequence) else ())
                                    if isinstance(frame, Mapping) for key in frame)}
         with self._world_kept(sets):
             plan = solver.plan(self, frames, budget, background=background, cache=sink.cache,

@@ -377,6 +377,44 @@ def test_a_mincam_inside_a_shape_is_said(tmp_path):
                          "material)"] if inside else [])
 
 
+def test_a_mesh_without_triangles_is_refused_naming_it(tmp_path):
+    """An OBJ with vertices and no faces, loaded with face normals, failed in a Dr.Jit gather (a traceback)."""
+    (tmp_path / "empty.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\n")
+    lamp = sd.area_light(0.2, 0.2, Pose((0.0, 0.0, 1.0), (0.0, 0.0, -1.0)).matrix(), 1.0)
+    toy = {"type": "obj", "filename": str(tmp_path / "empty.obj"), "face_normals": True}
+    with pytest.raises(InputError, match=r"^shape 'toy': a mesh without a single triangle .* give it faces"):
+        ms.Simulation(CAM, world={"toy": toy, "lamp": lamp})
+
+
+@pytest.mark.parametrize("distance_m, outcome, grid", [(1_000.0, "nothing", ""), (5_000.0, "warning", "0.49 mm"),
+                                                        (20_000.0, "refusal", "2 mm"), (100_000.0, "refusal", "7.8 mm")])
+def test_a_mincam_far_from_the_origin_is_warned_then_refused(distance_m, outcome, grid):
+    """Mitsuba loads coordinates as 32-bit floats: a tilted pair 100 km out read 10-13 sigma low, 1000 km 2x, with
+    no word. 1.2 km reads what the origin reads (test_far_geometry); beyond 4 km a warning, 16 km a refusal that
+    names the distance, the grid and the fix. A sky alone has nothing to misplace and is taken anywhere."""
+    shift = np.array([distance_m, -700.0, 0.0])
+    cam = ms.pair_layout(center=Pose(tuple(shift + [0.0, 0.0, 0.4]), (0.2, 0.1, -1.0), (0.0, 1.0, 0.3)))
+    floor = sd.mesh_object("floor", np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]]) + shift,
+                           np.array([[0, 1, 2], [0, 2, 3]]), 0.5)
+    lamp = sd.area_light(0.2, 0.2, Pose(tuple(shift + [0.0, 0.0, 1.0]), (0.0, 0.0, -1.0)).matrix(), 1.0)
+    where = (f"the mincam sits {distance_m:g} m from the scene's origin, where the 32-bit floats Mitsuba loads a "
+             f"scene in place its points on a {grid} grid")
+    fix = ("move the scene's origin near the mincam (subtract a local origin from the file's or the elements' "
+           "coordinates and from the mincam's position; within 4,096 m of it the grid is 0.24 mm or finer)")
+    with warnings.catch_warnings(record=True) as told:
+        warnings.simplefilter("always")
+        if outcome == "refusal":
+            with pytest.raises(InputError) as refused:
+                ms.Simulation(cam, world={"floor": floor, "lamp": lamp})
+            assert str(refused.value) == (f"{where}: the shapes near it are not where they were put and every "
+                                          f"reading would be off (at 100 km by 10-15 %); {fix}")
+        else:
+            ms.Simulation(cam, world={"floor": floor, "lamp": lamp})
+        ms.Simulation(cam, world={"sky": sd.sky(1.0)})
+    far = [str(w.message) for w in told if "scene's origin" in str(w.message)]
+    assert far == ([f"{where}: readings may be off by a little; {fix}"] if outcome == "warning" else [])
+
+
 def test_toml_parameters_unit_and_movers(tmp_path):
     """``[world.parameters]``, ``[world] unit_m`` (the file's unit; the config's own lights stay in metres) and a
     rectangle and a point light as ``[[world.mover]]``s from a config; the background without movers takes both

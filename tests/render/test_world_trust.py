@@ -130,6 +130,10 @@ def test_a_loaded_scene_as_an_element_gives_its_shapes_and_lights():
     assert "lamp.emitter.radiance.value" in ms.Simulation(cam, world={"room": loaded}).params
 
 
+def world_lamp() -> dict:
+    return {"lamp": sd.area_light(0.3, 0.3, Pose((0.0, 0.0, 1.0), (0, 0, -1)).matrix(), 5.0)}
+
+
 def _simple_world(**extra):
     cam = cross_layout(center=Pose((0.0, 0.0, 0.4), (0, 0, -1), (0, 1, 0)))
     tri = np.array([[0.0, 0.0, 0.05], [0.03, 0.0, 0.05], [0.0, 0.03, 0.05]])
@@ -144,6 +148,13 @@ BAD_UPDATES = {
     "wrong vertex count": ({"toy.vertex_positions": np.zeros(12)}, "mesh has 3 vertices"),
     "negative radiance": ({"lamp.emitter.radiance.value": np.array([-1.0])}, "negative power"),
     "singular transform": ({"floor.to_world": np.zeros((4, 4))}, "singular"),
+    # a reflectance out of [0, 1] read P = -0.25 W/m^2 (-1) or 16x the light (5), a (3,) radiance was Mitsuba's
+    # RuntimeError, a string vertex array numpy's ValueError from deep in the update
+    "negative reflectance": ({"floor.bsdf.reflectance.value": -1.0}, r"must lie in \[0, 1\].*got \[-1.0\]"),
+    "reflectance above 1": ({"floor.bsdf.reflectance.value": 5.0}, r"must lie in \[0, 1\]"),
+    "three numbers for one": ({"lamp.emitter.radiance.value": np.ones(3)},
+                              "holds 1 value, the update has 3; give one number"),
+    "text for vertices": ({"toy.vertex_positions": ["a"] * 9}, "the update must be numbers, got list"),
     "projective transform": ({"floor.to_world": np.vstack([np.eye(4)[:3], [0.5, 0.0, 0.0, 1.0]])},
                              r"last row of a transform must be \[0, 0, 0, 1\]"),
     "a key that is no string": ({1: np.eye(4)}, "a key must be a 'name.parameter' string"),
@@ -201,7 +212,27 @@ def test_bad_world_inputs_are_one_clear_error():
     with pytest.raises(InputError, match="no plugin 'type'"):
         ms.Simulation(cam, world={"toy": {"radius": 0.1}})
     with pytest.raises(InputError, match="negative power"):
-        ms.Simulation(cam, world={"lamp": sd.area_light(0.3, 0.3, np.eye(4), -2.0)})
+        ms.Simulation(cam, world={"lamp": {"type": "rectangle", "emitter": {
+            "type": "area", "radiance": {"type": "spectrum", "value": -2.0}}}})
+    for args, field in (((0.3, 0.3, np.eye(4), -2.0), "radiance_w_m2_sr"), ((0.0, 0.3, np.eye(4), 1.0), "width_m"),
+                        ((0.3, 0.3, np.eye(3), 1.0), "matrix must be a finite 4 x 4")):
+        with pytest.raises(InputError, match=f"area_light: {field}"):
+            sd.area_light(*args)
+    # built with a reflectance out of [0, 1]: the same refusal as an update (a scene dict read P = -0.13 W/m^2)
+    for material in ({"type": "diffuse", "reflectance": {"type": "spectrum", "value": -0.5}},
+                     {"type": "conductor", "specular_reflectance": {"type": "spectrum", "value": 2.0}}):
+        with pytest.raises(InputError, match=r"floor.bsdf.*reflectance.value = \[.*\] must lie in \[0, 1\]"):
+            ms.Simulation(cam, world={**world_lamp(), "floor": {"type": "rectangle", "bsdf": material}})
+    with pytest.raises(InputError, match="object 'toy': vertices hold NaN"):
+        sd.mesh_object("toy", np.full((3, 3), np.nan), np.array([[0, 1, 2]]))
+    # one Mitsuba object under two names was one shape, the first name silently dropped
+    toy = sd.mesh_object("toy", np.eye(3), np.array([[0, 1, 2]]))
+    with pytest.raises(InputError, match="elements 'a' and 'b' are the same Mitsuba object"):
+        ms.Simulation(cam, world={**world_lamp(), "a": toy, "b": toy})
+    with pytest.raises(InputError, match="background must be a dict"):  # was TypeError: unhashable type: 'dict'
+        changes(world, [frame], [{}], spp=64)
+    with pytest.raises(InputError, match=r"traces 8589934592 rays per replicate.*raise replicates to 2048"):
+        changes(world, [frame], {}, spp=1 << 36, solver=ms.StratifiedChange())  # was a Dr.Jit RuntimeError
     with pytest.raises(InputError, match="not a Mitsuba dict"):
         ms.Simulation(cam, world={"toy": np.zeros(3)})
 

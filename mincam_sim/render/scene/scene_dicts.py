@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from mincam_sim.errors import InputError
 from mincam_sim.model.optics import Mixel
 from mincam_sim.render import backend
 from mincam_sim.render.kernels.mask_eval import opacity_texture
@@ -216,14 +217,19 @@ SCREEN_RADIANCE_PARAM = f"{SCREEN_KEY}.emitter.radiance.data"
 def mesh_object(name: str, vertices_m: np.ndarray, faces: np.ndarray, albedo: float = 0.8):
     """An in-memory triangle mesh (``mi.Mesh``) with a diffuse gray albedo in [0, 1]."""
     mi = backend.mitsuba()
-    vertices_m = np.asarray(vertices_m, dtype=np.float32)
-    faces = np.asarray(faces, dtype=np.uint32)
+    vertices_m = _numbers(vertices_m, f"object {name!r}: vertices")
     if vertices_m.ndim != 2 or vertices_m.shape[1] != 3 or len(vertices_m) == 0:
-        raise ValueError(f"object {name!r}: vertices must be a non-empty (n, 3) array [m], got {vertices_m.shape}")
-    if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0 or faces.max() >= len(vertices_m):
-        raise ValueError(f"object {name!r}: faces must be a non-empty (m, 3) array of vertex indices")
-    if not 0.0 <= albedo <= 1.0:
-        raise ValueError(f"object {name!r}: albedo must lie in [0, 1], got {albedo}")
+        raise InputError(f"object {name!r}: vertices must be a non-empty (n, 3) array [m], got {vertices_m.shape}")
+    if not np.all(np.isfinite(vertices_m)):
+        raise InputError(f"object {name!r}: vertices hold NaN or infinite values; give finite positions [m]")
+    faces = _numbers(faces, f"object {name!r}: faces")
+    if (faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0 or not np.all(faces == np.round(faces))
+            or faces.min() < 0 or faces.max() >= len(vertices_m)):
+        raise InputError(f"object {name!r}: faces must be a non-empty (m, 3) array of vertex indices (0 to "
+                         f"{len(vertices_m) - 1})")
+    if _not_number(albedo) or not 0.0 <= albedo <= 1.0:
+        raise InputError(f"object {name!r}: albedo must lie in [0, 1], got {albedo!r}")
+    vertices_m, faces = vertices_m.astype(np.float32), faces.astype(np.uint32)
     props = mi.Properties()
     props["bsdf"] = mi.load_dict({"type": "diffuse", "reflectance": {"type": "spectrum", "value": float(albedo)}})
     mesh = mi.Mesh(name, len(vertices_m), len(faces), props=props)
@@ -250,8 +256,37 @@ def textured_plane(albedo: np.ndarray, width_m: float, height_m: float, matrix: 
     }
 
 
+def _not_number(value) -> bool:
+    """Not a real number that a 32-bit float holds (Mitsuba's scene values)."""
+    return (isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating)
+            or not abs(value) <= np.finfo(np.float32).max)
+
+
+def _numbers(value, what: str) -> np.ndarray:
+    """``value`` as a float64 array, or one :class:`InputError` naming ``what``."""
+    try:
+        return np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"{what} must be numbers, got {type(value).__name__}") from None
+
+
+def _placement(matrix, what: str) -> np.ndarray:
+    """A 4 x 4 finite placement matrix, or one :class:`InputError` naming ``what``."""
+    matrix = _numbers(matrix, what)
+    if matrix.shape != (4, 4) or not np.all(np.isfinite(matrix)):
+        raise InputError(f"{what} must be a finite 4 x 4 matrix (e.g. Pose(...).matrix()), got shape {matrix.shape}")
+    return matrix
+
+
 def area_light(width_m: float, height_m: float, matrix: np.ndarray, radiance_w_m2_sr: float) -> dict:
     """A rectangular area light emitting ``radiance_w_m2_sr`` along its local +z."""
+    for name, value in (("width_m", width_m), ("height_m", height_m)):
+        if _not_number(value) or value <= 0:
+            raise InputError(f"area_light: {name} must be a positive size [m] (a light of no area emits nothing), "
+                             f"got {value!r}")
+    if _not_number(radiance_w_m2_sr) or radiance_w_m2_sr < 0:
+        raise InputError(f"area_light: radiance_w_m2_sr must be a finite radiance >= 0, got {radiance_w_m2_sr!r}")
+    matrix = _placement(matrix, "area_light: matrix")
     return {
         "type": "rectangle",
         "to_world": _transform(np.asarray(matrix) @ np.diag([width_m / 2, height_m / 2, 1.0, 1.0])),

@@ -17,6 +17,11 @@ INSIDE_FRACTION = 0.5  # a mixel whose view meets the back of one-sided faces in
 SCENE_TOO_LARGE = 1e3  # scene extent / rig size above this: a scene modelled in cm or mm, read as metres?
 SCENE_TOO_SMALL = 1.0  # scene extent / rig size below this: the scene is smaller than the rig
 MIN_RIG_M = 0.01  # a mincam is taken as at least this size [m] (a single mixel's 2 mm mask sits in a device)
+# Mitsuba stores a loaded scene's coordinates in 32-bit floats: at a mincam this far from the file's origin the
+# points near it fall on a grid of np.spacing(float32(distance)). Measured (a tilted pair, a car 0.4 m below):
+# 1 and 1.2 km (0.06, 0.12 mm grid) read what the origin reads; 100 km (7.8 mm) 10-13 sigma low, 1000 km (62 mm) 2x.
+FLOAT32_GRID_WARN_M = 2.5e-4  # [m] a coarser grid near the mincam: a warning (from 4,096 m; 1.2 km is tested)
+FLOAT32_GRID_REFUSE_M = 1e-3  # [m] coarser than this: refused (from 16,384 m): the scene is not where it was put
 
 
 def require_light(scene) -> None:
@@ -24,6 +29,50 @@ def require_light(scene) -> None:
     if not scene.emitters():
         raise InputError("the world holds no light (no area light, point or spot light, sky): every mixel would "
                          "measure 0 in every frame; add an emitter (e.g. ms.sky(1.0) or an area light)")
+
+
+def require_triangles(scene, skip: set[str]) -> None:
+    """Refuse a mesh without a triangle (an empty file, or vertices without faces): Mitsuba loads it, and it
+    then fails deep in a gather (with ``face_normals``) or moves nothing."""
+    empty = sorted(s.id() for s in scene.shapes()
+                   if s.id() not in skip and s.is_mesh() and int(s.primitive_count()) == 0)
+    if empty:
+        raise InputError(f"{'shapes' if len(empty) > 1 else 'shape'} {', '.join(map(repr, empty))}: a mesh without "
+                         "a single triangle (an empty file, or vertices without faces); give it faces or leave it "
+                         "out of the scene")
+
+
+def float32_grid_m(distance_m: float, unit_m: float = 1.0) -> float:
+    """[m] the spacing of 32-bit floats at ``distance_m`` from the origin of a file in units of ``unit_m``: how
+    finely a loaded scene's points there are placed."""
+    return float(np.spacing(np.float32(abs(distance_m) / unit_m))) * unit_m
+
+
+def check_far_from_origin(scene, mincam_centre_m, skip: set[str], unit_m: float) -> None:
+    """Refuse (warn for) a world whose mincam sits so far from the coordinates' origin that the 32-bit floats
+    Mitsuba loads the scene in place the shapes around it on a grid coarser than :data:`FLOAT32_GRID_REFUSE_M`
+    (:data:`FLOAT32_GRID_WARN_M`). A world with no shape of its own (a sky) has nothing to misplace."""
+    if not any(s.id() not in skip and s.sensor() is None for s in scene.shapes()):
+        return
+    distance = float(np.max(np.abs(np.asarray(mincam_centre_m, dtype=float))))
+    grid = float32_grid_m(distance, unit_m)
+    if grid <= FLOAT32_GRID_WARN_M:
+        return
+    what = (f"the mincam sits {distance:.6g} m from the scene's origin, where the 32-bit floats Mitsuba loads a "
+            f"scene in place its points on a {1e3 * grid:.2g} mm grid")
+    fix = ("move the scene's origin near the mincam (subtract a local origin from the file's or the elements' "
+           f"coordinates and from the mincam's position; within {_within_m(FLOAT32_GRID_WARN_M, unit_m):,.0f} m of "
+           f"it the grid is {1e3 * float32_grid_m(_within_m(FLOAT32_GRID_WARN_M, unit_m) / 2, unit_m):.2g} mm or "
+           "finer)")
+    if grid > FLOAT32_GRID_REFUSE_M:
+        raise InputError(f"{what}: the shapes near it are not where they were put and every reading would be off "
+                         f"(at 100 km by 10-15 %); {fix}")
+    warnings.warn(f"{what}: readings may be off by a little; {fix}", WorldWarning, stacklevel=4)
+
+
+def _within_m(grid_m: float, unit_m: float) -> float:
+    """[m] the largest distance from the origin whose float32 grid is at most ``grid_m``."""
+    return float(2.0 ** (np.floor(np.log2(grid_m / unit_m / np.spacing(np.float32(1.0)))) + 1)) * unit_m
 
 
 def rig_size_m(mincam: Mincam) -> float:

@@ -18,6 +18,8 @@ from mincam_sim.errors import InputError
 from mincam_sim.render import backend
 
 RADIANT_PARTS = ("radiance", "intensity", "irradiance")  # emitter parameters that must be >= 0
+# material parameters that must lie in [0, 1]: a surface reflects or transmits at most the light it receives
+FRACTION_PARTS = ("reflectance", "diffuse_reflectance", "specular_reflectance", "specular_transmittance")
 
 
 class WorldWarning(UserWarning):
@@ -62,10 +64,17 @@ def expand_elements(elements) -> tuple[dict, LoadedScenes]:
     mi = backend.mitsuba()
     out: dict = {}
     loaded = LoadedScenes()
+    objects: dict[int, str] = {}  # id of each Mitsuba object given -> its element name
 
     def add(name, value, origin: str) -> None:
         if name in out:
             raise InputError(f"element name {name!r} ({origin}) is used twice; rename one of them")
+        if isinstance(value, mi.Object):  # one object is one shape in Mitsuba: a second name would be dropped
+            if id(value) in objects:
+                raise InputError(f"elements {objects[id(value)]!r} and {name!r} are the same Mitsuba object (one "
+                                 "shape, which the scene would hold once, under one name); make a second object "
+                                 "(e.g. call ms.mesh_object again) for a second shape")
+            objects[id(value)] = name
         out[name] = value
 
     for name, value in elements.items():
@@ -146,12 +155,40 @@ def check_radiant_params(params, keys: Sequence[str] | None = None) -> None:
                              "negative power); fix the emitter's value")
 
 
+def _is_fraction_key(key: str) -> bool:
+    parts = key.split(".")
+    return parts[-1] == "value" and any(p in FRACTION_PARTS for p in parts[1:-1])
+
+
+def check_built_params(params) -> None:
+    """Refuse values a world is built with that would give silently wrong numbers: a negative or non-finite
+    light (:func:`check_radiant_params`), a reflectance or transmittance outside [0, 1] (negative irradiance, or
+    more light out of a surface than onto it), a mesh with NaN or infinite vertices, a non-finite placement."""
+    check_radiant_params(params)
+    for key in params.keys():
+        checked = _is_fraction_key(key) or key.endswith((".vertex_positions", ".to_world"))
+        if not checked:
+            continue
+        try:
+            arr = np.asarray(params[key], dtype=np.float64)
+        except (TypeError, ValueError):
+            continue  # a texture or bitmap: its values are checked where they are made
+        if not np.all(np.isfinite(arr)):
+            raise InputError(f"{key} holds NaN or infinite values: the {key.split('.', 1)[0]!r} element was built "
+                             "with them; give finite numbers")
+        if _is_fraction_key(key) and arr.size and not (arr.min() >= 0 and arr.max() <= 1):
+            raise InputError(f"{key} = {arr.ravel()[:4].tolist()} must lie in [0, 1] (a surface reflects or "
+                             "transmits at most the light it receives); fix the material's value")
+
+
 def check_update(key: str, current, value) -> None:
     """Refuse an update whose size does not match the parameter it replaces, or that is not finite."""
     if not isinstance(value, np.ndarray):
         try:
             value = np.asarray(value, dtype=np.float64)
         except (TypeError, ValueError):
+            if isinstance(value, str | bytes | list | tuple | Mapping):
+                raise InputError(f"{key}: the update must be numbers, got {type(value).__name__} {value!r:.60}") from None
             return  # a Mitsuba object of another kind: Mitsuba checks its type
     if value.dtype.kind not in "biuf":
         raise InputError(f"{key}: the update must be numeric, got an array of {value.dtype}")
@@ -176,9 +213,19 @@ def check_update(key: str, current, value) -> None:
             raise InputError(f"{key}: the mesh has {expected // 3} vertices ({expected} values), the update has "
                              f"{value.size} values; an update moves the vertices of the same mesh (same count and "
                              "order)")
+    if key.endswith(".value"):  # a spectrum's value (one number in the mono variants Mitsuba runs here)
+        import drjit as dr
+
+        held = int(dr.width(current)) if dr.is_array_v(current) else np.asarray(current).size
+        if value.size != held:
+            raise InputError(f"{key}: the parameter holds {held} value{'s' if held != 1 else ''}, the update has "
+                             f"{value.size}; give {'one number' if held == 1 else f'{held} numbers'}")
     if key.split(".")[-1] in ("value", *RADIANT_PARTS) and any(p in RADIANT_PARTS for p in key.split(".")[1:]):
         if np.any(value < 0):
             raise InputError(f"{key}: a light cannot emit negative power; give values >= 0")
+    if _is_fraction_key(key) and not (value.min() >= 0 and value.max() <= 1):
+        raise InputError(f"{key}: a reflectance or transmittance must lie in [0, 1] (a surface reflects or "
+                         f"transmits at most the light it receives), got {value.ravel()[:4].tolist()}")
 
 
 def check_frames(frames, background) -> None:

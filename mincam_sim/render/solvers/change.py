@@ -86,6 +86,7 @@ from mincam_sim.render.scene.world_input import check_frames
 from mincam_sim.render.solvers.base import Plan, Row, Solver
 
 MAX_SPP = 1 << 26  # cap of the target-noise budget, samples per mixel per frame
+MAX_RAYS_PER_REPLICATE = 1 << 25  # stratified: a replicate's rays of a mixel are one launch (Dr.Jit: < 2^32 lanes)
 STRATA_EXPANSIONS = (1.0, 2.0, 4.0, 8.0)  # nested rectangles: the change region, then scaled about its centre
 STRATA_SHARES = (0.6, 0.1, 0.1, 0.1, 0.1)  # rays per stratum (region, rings, rest): near Neyman, guided, bench scene
 BACKGROUND_MIN_SPP = 1 << 16  # stratified: rays per mixel (at least) for the background's whole-aperture value
@@ -268,6 +269,12 @@ class StratifiedChange(ChangeSolver):
 
     def _check(self, frames, background, spp, replicates, target) -> None:
         super()._check(frames, background, spp, replicates, target)
+        per = -(-int(spp) // int(replicates))
+        if per > MAX_RAYS_PER_REPLICATE:
+            raise InputError(f"spp = {spp} with {replicates} replicates traces {per} rays per replicate, and a "
+                             f"replicate's rays are one launch: at most {MAX_RAYS_PER_REPLICATE} "
+                             f"(2^{MAX_RAYS_PER_REPLICATE.bit_length() - 1}, its memory); raise replicates to "
+                             f"{-(-int(spp) // MAX_RAYS_PER_REPLICATE)} or more, or lower spp")
         self.shares()
         if self.allocation_sigma not in ALLOCATION_SIGMA:
             raise InputError(f"allocation_sigma (where an allocated value's sigma comes from) must be one of "
