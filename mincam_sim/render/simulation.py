@@ -598,8 +598,9 @@ class Simulation:
         self._warn_ignored_budget(solver, budget)
         sink = MemorySink() if sink is None else sink
         sets = () if self.kind != "world" else {
-            *(background if isinstance(background, Mapping) else {}), *(key for frame in (frames if isinstance(frames, Sequence) else ())
-                                   if isinstance(frame, Mapping) for key in frame)}
+            *(background if isinstance(background, Mapping) else {}),
+            *(key for frame in (frames if isinstance(frames, Sequence) else ()) if isinstance(frame, Mapping)
+              for key in frame)}
         with self._world_kept(sets):
             plan = solver.plan(self, frames, budget, background=background, cache=sink.cache,
                                show_progress=show_progress)

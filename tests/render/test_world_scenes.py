@@ -386,8 +386,9 @@ def test_a_mesh_without_triangles_is_refused_naming_it(tmp_path):
         ms.Simulation(CAM, world={"toy": toy, "lamp": lamp})
 
 
-@pytest.mark.parametrize("distance_m, outcome, grid", [(1_000.0, "nothing", ""), (5_000.0, "warning", "0.49 mm"),
-                                                        (20_000.0, "refusal", "2 mm"), (100_000.0, "refusal", "7.8 mm")])
+@pytest.mark.parametrize("distance_m, outcome, grid", [
+    (1_000.0, "nothing", ""), (5_000.0, "warning", "0.49 mm"), (20_000.0, "refusal", "2 mm"),
+    (100_000.0, "refusal", "7.8 mm")])
 def test_a_mincam_far_from_the_origin_is_warned_then_refused(distance_m, outcome, grid):
     """Mitsuba loads coordinates as 32-bit floats: a tilted pair 100 km out read 10-13 sigma low, 1000 km 2x, with
     no word. 1.2 km reads what the origin reads (test_far_geometry); beyond 4 km a warning, 16 km a refusal that

@@ -188,7 +188,8 @@ def check_update(key: str, current, value) -> None:
             value = np.asarray(value, dtype=np.float64)
         except (TypeError, ValueError):
             if isinstance(value, str | bytes | list | tuple | Mapping):
-                raise InputError(f"{key}: the update must be numbers, got {type(value).__name__} {value!r:.60}") from None
+                raise InputError(f"{key}: the update must be numbers, got {type(value).__name__} "
+                                 f"{value!r:.60}") from None
             return  # a Mitsuba object of another kind: Mitsuba checks its type
     if value.dtype.kind not in "biuf":
         raise InputError(f"{key}: the update must be numeric, got an array of {value.dtype}")
