@@ -774,8 +774,10 @@ def _print_reused(results: dict, out_dir: Path) -> None:
 MIN_BIT_DEPTH = 2  # reproduce --quick runs at 2 bits (large errors); at 1 bit the calibration fit is singular
 
 
-def _reproduce_config(config: Path | None, quick: bool, **flags: Any) -> tuple[Any, dict]:
-    """Set-up and parameters from an optional reproduce config, then the command-line flags given."""
+def _reproduce_config(config: Path | None, quick: bool, names: Collection[str] | None = None,
+                      **flags: Any) -> tuple[Any, dict]:
+    """Set-up and parameters from an optional reproduce config, then the command-line flags given; checked for
+    the experiments ``names`` (default all)."""
     from mincam_sim.experiments import load_reproduce_config
 
     given = {key: value for key, value in flags.items() if value is not None}
@@ -794,7 +796,8 @@ def _reproduce_config(config: Path | None, quick: bool, **flags: Any) -> tuple[A
         raise ConfigError(flag.replace("[command line]: ", "")) from None
     from mincam_sim.experiments.reproduce_file import check_reproduce
 
-    check_reproduce(setup, params)  # what the experiments would refuse only deep inside, refused here
+    # what the experiments to run would refuse only deep inside, refused here
+    check_reproduce(setup, {name: p for name, p in params.items() if names is None or name in names})
     if getattr(setup, "bit_depth", MIN_BIT_DEPTH) < MIN_BIT_DEPTH:
         where = "--bit-depth" if "bit_depth" in given else "[setup] bit_depth"
         raise ConfigError(f"{where} = {setup.bit_depth}: give 2 to 32 bits (the paper: {paper.ADC_BITS}); a 1-bit "
@@ -828,7 +831,7 @@ def reproduce(
     if experiment != "all" and experiment not in EXPERIMENTS:
         raise ConfigError(f"unknown experiment {experiment!r}: choose {', '.join(EXPERIMENTS)} or all")
     names = list(EXPERIMENTS) if experiment == "all" else [experiment]
-    setup, params = _reproduce_config(config, quick, seed=seed, spacing_m=spacing_m, depth_m=depth_m,
+    setup, params = _reproduce_config(config, quick, names, seed=seed, spacing_m=spacing_m, depth_m=depth_m,
                                       bit_depth=bit_depth)
     check_variant()
     check_out_dir(out_dir)

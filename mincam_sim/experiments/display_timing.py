@@ -56,8 +56,9 @@ class DisplayTiming:
         if not 0 <= self.exposure_s <= 1 / self.sample_rate_hz:
             raise ValueError(f"exposure_s must be in [0, 1 / sample_rate_hz = {1 / self.sample_rate_hz:.4g} s], "
                              f"got {self.exposure_s!r}")
-        if not (np.isfinite(self.jitter_s) and self.jitter_s >= 0):
-            raise ValueError(f"jitter_s must be >= 0 seconds, got {self.jitter_s!r}")
+        if not (np.isfinite(self.jitter_s) and 0 <= self.jitter_s <= 1 / self.sample_rate_hz):
+            raise ValueError(f"jitter_s must be in [0, 1 / sample_rate_hz = {1 / self.sample_rate_hz:.4g} s] (rms "
+                             f"jitter of a reading's instant, within one reading interval), got {self.jitter_s!r}")
         if self.start_s is not None and not self.start_s >= 0:
             raise ValueError(f"start_s must be >= 0 seconds, got {self.start_s!r}")
 

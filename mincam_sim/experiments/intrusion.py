@@ -105,7 +105,8 @@ class IntrusionParams:
         if not 0.02 < self.car_height_m <= 0.2:
             raise ValueError(f"car_height_m must be in (0.02, 0.2] m (the wheels are 2 cm high), got "
                              f"{self.car_height_m!r}")
-        for key in ("band_m", "calibration_square_m", "calibration_rel_stderr", "frame_rate_hz"):
+        for key in ("band_m", "calibration_square_m", "calibration_rel_stderr", "frame_rate_hz", "start_distance_m",
+                    "overrun_m"):
             if not getattr(self, key) > 0:
                 raise ValueError(f"{key} must be > 0, got {getattr(self, key)!r}")
         if self.calibration_positions < 5:

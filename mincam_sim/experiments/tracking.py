@@ -113,8 +113,11 @@ class TrackingParams:
                 raise ValueError(f"{key} must be > 0, got {getattr(self, key)!r}")
         if not 0 < self.reach_fraction <= 0.5:
             raise ValueError(f"reach_fraction must be in (0, 0.5], got {self.reach_fraction!r}")
-        if self.frames_per_toy < 1 or self.calibration_grid < 4 or not self.toys:
-            raise ValueError("need frames_per_toy >= 1, calibration_grid >= 4 and at least one toy")
+        if not 0 < self.toy_size_m <= 0.2:
+            raise ValueError(f"toy_size_m must be in (0, 0.2] m (a toy on the 50 cm field; the paper's are ~7 cm), "
+                             f"got {self.toy_size_m!r}")
+        if self.frames_per_toy < 2 or self.calibration_grid < 4 or not self.toys:
+            raise ValueError("need frames_per_toy >= 2 (a path), calibration_grid >= 4 and at least one toy")
 
 
 @dataclass
