@@ -148,7 +148,8 @@ class WorldRunSection:
     max_depth: int = setting(0, "path length from the mask: 2 = direct light, 3 = one inter-reflection; 0 = the "
                              "scene file's <integrator> max_depth, else 3", _depth)
     variant: str = setting("", '"" = automatic (cuda_ad_mono > llvm_ad_mono)', _world_variant)
-    out_dir: str = setting("out/world", "measurements.npz / .csv and a plot of dP; relative to this file", Text())
+    out_dir: str = setting("out/world", "measurements.npz / .csv and a plot of dP; relative to this file",
+                           Text(nonempty=True))
 
 
 @dataclass(frozen=True)
@@ -209,8 +210,9 @@ class LightTable:
     forward: tuple[float, float, float] = setting((0.0, 0.0, -1.0), "area and spot lights: where they shine",
                                                   Vector(3))
     size_m: tuple[float, float] = setting((0.3, 0.3), "area lights: width, height", _positive_pair)
-    radiance_w_m2_sr: float = setting(10.0, "area lights and sky", Number(minimum=0.0))
-    intensity_w_sr: float = setting(1.0, "point and spot lights", Number(minimum=0.0))
+    # at most what a 32-bit float (Mitsuba's) holds: 1e300 became inf, refused under its internal parameter name
+    radiance_w_m2_sr: float = setting(10.0, "area lights and sky", Number(minimum=0.0, maximum=1e30))
+    intensity_w_sr: float = setting(1.0, "point and spot lights", Number(minimum=0.0, maximum=1e30))
     cutoff_deg: float = setting(20.0, "spot lights: half-angle of the cone (below 90)", _below(90.0))
 
 
@@ -593,4 +595,9 @@ def _camera(given: dict) -> CameraSpec:
     look = _required(where, "look_at_m", t.look_at_m, "the point it looks at [m]")
     if np.allclose(position, look):
         raise ConfigError(f"{where}: look_at_m must differ from position_m")
+    forward = np.asarray(look, dtype=float) - np.asarray(position, dtype=float)
+    up = np.asarray(t.up, dtype=float)
+    if np.linalg.norm(np.cross(forward, up)) < 1e-9 * np.linalg.norm(forward) * max(np.linalg.norm(up), 1e-300):
+        raise ConfigError(f"{where}: up = {up.tolist()} is parallel to the view from position_m to look_at_m "
+                          f"({np.round(forward / np.linalg.norm(forward), 6).tolist()}); give an up across the view")
     return CameraSpec(position, look, t.up, t.fov_deg, t.width_px, t.height_px, t.spp, t.threshold)

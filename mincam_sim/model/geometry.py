@@ -50,7 +50,7 @@ class Pose:
         if np.linalg.norm(fwd) == 0:
             raise InputError("forward must be a non-zero direction")
         if np.linalg.norm(np.cross(fwd, up)) < 1e-9 * np.linalg.norm(fwd) * max(np.linalg.norm(up), 1e-300):
-            raise InputError(f"up {tuple(up)} must not be parallel to forward {tuple(fwd)}")
+            raise InputError(f"up {[float(v) for v in up]} must not be parallel to forward {[float(v) for v in fwd]}")
         object.__setattr__(self, "position_m", tuple(float(v) for v in pos))
         object.__setattr__(self, "forward", tuple(float(v) for v in fwd))
         object.__setattr__(self, "up", tuple(float(v) for v in up))

@@ -717,6 +717,11 @@ class Simulation:
             if len(grid) != 2 or any(isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1
                                      for n in grid):
                 raise InputError(f"psf_grid must be two positive integers (nx, ny), got {psf_grid!r}")
+            cols, rows = self.screen.resolution
+            if grid[0] > cols or grid[1] > rows:  # 20000 x 20000 took 24 GB before the kernel killed it
+                raise InputError(f"psf_grid (--psf-grid) {grid[0]} x {grid[1]} is finer than the screen's {cols} x "
+                                 f"{rows} texels: a point's response is its texel's weight, so a finer grid repeats "
+                                 f"them; give at most {cols} x {rows}")
         if not (solver is None or isinstance(solver, DotProduct | ResponseMap)):
             raise InputError(f"export_maps takes the ResponseMap or DotProduct solver, got {type(solver).__name__}")
         if isinstance(solver, DotProduct):

@@ -553,6 +553,28 @@ CASES: list[Case] = [
          {"c.toml": '[world]\n[[world.object]]\nid = "toy"\nmesh = "m.obj"\n[[world.mover]]\nid = "toy"\n'
                     'offsets_m = [[0, 0, 0]]\n[world.camera]\nposition_m = [0, 0, 1]\nlook_at_m = [0, 0, 0]\n'
                     'fov_deg = 180.0\n', "m.obj": "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"}, keywords=("fov_deg",)),
+    Case("guard_camera_up_along_its_view", R,  # named Pose's up and numpy reprs (np.float64(0.0), ...)
+         {"c.toml": '[world]\n[[world.object]]\nid = "toy"\nmesh = "m.obj"\n[[world.mover]]\nid = "toy"\n'
+                    'offsets_m = [[0, 0, 0]]\n[world.camera]\nposition_m = [0, 0, 1]\nlook_at_m = [0, 0, 0]\n'
+                    'up = [0, 0, 1]\n', "m.obj": "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"},
+         keywords=("[world.camera]: up = [0.0, 0.0, 1.0] is parallel",)),
+    Case("guard_light_beyond_a_float", R,  # was refused as "lamp.emitter.radiance.value = [inf]"
+         {"c.toml": '[world]\n[[world.object]]\nid = "toy"\nmesh = "m.obj"\n[[world.light]]\nid = "lamp"\n'
+                    'kind = "area"\nposition_m = [0, 0, 1]\nradiance_w_m2_sr = 1e300\n[[world.mover]]\n'
+                    'id = "toy"\noffsets_m = [[0, 0, 0]]\n', "m.obj": "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"},
+         keywords=("radiance_w_m2_sr must be a number <= 1e+30",)),
+    Case("guard_world_out_dir_empty", R,  # wrote the outputs beside the config
+         {"c.toml": '[run]\nout_dir = ""\n[world]\n[[world.object]]\nid = "toy"\nmesh = "m.obj"\n'
+                    '[[world.mover]]\nid = "toy"\noffsets_m = [[0, 0, 0]]\n',
+          "m.obj": "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"}, keywords=("[run] out_dir must not be empty",)),
+    Case("guard_world_mesh_without_triangles", R,  # a Dr.Jit gather error (traceback) with face normals
+         {"c.toml": '[world]\nscene = "s.xml"\n[[world.mover]]\nid = "toy"\noffsets_m = [[0, 0, 0]]\n',
+          "s.xml": '<scene version="3.0.0"><shape type="obj" id="toy"><string name="filename" value="m.obj"/>'
+                   '<boolean name="face_normals" value="true"/></shape><emitter type="constant"/></scene>',
+          "m.obj": "v 0 0 0\nv 1 0 0\nv 0 1 0\n"}, keywords=("a mesh without a single triangle",)),
+    Case("export_maps_psf_grid_finer_than_the_texels", ["export-maps", "c.toml", "--out", "em", "--psf-grid",
+                                                        "20000", "20000"],  # killed at 24 GB of memory
+         {"c.toml": toml()}, keywords=("--psf-grid",)),
     Case("guard_warns_spp_with_response_map", [*R, "--check"], {"c.toml": toml(run={"spp": "1024"})}, expect="ok",
          notes=("warning: [run] spp is ignored",)),
     Case("guard_warns_grid_keys_in_a_line_sweep", [*R, "--check"], {"c.toml": toml(frames={"nx": "4"})},

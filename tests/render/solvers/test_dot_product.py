@@ -150,6 +150,10 @@ def test_export_refuses_bad_input(tmp_path):
     sim = ms.Simulation(ms.single(masks.constant(1.0)), screen=SCREEN)
     with pytest.raises(InputError, match="psf_grid must be two positive integers"):
         sim.export_maps(tmp_path, solver=ms.DotProduct(), psf_grid=(0, 3))
+    cols, rows = SCREEN.resolution  # a finer grid only repeats texels (20000 x 20000 was killed at 24 GB)
+    with pytest.raises(InputError, match=rf"{cols + 1} x {rows} is finer than the screen's {cols} x {rows} texels"):
+        sim.export_maps(tmp_path, solver=ms.DotProduct(), psf_grid=(cols + 1, rows))
+    assert not any(tmp_path.iterdir())  # refused before anything is written
     with pytest.raises(InputError, match="ResponseMap or DotProduct"):
         sim.export_maps(tmp_path, solver=ms.Aperture())
 
