@@ -771,9 +771,6 @@ def _print_reused(results: dict, out_dir: Path) -> None:
                    f"{', '.join(reused)}; --overwrite recomputes")
 
 
-MIN_BIT_DEPTH = 2  # reproduce --quick runs at 2 bits (large errors); at 1 bit the calibration fit is singular
-
-
 def _reproduce_config(config: Path | None, quick: bool, names: Collection[str] | None = None,
                       **flags: Any) -> tuple[Any, dict]:
     """Set-up and parameters from an optional reproduce config, then the command-line flags given; checked for
@@ -798,10 +795,6 @@ def _reproduce_config(config: Path | None, quick: bool, names: Collection[str] |
 
     # what the experiments to run would refuse only deep inside, refused here
     check_reproduce(setup, {name: p for name, p in params.items() if names is None or name in names})
-    if getattr(setup, "bit_depth", MIN_BIT_DEPTH) < MIN_BIT_DEPTH:
-        where = "--bit-depth" if "bit_depth" in given else "[setup] bit_depth"
-        raise ConfigError(f"{where} = {setup.bit_depth}: give 2 to 32 bits (the paper: {paper.ADC_BITS}); a 1-bit "
-                          "ADC reads every change as 0 or 1 DN and the calibration has nothing to fit")
     return setup, params
 
 

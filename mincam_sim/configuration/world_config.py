@@ -388,8 +388,8 @@ def load_world_config(source: str | Path | dict, base_dir: str | Path | None = N
     if w.scene:
         scene_file = _path("world", "scene", w.scene, base)
         if not scene_file.is_file():
-            raise ConfigError(f"[world] scene: {scene_file} does not exist (relative paths are taken from the "
-                              "config's folder)")
+            raise ConfigError(f"[world] scene: {scene_file} {_not_a_file(scene_file)} (relative paths are taken "
+                              "from the config's folder)")
         files.append(scene_file)
         files.extend(gltf_referenced_files(scene_file) if is_gltf(scene_file) else referenced_files(scene_file))
         if is_gltf(scene_file) and w.parameters:
@@ -483,7 +483,7 @@ def _object(i: int, given: dict, base: Path, files: list[Path]) -> WorldObject:
     _required(f"{where} ({oid})", "mesh", t.mesh, "a mesh file: OBJ, PLY, STL, glTF/GLB")
     mesh = _path(where, "mesh", t.mesh, base)
     if not mesh.is_file():
-        raise ConfigError(f"{where} ({oid}): mesh file {mesh} does not exist (relative to the config's folder)")
+        raise ConfigError(f"{where} ({oid}): mesh file {mesh} {_not_a_file(mesh)} (relative to the config's folder)")
     files.append(mesh)
     return WorldObject(oid, mesh, t.albedo, t.position_m, t.rotation_deg, t.scale)
 
@@ -559,9 +559,14 @@ def _sample_keyframes(where: str, times: Any, keys: np.ndarray, rate: float) -> 
     return np.stack([np.interp(frames, t, keys[:, k]) for k in range(3)], axis=1)
 
 
+def _not_a_file(path: Path) -> str:
+    """Why ``path`` is no file to read, in words."""
+    return "is a directory, not a file" if path.is_dir() else "does not exist"
+
+
 def _read_trajectory_csv(where: str, path: Path) -> tuple[np.ndarray, np.ndarray]:
     if not path.is_file():
-        raise ConfigError(f"{where}: csv file {path} does not exist")
+        raise ConfigError(f"{where}: csv file {path} {_not_a_file(path)}")
     try:
         with path.open(newline="") as fh:
             rows = [r for r in csv.reader(fh) if r and not r[0].lstrip().startswith("#")]

@@ -87,10 +87,13 @@ class Setup:
             v = getattr(self, key)
             if not (np.isfinite(v) and v > 0):
                 raise InputError(f"Setup.{key} must be > 0 (metres), got {v!r}")
-        if not 1 <= self.bit_depth <= 32:
-            raise InputError(f"Setup.bit_depth must be 1 to 32 bits, got {self.bit_depth!r}")
-        if self.spp < 1 or self.camera_px < 8:
-            raise InputError("Setup.spp must be >= 1 and Setup.camera_px >= 8")
+        if not 2 <= self.bit_depth <= 32:  # at 1 bit every change reads 0 or 1 DN: the calibration has nothing to fit
+            raise InputError(f"Setup.bit_depth must be 2 to 32 bits (the paper's: 12), got {self.bit_depth!r}")
+        if not self.spp >= 1:
+            raise InputError(f"Setup.spp must be >= 1 samples per mixel per frame, got {self.spp!r}")
+        if not self.camera_px >= 8:
+            raise InputError(f"Setup.camera_px must be >= 8 pixels a side (the ground-truth camera), got "
+                             f"{self.camera_px!r}")
         if not 0 < self.exposure_fill <= 1:
             raise InputError(f"Setup.exposure_fill must be in (0, 1], got {self.exposure_fill!r}")
         if self.dp_solver not in ("stratified_change", "plain_change"):
