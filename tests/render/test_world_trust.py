@@ -218,6 +218,9 @@ def test_bad_world_inputs_are_one_clear_error():
                         ((0.3, 0.3, np.eye(3), 1.0), "matrix must be a finite 4 x 4")):
         with pytest.raises(InputError, match=f"area_light: {field}"):
             sd.area_light(*args)
+    # a Mitsuba transform places it as its matrix does
+    placed = sd.area_light(0.3, 0.3, backend.mitsuba().ScalarTransform4f().translate([0.0, 0.0, 1.0]), 1.0)
+    assert np.allclose(np.asarray(placed["to_world"].matrix)[:3, 3], [0.0, 0.0, 1.0])
     # built with a reflectance out of [0, 1]: the same refusal as an update (a scene dict read P = -0.13 W/m^2)
     for material in ({"type": "diffuse", "reflectance": {"type": "spectrum", "value": -0.5}},
                      {"type": "conductor", "specular_reflectance": {"type": "spectrum", "value": 2.0}}):

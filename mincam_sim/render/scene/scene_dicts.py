@@ -271,8 +271,9 @@ def _numbers(value, what: str) -> np.ndarray:
 
 
 def _placement(matrix, what: str) -> np.ndarray:
-    """A 4 x 4 finite placement matrix, or one :class:`InputError` naming ``what``."""
-    matrix = _numbers(matrix, what)
+    """A 4 x 4 finite placement matrix (an array, or a Mitsuba transform), or one :class:`InputError` naming
+    ``what``."""
+    matrix = _numbers(getattr(matrix, "matrix", matrix), what)
     if matrix.shape != (4, 4) or not np.all(np.isfinite(matrix)):
         raise InputError(f"{what} must be a finite 4 x 4 matrix (e.g. Pose(...).matrix()), got shape {matrix.shape}")
     return matrix
