@@ -147,10 +147,12 @@ class _MincamGroup(TyperGroup):
                 if isinstance(err, EOFError):  # a reader that let a file's end through: a bug, with its traceback
                     raise _CarriedBug(err) from None
                 raise
+            _remove_created_if_empty()
             raise _fail_line(user_error_message(err)) from None
 
     def main(self, args: Any = None, prog_name: Any = None, complete_var: Any = None,
              standalone_mode: bool = True, **extra: Any) -> Any:
+        _created.clear()
         _state.update(verbose=False, quiet=False, debug=os.environ.get(ENV_DEBUG, "") not in ("", "0"),
                       variant=None)
         install_warning_format()
@@ -314,8 +316,42 @@ def check_variant(config_variant: str | None = None) -> str | None:
     return wanted
 
 
+#: (directory, the topmost folder created for it) of each output directory this command created: removed again
+#: when the command is refused and they hold nothing (:func:`_remove_created_if_empty`)
+_created: list[tuple[Path, Path]] = []
+
+
+def _remove_created_if_empty() -> None:
+    """Remove the output directories this command created (and the folders made for them) that hold nothing but
+    their lock file: a refused run leaves no empty folder behind. A lock another process holds is left alone."""
+    from mincam_sim.storage.store import LOCK_NAME
+
+    while _created:
+        path, top = _created.pop()
+        lock = path / LOCK_NAME
+        try:
+            if any(entry.name != LOCK_NAME for entry in path.iterdir()):
+                continue
+            if lock.exists():
+                import fcntl
+
+                fd = os.open(lock, os.O_RDWR)
+                try:
+                    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # refused: another run holds the folder
+                    lock.unlink()
+                finally:
+                    os.close(fd)
+            for folder in (path, *path.parents):
+                folder.rmdir()  # stops (OSError) at the first folder that holds anything
+                if folder == top:
+                    break
+        except (OSError, ImportError):
+            continue
+
+
 def check_out_dir(path: Path, what: str = "output directory", create: bool = True) -> Path:
-    """Make sure ``path`` can be a writable directory (create it unless ``create`` is False); ConfigError if not."""
+    """Make sure ``path`` can be a writable directory (create it unless ``create`` is False); ConfigError if not.
+    A directory created here is removed again if the command is refused before writing anything into it."""
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise ConfigError(f"{what} {path} is an existing file, not a directory; choose a directory path")
@@ -329,10 +365,13 @@ def check_out_dir(path: Path, what: str = "output directory", create: bool = Tru
     if ancestor.exists() and not os.access(ancestor, os.W_OK | os.X_OK):
         raise ConfigError(f"{what} {path} cannot be written: no permission in {ancestor}")
     if create:
+        top = next((p for p in reversed((path, *path.parents)) if not p.exists()), None)
         try:
             path.mkdir(parents=True, exist_ok=True)
         except OSError as err:
             raise ConfigError(f"cannot create {what} {path}: {err.strerror or err}") from None
+        if top is not None:
+            _created.append((path, top))
     return path
 
 

@@ -266,3 +266,21 @@ def test_results_table_prints_unscored_experiments(capsys):
     lines = capsys.readouterr().out.splitlines()
     assert lines[1].split()[:4] == ["intrusion", "-", "/", "-"]
     assert lines[2].split()[:4] == ["tracking", "3.25", "/", "1.00"]
+
+
+def test_a_refused_run_leaves_no_folder_it_created(tmp_path):
+    """A world whose mesh has no triangle is refused after ``render`` created (and locked) its output folder, two
+    levels deep: the folders go again; a folder that was there before stays."""
+    (tmp_path / "m.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\n")
+    (tmp_path / "s.xml").write_text('<scene version="3.0.0"><shape type="obj" id="toy"><string name="filename" '
+                                    'value="m.obj"/><boolean name="face_normals" value="true"/></shape>'
+                                    '<emitter type="constant"/></scene>')
+    body = '[world]\nscene = "s.xml"\n[[world.mover]]\nid = "toy"\noffsets_m = [[0, 0, 0]]\n'
+    for out, existed in (("new/deeper/out", False), ("there", True)):
+        if existed:
+            (tmp_path / out).mkdir()
+        config = tmp_path / "c.toml"
+        config.write_text(f'[run]\nout_dir = "{out}"\n' + body)
+        result = CliRunner().invoke(app, ["render", str(config)])
+        assert result.exit_code == 2 and "a mesh without a single triangle" in result.output
+        assert (tmp_path / out).is_dir() == existed and (tmp_path / "new").exists() is False
