@@ -17,6 +17,7 @@ from contextlib import contextmanager
 FROZEN_SCENES = 4  # scenes whose frozen functions are kept (each holds its recordings)
 FROZEN_RECORDINGS = 16  # recordings kept per (scene, function) (launch shapes x buffer addresses), LRU dropped
 FREEZE_ALLOWANCE = 6  # recordings of a frozen function before it must replay (then: one more per 4 calls)
+FROZEN_WARN_AFTER = 1 << 30  # recordings before Dr.Jit warns: never (keeps_recording is the guard)
 
 _FROZEN: OrderedDict[int, tuple] = OrderedDict()  # id(scene) -> (scene, {function: frozen function})
 
@@ -47,7 +48,9 @@ def frozen(scene, function: Callable) -> Callable:
             _FROZEN.popitem(last=False)
     kept = _FROZEN[key][1]
     if function not in kept:
-        kept[function] = dr.freeze(function, limit=FROZEN_RECORDINGS, warn_after=4 * FROZEN_RECORDINGS)
+        # when recording stops paying is decided by keeps_recording (per run); Dr.Jit's own warning at a fixed count
+        # printed a line per launch once ~15 mixed runs on one Simulation had recorded 64 times (numbers unaffected)
+        kept[function] = dr.freeze(function, limit=FROZEN_RECORDINGS, warn_after=FROZEN_WARN_AFTER)
     return kept[function]
 
 
