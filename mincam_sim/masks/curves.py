@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from mincam_sim.errors import InputError
 from mincam_sim.masks import profiles as prof
 from mincam_sim.masks.mask import DEFAULT_MASK_SIZE_M, DEFAULT_RESOLUTION, Mask, _check_resolution, _normalized_grid
 
@@ -14,16 +15,16 @@ def _to_physical_points(
 ) -> np.ndarray:
     p = np.asarray(points, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] != 2:
-        raise ValueError(f"{what}: curve must be an (N, 2) array of (x, y) points, got shape {p.shape}")
+        raise InputError(f"{what}: curve must be an (N, 2) array of (x, y) points, got shape {p.shape}")
     if p.shape[0] < 2:
-        raise ValueError(f"{what}: curve needs at least 2 points, got {p.shape[0]}")
+        raise InputError(f"{what}: curve needs at least 2 points, got {p.shape[0]}")
     if not np.isfinite(p).all():
-        raise ValueError(f"{what}: curve points must be finite numbers (found NaN or infinity)")
+        raise InputError(f"{what}: curve points must be finite numbers (found NaN or infinity)")
     if coords == "normalized":
         return np.column_stack(((p[:, 0] - 0.5) * width_m, (p[:, 1] - 0.5) * height_m))
     if coords == "physical":
         return p.copy()
-    raise ValueError(f"{what}: coords must be 'normalized' or 'physical', got {coords!r}")
+    raise InputError(f"{what}: coords must be 'normalized' or 'physical', got {coords!r}")
 
 
 def _arc_length_fraction(
@@ -121,17 +122,17 @@ def curved_ramp(
     hgt = width_m if height_m is None else height_m
     for key, v in (("width_m", width_m), ("height_m", hgt)):
         if not (np.isfinite(v) and v > 0):
-            raise ValueError(f"curved_ramp: {key} must be a positive size in metres, got {v!r}")
+            raise InputError(f"curved_ramp: {key} must be a positive size in metres, got {v!r}")
     v0, v1 = (float(v) for v in values)
     if not (0.0 <= v0 <= 1.0 and 0.0 <= v1 <= 1.0):
-        raise ValueError(f"curved_ramp: values must both lie in [0, 1], got {values!r}")
+        raise InputError(f"curved_ramp: values must both lie in [0, 1], got {values!r}")
     pts = _to_physical_points(curve_xy, coords, width_m, hgt, "curved_ramp")
     if closed:
         pts = np.vstack((pts, pts[:1]))
     keep = np.concatenate(([True], np.any(np.diff(pts, axis=0) != 0.0, axis=1)))
     pts = pts[keep]
     if len(pts) < 2:
-        raise ValueError("curved_ramp: the curve has zero length (all points coincide); give distinct points")
+        raise InputError("curved_ramp: the curve has zero length (all points coincide); give distinct points")
     x, y = _normalized_grid(h, w)
     query = np.column_stack((((x - 0.5) * width_m).ravel(), ((y - 0.5) * hgt).ravel()))
     frac = _arc_length_fraction(pts, query).reshape(h, w)
@@ -191,9 +192,9 @@ def circular_ramp(
         centre; the start angle is a seam where it jumps from ``values[1]`` to ``values[0]``).
     """
     if not (np.isfinite(radius) and radius > 0):
-        raise ValueError(f"circular_ramp: radius must be positive, got {radius!r}")
+        raise InputError(f"circular_ramp: radius must be positive, got {radius!r}")
     if not (np.isfinite(sweep_deg) and 0 < abs(sweep_deg) <= 360):
-        raise ValueError(f"circular_ramp: sweep_deg must be in [-360, 0) or (0, 360], got {sweep_deg!r}")
+        raise InputError(f"circular_ramp: sweep_deg must be in [-360, 0) or (0, 360], got {sweep_deg!r}")
     hgt = width_m if height_m is None else height_m
     if coords == "normalized":
         cx, cy = (center[0] - 0.5) * width_m, (center[1] - 0.5) * hgt
@@ -201,7 +202,7 @@ def circular_ramp(
     elif coords == "physical":
         (cx, cy), r_m = center, radius
     else:
-        raise ValueError(f"circular_ramp: coords must be 'normalized' or 'physical', got {coords!r}")
+        raise InputError(f"circular_ramp: coords must be 'normalized' or 'physical', got {coords!r}")
     meta = {
         "kind": "circular_ramp", "center_m": [float(cx), float(cy)], "radius_m": float(r_m),
         "start_angle_deg": float(start_angle_deg), "sweep_deg": float(sweep_deg), "n_segments": n_segments,
@@ -209,7 +210,7 @@ def circular_ramp(
     if n_segments is not None:
         n = int(n_segments)
         if n < 1 or n != n_segments:
-            raise ValueError(f"circular_ramp: n_segments must be an integer >= 1, got {n_segments!r}")
+            raise InputError(f"circular_ramp: n_segments must be an integer >= 1, got {n_segments!r}")
         ang = np.deg2rad(start_angle_deg + sweep_deg * np.linspace(0.0, 1.0, n + 1))
         curve = np.column_stack((cx + r_m * np.cos(ang), cy + r_m * np.sin(ang)))
         m = curved_ramp(curve, resolution, width_m, hgt, coords="physical", values=values, name=name)
@@ -219,7 +220,7 @@ def circular_ramp(
     h, w = _check_resolution(resolution)
     v0, v1 = (float(v) for v in values)
     if not (0.0 <= v0 <= 1.0 and 0.0 <= v1 <= 1.0):
-        raise ValueError(f"circular_ramp: values must both lie in [0, 1], got {values!r}")
+        raise InputError(f"circular_ramp: values must both lie in [0, 1], got {values!r}")
     x, y = _normalized_grid(h, w)
     dx, dy = (x - 0.5) * width_m - cx, (y - 0.5) * hgt - cy
     sweep = np.deg2rad(abs(sweep_deg))

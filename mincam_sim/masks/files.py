@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mincam_sim.errors import InputError
 from mincam_sim.masks.freeform import is_npy, load_npy
 from mincam_sim.masks.mask import Mask
 from mincam_sim.storage import imageio
@@ -23,7 +24,7 @@ def _to_transmission(arr: np.ndarray, channels: list[str], src: str) -> np.ndarr
     if "A" in names:
         alpha = arr[..., names.index("A")]
         if np.any(alpha < 1.0 - 1e-6):
-            raise ValueError(
+            raise InputError(
                 f"mask file {src!r} has a transparent alpha channel; transmission would be ambiguous:"
                 " flatten the image onto white or black and save it without alpha"
             )
@@ -36,7 +37,7 @@ def _to_transmission(arr: np.ndarray, channels: list[str], src: str) -> np.ndarr
     if all(c in names for c in ("R", "G", "B")) and len(names) == 3:
         rgb = np.stack([arr[..., names.index(c)] for c in ("R", "G", "B")], axis=-1)
         return rgb @ _LUMA_709
-    raise ValueError(
+    raise InputError(
         f"mask file {src!r} has {arr.shape[-1]} channels ({', '.join(names)}); give a single-channel"
         " grayscale (PNG 'L' / EXR 'Y') or an RGB image"
     )
@@ -76,7 +77,7 @@ def load(path: str | Path, width_m: float | None = None, height_m: float | None 
     ------
     FileNotFoundError
         If the file does not exist.
-    ValueError
+    InputError
         For an empty, unreadable or non-image file, an unsupported channel layout, NaN/infinite values, values
         outside [0, 1] (EXR) or a missing/invalid physical size.
 
@@ -101,9 +102,9 @@ def _npy_mask(p: Path, width_m: float | None, height_m: float | None, invert: bo
               encoding: str) -> Mask:
     """A freeform mask from a ``.npy`` array (linear transmission in [0, 1]; its size must be given)."""
     if width_m is None:
-        raise ValueError(f"mask file {str(p)!r} (a NumPy array) has no physical size: give width_m in metres")
+        raise InputError(f"mask file {str(p)!r} (a NumPy array) has no physical size: give width_m in metres")
     if encoding != "linear":
-        raise ValueError(f"mask file {str(p)!r} is a NumPy array of linear transmissions; the sRGB encoding applies "
+        raise InputError(f"mask file {str(p)!r} is a NumPy array of linear transmissions; the sRGB encoding applies "
                          "to PNG files only (use mask_encoding = \"linear\")")
     mask = load_npy(p, width_m, height_m, name)
     if invert:
@@ -114,11 +115,11 @@ def _npy_mask(p: Path, width_m: float | None, height_m: float | None, invert: bo
 def _source(path: str | Path, encoding: str) -> tuple[Path, str]:
     """The file and its format (``"png"`` / ``"exr"``, from its content), checked against ``encoding``."""
     if encoding not in ("linear", "srgb"):
-        raise ValueError(f"encoding must be 'linear' or 'srgb', got {encoding!r}")
+        raise InputError(f"encoding must be 'linear' or 'srgb', got {encoding!r}")
     p = Path(path)
     fmt = imageio.sniff_format(p, "mask file")
     if fmt == "exr" and encoding == "srgb":
-        raise ValueError(f"mask file {str(p)!r} is OpenEXR, whose values are linear transmission; the sRGB "
+        raise InputError(f"mask file {str(p)!r} is OpenEXR, whose values are linear transmission; the sRGB "
                          "encoding applies to PNG files only (use mask_encoding = \"linear\")")
     return p, fmt
 
@@ -130,13 +131,13 @@ def _read_exr(p: Path) -> tuple[np.ndarray, dict, dict]:
     t = _to_transmission(arr, info["channels"], str(p))
     bad = ~np.isfinite(t)
     if bad.any():
-        raise ValueError(
+        raise InputError(
             f"mask file {str(p)!r}: {int(bad.sum())} pixel(s) are NaN or infinite;"
             " transmission must be finite numbers in [0, 1]"
         )
     lo, hi = float(t.min()), float(t.max())
     if lo < 0.0 or hi > 1.0:
-        raise ValueError(
+        raise InputError(
             f"mask file {str(p)!r}: values span [{lo:.4g}, {hi:.4g}] but transmission must lie in [0, 1];"
             " rescale the image (e.g. divide by its maximum) or clip it before loading"
         )
@@ -162,7 +163,7 @@ def _physical_size(p: Path, shape: tuple[int, int], width_m: float | None, heigh
 
     Raises
     ------
-    ValueError
+    InputError
         No width given or stored (naming the width the file's dpi implies, if it records one).
     """
     h, w = shape
@@ -173,7 +174,7 @@ def _physical_size(p: Path, shape: tuple[int, int], width_m: float | None, heigh
         if "dpi" in info and info["dpi"][0] > 0:
             dpi_x = info["dpi"][0]
             hint = f" (the file says {dpi_x:g} dpi, i.e. width_m={w / dpi_x * 0.0254:.6g} m)"
-        raise ValueError(f"mask file {str(p)!r} has no physical size: give width_m in metres{hint}")
+        raise InputError(f"mask file {str(p)!r} has no physical size: give width_m in metres{hint}")
     if height_m is None:
         same_width = "width_m" in stored and width_m == stored.get("width_m")
         height_m = stored.get("height_m") if same_width else None

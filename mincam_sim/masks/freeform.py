@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mincam_sim.errors import InputError
 from mincam_sim.masks.mask import Mask
 from mincam_sim.masks.profiles import NUMPY_OPS
 
@@ -32,22 +33,22 @@ def from_array(array, width_m: float, height_m: float | None = None, name: str =
 
     Raises
     ------
-    ValueError
+    InputError
         An array that is not 2D (or 2D with one channel), an integer array (8-bit images: divide by 255 first),
         values outside [0, 1], NaN, or a size that is not a positive number of metres.
     """
     arr = np.asarray(array)
     if arr.dtype.kind in "iub":
-        raise ValueError(f"mask {name!r}: the array holds integers ({arr.dtype}); transmission is a float in "
+        raise InputError(f"mask {name!r}: the array holds integers ({arr.dtype}); transmission is a float in "
                          "[0, 1]: divide 8-bit values by 255 (or 16-bit by 65535) first")
     if arr.dtype.kind not in "f":
-        raise ValueError(f"mask {name!r}: the array must hold float transmissions in [0, 1], got dtype {arr.dtype}")
+        raise InputError(f"mask {name!r}: the array must hold float transmissions in [0, 1], got dtype {arr.dtype}")
     if arr.ndim == 3 and arr.shape[2] == 1:
         arr = arr[..., 0]
     if arr.ndim != 2:
-        raise ValueError(f"mask {name!r}: a freeform mask is a 2D array (rows, cols), got shape {arr.shape}")
+        raise InputError(f"mask {name!r}: a freeform mask is a 2D array (rows, cols), got shape {arr.shape}")
     if isinstance(width_m, bool) or not isinstance(width_m, (int, float, np.floating)):
-        raise ValueError(f"mask {name!r}: width_m must be the mask's width in metres (e.g. 0.002), got {width_m!r}")
+        raise InputError(f"mask {name!r}: width_m must be the mask's width in metres (e.g. 0.002), got {width_m!r}")
     height = float(width_m) * arr.shape[0] / arr.shape[1] if height_m is None else height_m
     return Mask(arr, float(width_m), height, name, {"kind": "freeform", **meta}, None, interpolation)
 
@@ -60,7 +61,7 @@ def load_npy(path: str | Path, width_m: float, height_m: float | None = None, na
     ------
     FileNotFoundError
         If the file does not exist.
-    ValueError
+    InputError
         A file that is not a plain NumPy array (pickled objects are refused), or an array :func:`from_array`
         refuses.
     """
@@ -70,9 +71,9 @@ def load_npy(path: str | Path, width_m: float, height_m: float | None = None, na
     try:
         arr = np.load(p, allow_pickle=False)
     except ValueError as err:
-        raise ValueError(f"mask file {str(p)!r} is not a plain NumPy array file: {err}") from None
+        raise InputError(f"mask file {str(p)!r} is not a plain NumPy array file: {err}") from None
     if not isinstance(arr, np.ndarray):
-        raise ValueError(f"mask file {str(p)!r} holds several arrays (.npz); save one 2D array with np.save")
+        raise InputError(f"mask file {str(p)!r} holds several arrays (.npz); save one 2D array with np.save")
     mask = from_array(arr, width_m, height_m, name if name is not None else p.stem, interpolation,
                       source=str(p), format="npy")
     return mask

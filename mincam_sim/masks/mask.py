@@ -22,6 +22,7 @@ import numpy as np
 from scipy import sparse
 
 from mincam_sim import paper
+from mincam_sim.errors import InputError
 from mincam_sim.masks import profiles as prof
 from mincam_sim.masks.profiles import MaskProfile
 
@@ -66,36 +67,36 @@ class Mask:
         if t.ndim == 3 and t.shape[2] == 1:
             t = t[..., 0]
         if t.ndim != 2:
-            raise ValueError(
+            raise InputError(
                 f"mask {self.name!r}: transmission must be a 2D array (H, W), got shape {t.shape}"
             )
         if t.size == 0:
-            raise ValueError(f"mask {self.name!r}: transmission array is empty; give at least 1x1 texels")
+            raise InputError(f"mask {self.name!r}: transmission array is empty; give at least 1x1 texels")
         if t.size > MAX_TEXELS:
-            raise ValueError(
+            raise InputError(
                 f"mask {self.name!r}: {t.shape} is too large (max {MAX_TEXELS} texels); downsample it"
             )
         bad = ~np.isfinite(t)
         if bad.any():
             i, j = np.argwhere(bad)[0]
-            raise ValueError(
+            raise InputError(
                 f"mask {self.name!r}: {int(bad.sum())} texel(s) are NaN or infinite"
                 f" (first at row {i}, column {j}); transmission must be finite numbers in [0, 1]"
             )
         lo, hi = float(t.min()), float(t.max())
         if lo < 0.0 or hi > 1.0:
-            raise ValueError(
+            raise InputError(
                 f"mask {self.name!r}: transmission must lie in [0, 1] but spans [{lo:.4g}, {hi:.4g}];"
                 " rescale it (e.g. divide by its maximum) or clip it"
             )
         for key in ("width_m", "height_m"):
             v = getattr(self, key)
-            if not (np.isfinite(v) and v > 0):
-                raise ValueError(f"mask {self.name!r}: {key} must be a positive size in metres, got {v!r}")
+            if not (_is_real(v) and v > 0):
+                raise InputError(f"mask {self.name!r}: {key} must be a positive size in metres, got {v!r}")
         if self.profile is not None and not isinstance(self.profile, MaskProfile):
             raise TypeError(f"mask {self.name!r}: profile must be a mincam_sim.masks.profiles.MaskProfile or None")
         if self.interpolation not in ("bilinear", "nearest"):
-            raise ValueError(f"mask {self.name!r}: interpolation must be 'bilinear' or 'nearest', "
+            raise InputError(f"mask {self.name!r}: interpolation must be 'bilinear' or 'nearest', "
                              f"got {self.interpolation!r}")
         t.setflags(write=False)
         object.__setattr__(self, "transmission", t)
@@ -149,7 +150,7 @@ def _normalized_grid(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
 def _check_resolution(resolution: int | tuple[int, int]) -> tuple[int, int]:
     h, w = (resolution, resolution) if np.isscalar(resolution) else tuple(resolution)  # type: ignore[misc]
     if int(h) != h or int(w) != w or h < 1 or w < 1:
-        raise ValueError(f"mask resolution must be positive integers (H, W), got {resolution!r}")
+        raise InputError(f"mask resolution must be positive integers (H, W), got {resolution!r}")
     return int(h), int(w)
 
 
@@ -180,8 +181,8 @@ def from_profile(
     h, w = _check_resolution(resolution)
     hgt = width_m if height_m is None else height_m
     for key, v in (("width_m", width_m), ("height_m", hgt)):
-        if not (np.isfinite(v) and v > 0):
-            raise ValueError(f"mask {name!r}: {key} must be a positive size in metres, got {v!r}")
+        if not (_is_real(v) and v > 0):
+            raise InputError(f"mask {name!r}: {key} must be a positive size in metres, got {v!r}")
     return Mask(prof.sample(profile, (h, w), width_m, hgt), width_m, hgt, name, meta, profile)
 
 
@@ -194,7 +195,7 @@ def ramp(
     """Linear ramp mask: ``kind`` is ``"x"``, ``"1-x"``, ``"y"`` or ``"1-y"`` (the paper's Eq. 2 and 5)."""
     kinds = ("x", "1-x", "y", "1-y")
     if kind not in kinds:
-        raise ValueError(f"unknown ramp {kind!r}: choose one of {', '.join(kinds)}")
+        raise InputError(f"unknown ramp {kind!r}: choose one of {', '.join(kinds)}")
     hgt = width_m if height_m is None else height_m
     return from_profile(prof.Ramp(kind, float(width_m), float(hgt)), f"ramp_{kind}", resolution, width_m, hgt,
                         kind="ramp", ramp=kind)
@@ -208,7 +209,7 @@ def constant(
 ) -> Mask:
     """Uniform mask of transmission ``value`` (1 = open aperture)."""
     if not (np.isfinite(value) and 0.0 <= value <= 1.0):
-        raise ValueError(f"constant mask transmission must lie in [0, 1], got {value!r}")
+        raise InputError(f"constant mask transmission must lie in [0, 1], got {value!r}")
     return from_profile(prof.Constant(float(value)), f"constant_{value:g}", resolution, width_m, height_m,
                         kind="constant", value=value)
 
@@ -237,15 +238,15 @@ def sinusoid(
         Direction t of the wave vector, degrees counter-clockwise from +x (right).
     """
     if not np.isfinite(omega_rad_per_m) or omega_rad_per_m < 0:
-        raise ValueError(f"omega_rad_per_m must be a finite frequency >= 0 [rad/m], got {omega_rad_per_m!r}")
+        raise InputError(f"omega_rad_per_m must be a finite frequency >= 0 [rad/m], got {omega_rad_per_m!r}")
     if not (np.isfinite(direction_deg) and abs(direction_deg) <= 360.0):
-        raise ValueError(f"direction_deg must be an angle in degrees between -360 and 360, got {direction_deg!r} "
+        raise InputError(f"direction_deg must be an angle in degrees between -360 and 360, got {direction_deg!r} "
                          "(take it modulo 360)")
     if not (np.isfinite(phase_rad) and abs(phase_rad) <= 1e3):
-        raise ValueError(f"phase_rad must be a finite phase of at most 1000 rad in size, got {phase_rad!r} "
+        raise InputError(f"phase_rad must be a finite phase of at most 1000 rad in size, got {phase_rad!r} "
                          "(take it modulo 2 pi)")
     if a0 - abs(a1) < -1e-12 or a0 + abs(a1) > 1 + 1e-12:
-        raise ValueError(f"sinusoid a0={a0}, a1={a1} leaves [0, 1]: need a0 - |a1| >= 0 and a0 + |a1| <= 1")
+        raise InputError(f"sinusoid a0={a0}, a1={a1} leaves [0, 1]: need a0 - |a1| >= 0 and a0 + |a1| <= 1")
     hgt = width_m if height_m is None else height_m
     profile = prof.Sinusoid(float(omega_rad_per_m), float(a0), float(a1), float(phase_rad), float(direction_deg))
     return from_profile(
@@ -283,3 +284,9 @@ def resample(mask: Mask, shape: tuple[int, int]) -> np.ndarray:
     ax = _box_matrix(mask.shape[1], w)
     out = ay @ (ax @ mask.transmission.T).T
     return np.clip(np.asarray(out), 0.0, 1.0)
+
+
+def _is_real(value) -> bool:
+    """A finite real number (a string or None is not: ``np.isfinite`` raised a bare ``TypeError`` for ``'2mm'``)."""
+    return not isinstance(value, bool) and isinstance(value, int | float | np.integer | np.floating) and bool(
+        np.isfinite(value))

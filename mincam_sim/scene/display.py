@@ -55,7 +55,8 @@ class Screen:
     def __post_init__(self) -> None:
         for key in ("width_m", "height_m"):
             v = getattr(self, key)
-            if not (np.isfinite(v) and v > 0):
+            if isinstance(v, bool) or not isinstance(v, int | float | np.integer | np.floating) or not (
+                    np.isfinite(v) and v > 0):
                 raise InputError(f"screen {key} must be a positive size in metres, got {v!r}")
         res = tuple(self.resolution)
         if len(res) != 2 or any(int(r) != r or r < 1 for r in res):
@@ -111,6 +112,9 @@ class Screen:
             raise InputError(f"{name} contains NaN or infinite radiance; frames must be finite and >= 0")
         if f.min() < 0:
             raise InputError(f"{name} has negative radiance ({f.min():.3g}); displays emit >= 0 W/m^2/sr")
+        if f.max() > np.finfo(np.float32).max:  # a texture holds 32-bit floats: it became inf, its sigma NaN
+            raise InputError(f"{name} has radiance {f.max():.3g}, beyond a 32-bit float's largest "
+                             f"({np.finfo(np.float32).max:.3g}) that the renderer holds; scale the frames down")
         return f
 
 
@@ -151,6 +155,22 @@ class Sweep:
     positions_m: np.ndarray
     size_m: float
     radiance: float = 1.0
+
+    def __post_init__(self) -> None:
+        try:
+            positions = np.asarray(self.positions_m, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise InputError(f"Sweep.positions_m must be (n, 2) positions [m], got {self.positions_m!r:.60}") from None
+        if positions.ndim != 2 or positions.shape[1] != 2 or not np.all(np.isfinite(positions)):
+            raise InputError(f"Sweep.positions_m must be finite (n, 2) positions [m], got shape {positions.shape}"
+                             + ("" if np.all(np.isfinite(positions)) else " holding NaN or infinite values"))
+        for key, rule, ok in (("size_m", "a positive size [m]", lambda v: v > 0),
+                              ("radiance", "a radiance >= 0 W m^-2 sr^-1", lambda v: v >= 0)):
+            v = getattr(self, key)
+            real = not isinstance(v, bool) and isinstance(v, int | float | np.integer | np.floating)
+            if not (real and np.isfinite(v) and ok(v)):
+                raise InputError(f"Sweep.{key} must be {rule}, got {v!r}")
+        object.__setattr__(self, "positions_m", positions)
 
     def __len__(self) -> int:
         return len(self.positions_m)
@@ -254,17 +274,35 @@ def as_frame_source(frames) -> FrameSource:
     """A :class:`FrameSource` from a source, an (n, rows, cols) / (rows, cols) array, or a list of frames."""
     if isinstance(frames, FrameSource):
         return frames
+    what = "frames must be radiance images [W m^-2 sr^-1]: an (n, rows, cols) array, a list of (rows, cols) arrays"
     if isinstance(frames, np.ndarray):
+        if frames.dtype.kind not in "biuf":
+            raise InputError(f"{what} of real numbers, got an array of {frames.dtype}")
+        if frames.ndim not in (2, 3):
+            raise InputError(f"{what}, got an array of shape {frames.shape}")
         return FrameSource.from_array(frames if frames.ndim == 3 else frames[None])
-    return FrameSource.from_array(np.stack([np.asarray(f, dtype=np.float64) for f in frames]))
+    if isinstance(frames, str | bytes) or not hasattr(frames, "__iter__"):
+        raise InputError(f"{what} or a FrameSource, got {type(frames).__name__}")
+    try:
+        stack = [np.asarray(f) for f in frames]
+    except (TypeError, ValueError) as err:  # a ragged nested list
+        raise InputError(f"{what}: {err}") from None
+    if not stack:
+        raise InputError(f"{what}; got no frame (an empty list)")
+    shapes = {f.shape for f in stack}
+    if len(shapes) > 1 or stack[0].ndim != 2:
+        raise InputError(f"{what}, each of one (rows, cols) shape; got shapes {sorted(shapes)[:4]}")
+    if any(f.dtype.kind not in "biuf" for f in stack):
+        raise InputError(f"{what} of real numbers, got {sorted({str(f.dtype) for f in stack})}")
+    return FrameSource.from_array(np.stack(stack).astype(np.float64))
 
 
 def line_sweep(
     start_m: tuple[float, float], end_m: tuple[float, float], n: int, size_m: float, radiance: float = 1.0
 ) -> Sweep:
     """``n`` square positions evenly spaced from ``start_m`` to ``end_m`` (a 1D sweep along a boundary)."""
-    if n < 1:
-        raise InputError(f"a sweep needs n >= 1 positions, got {n}")
+    if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
+        raise InputError(f"a sweep needs an integer n >= 1 positions, got {n!r}")
     t = np.linspace(0.0, 1.0, n)[:, None]
     pos = (1 - t) * np.asarray(start_m, float) + t * np.asarray(end_m, float)
     return Sweep(pos, size_m, radiance)
@@ -279,8 +317,8 @@ def grid_sweep(
     radiance: float = 1.0,
 ) -> Sweep:
     """Square positions on an ``nx`` x ``ny`` grid (row-major, y from top to bottom) for 2D calibration."""
-    if nx < 1 or ny < 1:
-        raise InputError(f"a grid sweep needs nx, ny >= 1, got {nx}, {ny}")
+    if any(isinstance(k, bool) or not isinstance(k, int | np.integer) or k < 1 for k in (nx, ny)):
+        raise InputError(f"a grid sweep needs integers nx, ny >= 1, got {nx!r}, {ny!r}")
     xs = np.linspace(*x_range_m, nx)
     ys = np.linspace(*y_range_m, ny)[::-1]
     gx, gy = np.meshgrid(xs, ys)

@@ -126,3 +126,45 @@ def test_max_spp_caps_the_target_search_and_the_run_says_so():
     with pytest.warns(UserWarning, match="target"):
         m = sim.measure([frame], ms.Aperture(), ms.Budget(target_rel_stderr=1e-7, max_spp=1 << 15, seed=1))
     assert m.meta["spp"] <= 1 << 15
+
+
+@pytest.mark.parametrize("frames, said", [
+    ([], "got no frame"), ([np.zeros((18, 32)), np.zeros((9, 32))], "each of one (rows, cols) shape"),
+    (None, "got NoneType"), (np.array([["a"]]), "real numbers"), (np.zeros((1, 1, 18, 32)), "shape (1, 1, 18, 32)"),
+])
+def test_display_frames_of_no_image_form_are_one_input_error(frames, said):
+    """Each was numpy's ValueError ("need at least one array to stack", ...) or a TypeError from deep in the frame
+    source, with every solver."""
+    sim = ms.Simulation(ms.pair_layout(), screen=ms.Screen(resolution=(32, 18)))
+    for solver in (ms.ResponseMap(), ms.DotProduct(), ms.Aperture()):
+        with pytest.raises(InputError, match=f"frames must be radiance images.*{re_escape(said)}"):
+            sim.measure(frames, solver=solver, budget=ms.Budget(spp=64) if isinstance(solver, ms.Aperture) else None)
+
+
+def test_display_radiance_beyond_a_float32_is_refused_by_every_solver():
+    """1e308 is finite, but Mitsuba's textures hold 32-bit floats: the aperture solver's sigma became NaN and an
+    internal check on the result fired; the map solvers called it NaN. Now one InputError that says why."""
+    sim = ms.Simulation(ms.pair_layout(), screen=ms.Screen(resolution=(32, 18)))
+    for solver in (ms.ResponseMap(), ms.DotProduct(), ms.Aperture()):
+        with pytest.raises(InputError, match=r"too large|beyond a 32-bit float"):
+            sim.measure(np.full((1, 18, 32), 1e308), solver=solver,
+                        budget=ms.Budget(spp=64) if isinstance(solver, ms.Aperture) else None)
+
+
+def test_mask_screen_and_sweep_inputs_are_input_errors():
+    from mincam_sim import masks
+
+    for make, said in ((lambda: masks.Mask(np.ones((4, 4)), width_m="2mm"), "width_m must be a positive size"),
+                       (lambda: masks.ramp("z"), "unknown ramp"), (lambda: ms.Screen(width_m="1"), "screen width_m"),
+                       (lambda: ms.line_sweep((0, 0), (0.1, 0), 2.5, 0.03), "integer n"),
+                       (lambda: ms.grid_sweep((0, 0.1), (0, 0.1), 2.5, 2, 0.03), "integers nx, ny"),
+                       (lambda: ms.line_sweep((np.nan, 0), (0.1, 0), 3, 0.03), "NaN"),
+                       (lambda: ms.line_sweep((0, 0), (0.1, 0), 3, 0.03, radiance=-1.0), "radiance >= 0")):
+        with pytest.raises(InputError, match=said):
+            make()
+
+
+def re_escape(text: str) -> str:
+    import re
+
+    return re.escape(text)

@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mincam_sim.errors import InputError
 from mincam_sim.measurements import Measurements
 from mincam_sim.model.optics import Mincam
 from mincam_sim.progress import progress
@@ -141,13 +142,17 @@ class ResponseMaps:
                        json.loads(str(d["meta_json"])))
 
 
+FLOAT32_MAX = float(np.finfo(np.float32).max)  # [W m^-2 sr^-1] the largest radiance a texture holds
+
+
 def check_radiance(stack: np.ndarray, indices: np.ndarray) -> None:
-    """Refuse NaN, infinite or negative radiance, naming the first bad frame."""
-    bad = ~(stack >= 0).all(axis=(1, 2)) | ~np.isfinite(stack.sum(axis=(1, 2)))  # NaN fails ">= 0"
+    """Refuse NaN, infinite, negative or beyond-float32 radiance (Mitsuba's textures), naming the first bad
+    frame."""
+    bad = ~((stack >= 0) & (stack <= FLOAT32_MAX)).all(axis=(1, 2))  # NaN fails both comparisons
     if bad.any():
         i = int(indices[np.argmax(bad)])
-        raise ValueError(f"frame {i} contains NaN, infinite or negative radiance; frames must be finite and >= 0 "
-                         "W m^-2 sr^-1")
+        raise InputError(f"frame {i} contains NaN, infinite, negative or too large (> {FLOAT32_MAX:.3g}, a 32-bit "
+                         "float's largest) radiance; frames must be finite and >= 0 W m^-2 sr^-1")
 
 
 def _safe(name: str) -> str:
