@@ -143,13 +143,29 @@ class Experiment(ABC):
             raise RuntimeError(f"experiment {self.name}: parameters {clash} are both set-up and experiment fields")
         return {**setup, **own}
 
-    def study_point(self, params: dict, seed: int, quick: bool) -> dict:
-        """One study point: :meth:`run` on the set-up and parameters ``params`` gives (the others at their
-        quick or full defaults), its figures not drawn; the numbers of its result entry as metrics."""
+    def _study_inputs(self, params: dict, seed: int, quick: bool) -> tuple[Setup, Any]:
+        """The set-up and parameters of a study point (validated by their dataclasses: a bad value is a
+        ValueError)."""
         setup_keys = set(_scalar_fields(Setup())) - _SETUP_NOT_STUDIED
         setup = dataclasses.replace(Setup(quick=quick, seed=seed),
                                     **{k: v for k, v in params.items() if k in setup_keys})
         own = dataclasses.replace(self.params(quick), **{k: v for k, v in params.items() if k not in setup_keys})
+        return setup, own
+
+    def study_check(self, params: dict, quick: bool) -> None:
+        """Refuse a study point's parameters as :meth:`study_point` would, before any point is computed: the
+        set-up's and the parameters' own checks and those of a reproduce file
+        (:func:`~.reproduce_file.check_reproduce`)."""
+        from mincam_sim.experiments.reproduce_file import check_reproduce
+
+        setup, own = self._study_inputs(params, 0, quick)
+        if self.name in ("intrusion", "tracking", "speed"):
+            check_reproduce(setup, {self.name: own})
+
+    def study_point(self, params: dict, seed: int, quick: bool) -> dict:
+        """One study point: :meth:`run` on the set-up and parameters ``params`` gives (the others at their
+        quick or full defaults), its figures not drawn; the numbers of its result entry as metrics."""
+        setup, own = self._study_inputs(params, seed, quick)
         with tempfile.TemporaryDirectory(prefix=f"study_{self.name}_") as tmp, figures_not_saved():
             result = self.run(setup, own, Path(tmp)).as_dict()
         return numeric_details(result)
@@ -159,7 +175,8 @@ class Experiment(ABC):
         ref = {"name": self.name} if self.study_version == 1 else {"name": self.name, "version": self.study_version}
         return StudyExperiment(name=self.name, description=self.study_description(),
                                parameters=self.study_parameters(), metrics=self.study_metrics,
-                               point=self.study_point, seconds_per_point=self.study_seconds, ref=ref)
+                               point=self.study_point, seconds_per_point=self.study_seconds, ref=ref,
+                               check=self.study_check)
 
     def study_description(self) -> str:
         return f"the {self.name} experiment (paper Sec. {self.paper_section}) per point"

@@ -218,6 +218,10 @@ class Spacing(Experiment):
             sweep = dataclasses.replace(sweep, **self.study_quick_overrides)
         return setup, sweep
 
+    def study_check(self, params: dict, quick: bool) -> None:
+        """A point's set-up and sweep built as :meth:`study_point` builds them (their checks), nothing computed."""
+        self.study_setup(params, 0, quick)
+
     def study_point(self, params: dict, seed: int, quick: bool) -> dict:
         """Errors before / after the calibration at ``depth_m``, noiseless (the experiment's own numbers for this
         set-up) and through the noisy sensor (``noisy_``; its noise drawn from ``seed``)."""

@@ -58,6 +58,8 @@ class StudyExperiment:
     point: PointFunction
     seconds_per_point: tuple[float, float] = (1.0, 10.0)
     ref: dict = field(default_factory=dict)  # how a worker rebuilds this target (registry.study_target)
+    # refuses a point's parameters (ValueError) without computing it: every point is checked before the first runs
+    check: Callable[[dict, bool], None] | None = None
 
     def integer_parameters(self) -> set[str]:
         """Parameters whose values must be integers (their default is an ``int``)."""
@@ -111,18 +113,24 @@ def _flat_numeric(raw: dict) -> dict:
     return out
 
 
+def _render_config(config_path: str, params: dict, seed: int):
+    """The render config of a study point: the file with the point's ``section.key`` values and its seed."""
+    from mincam_sim.configuration.config import load_config
+    from mincam_sim.configuration.toml_files import read_toml_file
+
+    raw = read_toml_file(config_path, "[study] config")
+    for key, value in params.items():
+        section, name = key.split(".", 1)
+        raw.setdefault(section, {})[name] = value
+    raw.setdefault("run", {})["seed"] = int(seed)
+    return load_config(raw, base_dir=Path(config_path).parent)
+
+
 def _render_point(config_path: str) -> PointFunction:
     def point(params: dict, seed: int, quick: bool) -> dict:
-        from mincam_sim.configuration.config import load_config
-        from mincam_sim.configuration.toml_files import read_toml_file
         from mincam_sim.render.simulation import Simulation
 
-        raw = read_toml_file(config_path, "[study] config")
-        for key, value in params.items():
-            section, name = key.split(".", 1)
-            raw.setdefault(section, {})[name] = value
-        raw.setdefault("run", {})["seed"] = int(seed)
-        cfg = load_config(raw, base_dir=Path(config_path).parent)
+        cfg = _render_config(config_path, params, seed)
         m = Simulation(cfg.mincam, screen=cfg.screen).measure(cfg.frames, cfg.run.solver, cfg.run.budget)
         out = {}
         for j, mixel in enumerate(m.mixel_names):
@@ -150,7 +158,8 @@ def render_target(config_path: str | Path) -> StudyExperiment:
                     for kind in ("mean_irradiance_w_m2", "peak_irradiance_w_m2"))
     return StudyExperiment(name="render", description=f"render config {path.name}", parameters=_flat_numeric(raw),
                            metrics=metrics, point=_render_point(str(path.resolve())), seconds_per_point=(2.0, 30.0),
-                           ref={"name": "render", "config": str(path.resolve())})
+                           ref={"name": "render", "config": str(path.resolve())},
+                           check=lambda params, quick: _render_config(str(path.resolve()), params, 0) and None)
 
 
 def render_target_from_ref(ref: dict) -> StudyExperiment:
@@ -184,4 +193,15 @@ def design_target(ref: dict | None = None) -> StudyExperiment:
         name="design", description="mask design for tracking (differentiable rendering) vs printer resolution",
         parameters={"dpi": float(TrackingTask().dpi)}, metrics=("baseline_avg_error_pct", "baseline_max_error_pct",
                                             "designed_avg_error_pct", "designed_max_error_pct"),
-        point=_design_point, seconds_per_point=(300.0, 3600.0), ref={"name": "design"})
+        point=_design_point, seconds_per_point=(300.0, 3600.0), ref={"name": "design"}, check=_design_check)
+
+
+def _design_check(params: dict, quick: bool) -> None:
+    """A design point's printer resolution, refused as the design task refuses it (range, print sheet), before
+    any point runs (a point takes minutes)."""
+    from mincam_sim.design.run import make_task
+
+    dpi = params["dpi"]
+    if isinstance(dpi, bool) or not isinstance(dpi, int | float) or not np.isfinite(dpi):
+        raise ConfigError(f"dpi must be a number of dots per inch, got {dpi!r}")
+    make_task(quick, dpi=float(dpi))

@@ -326,6 +326,20 @@ def _write_point(spec: StudySpec, store: Path, records: Path, index: tuple[int, 
         raise _wrap_os_error(err, "the completion record", path) from None
 
 
+def check_points(spec: StudySpec, quick: bool) -> None:
+    """Refuse, before any point is computed, the first point whose parameters the target refuses (its
+    ``check``): a bad value late in a grid stopped the study after the points before it had run."""
+    check = spec.experiment.check
+    if check is None:
+        return
+    for index, params in zip(spec.indices, spec.points, strict=True):
+        try:
+            check(dict(params), quick)
+        except ValueError as err:  # ConfigError and InputError among them
+            raise ConfigError(f"study {spec.name}, point ({_label(spec, index)}): {err}; change the grid (nothing "
+                              "was computed)") from None
+
+
 def _refused_point(spec: StudySpec, index: tuple[int, ...], compute: Callable[[], dict]) -> dict:
     """``compute()``; an experiment's refusal of the point's parameters (a ValueError) names the point."""
     try:
@@ -430,6 +444,7 @@ def run_study(spec: StudySpec, workers: int | None = None, scheduler: str | None
         n_workers = max(1, check_scheduler(scheduler))
         where = f"the scheduler's {n_workers} worker{'s' if n_workers > 1 else ''}"
     out = Path(out_dir) if out_dir is not None else spec.out_dir
+    check_points(spec, quick)
     if overwrite or not (out / STORE_NAME).exists():  # before the lock creates the out dir: nothing is left behind
         check_time(spec, len(spec.points), n_workers, quick, time_limit_s, where)
     try:

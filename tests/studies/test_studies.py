@@ -349,3 +349,18 @@ def test_a_point_the_experiment_refuses_is_named_and_the_others_kept(tmp_path, m
     with pytest.raises(ConfigError, match=r"point \(spacing_m=0.05, depth_m=0.8\): only 6 of 8"):
         run_quick(spec, tmp_path, workers=1)
     assert len(list((tmp_path / "points").iterdir())) == 3
+
+
+@pytest.mark.parametrize("experiment, grid, said", [
+    ("spacing", {"bit_depth": [12, 0]}, r"point \(bit_depth=0\): Setup.bit_depth must be 2 to 32"),
+    ("tracking", {"spacing_m": [0.03, -1.0]}, r"point \(spacing_m=-1\): Setup.spacing_m must be >= 0"),
+    ("intrusion", {"depth_m": [0.5, 3.0]}, r"point \(depth_m=3\): .*depth_m .* at or above the table's light"),
+    ("design", {"dpi": [600.0, 0.0]}, r"point \(dpi=0\): TrackingTask.dpi must be a number from 50 to 4800"),
+])
+def test_every_point_is_checked_before_the_first_runs(tmp_path, experiment, grid, said):
+    """A bad value late in a grid stopped the study after the points before it had run (a design point takes
+    minutes): every point is now checked first, and nothing is computed or written."""
+    spec = load_study({"study": {"experiment": experiment, "replicates": 1}, "grid": grid}, base_dir=tmp_path)
+    with pytest.raises(ConfigError, match=f"{said}.*change the grid \\(nothing was computed\\)"):
+        run_quick(spec, tmp_path / "out")
+    assert not (tmp_path / "out").exists()
