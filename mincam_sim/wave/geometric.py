@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from mincam_sim.errors import InputError
 from mincam_sim.masks import Mask
 from mincam_sim.masks import profiles as prof
 from mincam_sim.model.optics import Mixel
@@ -93,6 +94,7 @@ def _check_tan(tan_theta) -> np.ndarray:
     tan = np.asarray(tan_theta, dtype=np.float64)
     if tan.ndim == 1 and tan.shape == (2,):
         tan = tan[None]
-    if tan.ndim != 2 or tan.shape[1] != 2 or not np.all(np.isfinite(tan)):
-        raise ValueError(f"tan_theta must be finite direction tangents of shape (n, 2), got shape {tan.shape}")
+    if tan.ndim != 2 or tan.shape[1] != 2 or not len(tan) or not np.all(np.isfinite(tan)):
+        raise InputError(f"tan_theta must be finite direction tangents of shape (n, 2), n >= 1, got shape "
+                         f"{tan.shape}")
     return tan

@@ -6,6 +6,8 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from mincam_sim.errors import InputError
+
 DEFAULT_WAVELENGTHS_M = (550e-9,)  # [m] the sensor model's wavelength
 
 
@@ -55,7 +57,7 @@ def silicon_qe(wavelength_m: float | np.ndarray) -> np.ndarray:
     """
     lam_nm = np.asarray(wavelength_m, dtype=np.float64) * 1e9
     if np.any(~np.isfinite(lam_nm)) or np.any(lam_nm < _SI_ALPHA_NM[0]) or np.any(lam_nm > _SI_ALPHA_NM[-1]):
-        raise ValueError(f"silicon_qe: wavelength_m must lie in [400e-9, 1100e-9] m, got {wavelength_m!r}")
+        raise InputError(f"silicon_qe: wavelength_m must lie in [400e-9, 1100e-9] m, got {wavelength_m!r}")
     alpha = np.exp(np.interp(lam_nm, _SI_ALPHA_NM, np.log(_SI_ALPHA_PER_M)))
     return (1.0 - SI_SURFACE_LOSS) * (np.exp(-alpha * SI_DEAD_LAYER_M) - np.exp(-alpha * SI_COLLECTION_DEPTH_M))
 
@@ -79,15 +81,15 @@ def spectral_weights(
     w = np.empty_like(w_sorted)
     w[order] = w_sorted
     if not np.all(np.isfinite(w)) or w.sum() <= 0:
-        raise ValueError("spectral_weights: the QE curve gives no weight to these wavelengths")
+        raise InputError("spectral_weights: the QE curve gives no weight to these wavelengths")
     return w / w.sum()
 
 
 def _check_wavelengths(wavelengths_m: Sequence[float]) -> np.ndarray:
     lam = np.atleast_1d(np.asarray(wavelengths_m, dtype=np.float64))
     if lam.ndim != 1 or lam.size == 0 or not np.all(np.isfinite(lam)) or np.any(lam <= 0):
-        raise ValueError(f"wavelengths_m must be a non-empty list of positive wavelengths in metres, got "
+        raise InputError(f"wavelengths_m must be a non-empty list of positive wavelengths in metres, got "
                          f"{wavelengths_m!r}")
     if np.any(lam > 1e-4):
-        raise ValueError(f"wavelengths_m {wavelengths_m!r} look like nanometres; give metres (550e-9 for 550 nm)")
+        raise InputError(f"wavelengths_m {wavelengths_m!r} look like nanometres; give metres (550e-9 for 550 nm)")
     return lam

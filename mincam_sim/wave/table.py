@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mincam_sim.errors import InputError
 from mincam_sim.model.optics import Mixel
 from mincam_sim.wave.geometric import geometric_response, open_fraction
 from mincam_sim.wave.propagation import _response_1d
@@ -71,7 +72,7 @@ def response_table(
     if n_tan is None:
         n_tan = 513 if axis is not None else 33
     if int(n_tan) != n_tan or n_tan < 3:
-        raise ValueError(f"n_tan must be an integer >= 3 points per axis, got {n_tan!r}")
+        raise InputError(f"n_tan must be an integer >= 3 points per axis, got {n_tan!r}")
     hx, hy = mixel.half_fov_tan()
     tx = np.linspace(-hx, hx, int(n_tan))
     ty = np.linspace(-hy, hy, int(n_tan))

@@ -361,3 +361,19 @@ def test_optics_enters_run_identities_only_when_not_default():
     assert "optics" not in canonical(geo) and "wavelengths_m" not in canonical(geo)  # older stores stay valid
     assert fingerprint(geo.with_optics("wave")) != fingerprint(geo)
     assert fingerprint(geo.with_optics("wave", (500e-9,))) != fingerprint(geo.with_optics("wave"))
+
+
+def test_wave_sizes_a_caller_types_are_one_input_error():
+    """``max_cells = 3`` ran on a 14-cell grid and read a ramp 0.677 against 0.700 (3 %) without a word; an empty
+    tan_theta and ``workers = 0`` were numpy's and scipy's ValueErrors."""
+    from mincam_sim.errors import InputError
+
+    mixel = Mixel(masks.ramp("x"))
+    for kwargs, said in (({"max_cells": 3}, "max_cells must be None"), ({"max_cells": 1.5}, "max_cells must be"),
+                         ({"workers": 0, "method": "2d"}, "workers must be an integer >= 1")):
+        with pytest.raises(InputError, match=said):
+            wave.angular_response(mixel, [[0.2, 0.0]], **kwargs)
+    with pytest.raises(InputError, match=r"n >= 1, got shape \(0, 2\)"):
+        wave.angular_response(mixel, np.zeros((0, 2)))
+    r = wave.angular_response(mixel, [[0.2, 0.0]], max_cells=64)
+    assert abs(r[0] - 0.7) < 0.005  # the fewest cells allowed still read the ramp within 0.2 %
