@@ -830,7 +830,7 @@ def _reproduce_config(config: Path | None, quick: bool, names: Collection[str] |
             raise
         flag = re.sub(r"Setup\.(\w+)", lambda m: "--" + m.group(1).replace("_", "-"), text)
         raise ConfigError(flag.replace("[command line]: ", "")) from None
-    from mincam_sim.experiments.reproduce_file import check_reproduce
+    from mincam_sim.experiments.input_checks import check_reproduce
 
     # what the experiments to run would refuse only deep inside, refused here
     check_reproduce(setup, {name: p for name, p in params.items() if names is None or name in names})

@@ -25,6 +25,8 @@ Files:
   physics.
 * ``registry.py``: the one registry of what ``reproduce``, ``study`` and ``demo`` run, and its runner.
 * ``reproduce_file.py``: the reproduce file (``mincam-sim reproduce --config FILE``).
+* ``input_checks.py``: the values the experiments would refuse only deep inside, refused up front (by
+  ``reproduce`` and for every study point).
 * ``study_targets.py``: what a study target is, and the targets that are no experiment of the paper.
 """
 

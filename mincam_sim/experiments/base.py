@@ -143,7 +143,7 @@ class Experiment(ABC):
             raise RuntimeError(f"experiment {self.name}: parameters {clash} are both set-up and experiment fields")
         return {**setup, **own}
 
-    def _study_inputs(self, params: dict, seed: int, quick: bool) -> tuple[Setup, Any]:
+    def study_inputs(self, params: dict, seed: int, quick: bool) -> tuple[Setup, Any]:
         """The set-up and parameters of a study point (validated by their dataclasses: a bad value is a
         ValueError)."""
         setup_keys = set(_scalar_fields(Setup())) - _SETUP_NOT_STUDIED
@@ -154,18 +154,14 @@ class Experiment(ABC):
 
     def study_check(self, params: dict, quick: bool) -> None:
         """Refuse a study point's parameters as :meth:`study_point` would, before any point is computed: the
-        set-up's and the parameters' own checks and those of a reproduce file
-        (:func:`~.reproduce_file.check_reproduce`)."""
-        from mincam_sim.experiments.reproduce_file import check_reproduce
-
-        setup, own = self._study_inputs(params, 0, quick)
-        if self.name in ("intrusion", "tracking", "speed"):
-            check_reproduce(setup, {self.name: own})
+        set-up's and the parameters' own checks (the registry adds a reproduce file's:
+        :func:`~.input_checks.check_reproduce`)."""
+        self.study_inputs(params, 0, quick)
 
     def study_point(self, params: dict, seed: int, quick: bool) -> dict:
         """One study point: :meth:`run` on the set-up and parameters ``params`` gives (the others at their
         quick or full defaults), its figures not drawn; the numbers of its result entry as metrics."""
-        setup, own = self._study_inputs(params, seed, quick)
+        setup, own = self.study_inputs(params, seed, quick)
         with tempfile.TemporaryDirectory(prefix=f"study_{self.name}_") as tmp, figures_not_saved():
             result = self.run(setup, own, Path(tmp)).as_dict()
         return numeric_details(result)

@@ -70,8 +70,25 @@ def study_target(ref: dict) -> StudyExperiment:
     if name in STUDY_ONLY:
         return STUDY_ONLY[name](ref)
     if name in REGISTRY:
-        return REGISTRY[name].study_target()
+        return _with_reproduce_checks(REGISTRY[name])
     raise ConfigError(f"[study] experiment = {name!r} is not one of {', '.join(map(repr, target_names()))}")
+
+
+def _with_reproduce_checks(experiment) -> StudyExperiment:
+    """``experiment`` as a study target whose points are also checked as a reproduce file's values are
+    (:func:`~.input_checks.check_reproduce`: the lamp above the mincam, steps that do not fit, too few rays)."""
+    from mincam_sim.experiments.input_checks import check_reproduce
+
+    target = experiment.study_target()
+    if experiment.name not in EXPERIMENTS:  # the spacing study's points build their own set-up
+        return target
+
+    def check(params: dict, quick: bool) -> None:
+        experiment.study_check(params, quick)
+        setup, own = experiment.study_inputs(params, 0, quick)
+        check_reproduce(setup, {experiment.name: own})
+
+    return dataclasses.replace(target, check=check)
 
 
 def load_reproduce_config(source: str | Path | dict | None, quick: bool = False,
