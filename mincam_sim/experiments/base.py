@@ -154,8 +154,8 @@ class Experiment(ABC):
 
     def study_check(self, params: dict, quick: bool) -> None:
         """Refuse a study point's parameters as :meth:`study_point` would, before any point is computed: the
-        set-up's and the parameters' own checks (the registry adds a reproduce file's:
-        :func:`~.input_checks.check_reproduce`)."""
+        set-up's and the parameters' own checks (the registry adds a reproduce file's, ``check_reproduce`` of
+        ``experiments/input_checks.py``)."""
         self.study_inputs(params, 0, quick)
 
     def study_point(self, params: dict, seed: int, quick: bool) -> dict:
