@@ -247,8 +247,11 @@ def _layout(notes: Sequence[str], masks: Sequence[Mask], pos: np.ndarray, dpi: f
     width = max(inner_w, text_w + 2 * margin)
     height = inner_h + line_h * (len(notes) + 1) + margin
     if width * height > MAX_TEXELS:
-        raise InputError(f"print sheet of {width} x {height} dots at {dpi:g} dpi is too large (max {MAX_TEXELS}); "
-                         "lower the dpi or print the masks on separate sheets")
+        span_cm = 100 * 2 * half_span
+        raise InputError(f"print sheet of {width} x {height} dots at {dpi:g} dpi is too large (max {MAX_TEXELS}): "
+                         f"it holds the masks at their places, {span_cm[0]:.3g} x {span_cm[1]:.3g} cm apart at the "
+                         "edges; lower the dpi, bring the mixels closer (their spacing) or print the masks on "
+                         "separate sheets")
     return _Layout(width, height, inner_h, margin, line_h, font)
 
 

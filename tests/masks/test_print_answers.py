@@ -64,6 +64,10 @@ def test_check_print_sheet_refuses_before_anything_is_written(tmp_path, monkeypa
         check_print_sheet([M.ramp("x", 16)], [(0.0, 0.0)], 600)
     with pytest.raises(InputError, match="too large"):
         write_print_sheet([M.ramp("x", 16)], [(0.0, 0.0)], 600, None, tmp_path / "s.png")
+    # masks far apart make the sheet large whatever the dpi: the message says so (it blamed the dpi alone for
+    # `design tracking --spacing-m 0.2`, inside the documented range)
+    with pytest.raises(InputError, match=r"masks at their places, 40(\.\d)? x 0\.2 cm apart.*bring the mixels closer"):
+        check_print_sheet([M.ramp("x", 16)] * 2, [(-0.2, 0.0), (0.2, 0.0)], 50)
     assert not any(tmp_path.iterdir())
 
 
