@@ -294,7 +294,7 @@ def as_frame_source(frames) -> FrameSource:
         raise InputError(f"{what}, each of one (rows, cols) shape; got shapes {sorted(shapes)[:4]}")
     if any(f.dtype.kind not in "biuf" for f in stack):
         raise InputError(f"{what} of real numbers, got {sorted({str(f.dtype) for f in stack})}")
-    return FrameSource.from_array(np.stack(stack).astype(np.float64))
+    return FrameSource.from_array(np.stack(stack).astype(np.float64, copy=False))
 
 
 def line_sweep(
