@@ -7,6 +7,9 @@ Errors that also are a ``ValueError`` (bad values) subclass both, so ``except Va
 
 from __future__ import annotations
 
+import math
+from numbers import Real
+
 
 class MincamError(Exception):
     """Base class of mincam_sim's user-facing errors; the message says what is wrong and how to fix it."""
@@ -42,6 +45,12 @@ class IgnoredSettingWarning(UserWarning):
     makes ineffective: it is ignored, and one warning says so."""
 
 
+def is_finite_real(value) -> bool:
+    """True for a finite real number (numpy's scalars included); False for a boolean, a string, NaN or an
+    infinity: what a boundary checks before it compares a user's number with its range."""
+    return isinstance(value, Real) and not isinstance(value, bool) and math.isfinite(value)
+
+
 __all__ = [
     "BackendUnavailableError",
     "ConfigError",
@@ -51,5 +60,6 @@ __all__ = [
     "OutDirLockedError",
     "StaleResultError",
     "StoreError",
+    "is_finite_real",
 ]
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 import dataclasses
 
 from mincam_sim.configuration.schema import Part, Schema, toml_value
-from mincam_sim.experiments.input_checks import check_reproduce
 from mincam_sim.experiments.registry import REGISTRY
 from mincam_sim.experiments.setup import Setup
 
@@ -49,4 +48,4 @@ def reproduce_example_toml() -> str:
     return reproduce_schema().example(notes=quick_notes(), commented_keys=True)
 
 
-__all__ = ["check_reproduce", "quick_notes", "reproduce_example_toml", "reproduce_schema"]
+__all__ = ["quick_notes", "reproduce_example_toml", "reproduce_schema"]

@@ -22,7 +22,7 @@ import numpy as np
 from scipy import sparse
 
 from mincam_sim import paper
-from mincam_sim.errors import InputError
+from mincam_sim.errors import InputError, is_finite_real
 from mincam_sim.masks import profiles as prof
 from mincam_sim.masks.profiles import MaskProfile
 
@@ -91,7 +91,7 @@ class Mask:
             )
         for key in ("width_m", "height_m"):
             v = getattr(self, key)
-            if not (_is_real(v) and v > 0):
+            if not (is_finite_real(v) and v > 0):
                 raise InputError(f"mask {self.name!r}: {key} must be a positive size in metres, got {v!r}")
         if self.profile is not None and not isinstance(self.profile, MaskProfile):
             raise TypeError(f"mask {self.name!r}: profile must be a mincam_sim.masks.profiles.MaskProfile or None")
@@ -181,7 +181,7 @@ def from_profile(
     h, w = _check_resolution(resolution)
     hgt = width_m if height_m is None else height_m
     for key, v in (("width_m", width_m), ("height_m", hgt)):
-        if not (_is_real(v) and v > 0):
+        if not (is_finite_real(v) and v > 0):
             raise InputError(f"mask {name!r}: {key} must be a positive size in metres, got {v!r}")
     return Mask(prof.sample(profile, (h, w), width_m, hgt), width_m, hgt, name, meta, profile)
 
@@ -284,9 +284,3 @@ def resample(mask: Mask, shape: tuple[int, int]) -> np.ndarray:
     ax = _box_matrix(mask.shape[1], w)
     out = ay @ (ax @ mask.transmission.T).T
     return np.clip(np.asarray(out), 0.0, 1.0)
-
-
-def _is_real(value) -> bool:
-    """A finite real number (a string or None is not: ``np.isfinite`` raised a bare ``TypeError`` for ``'2mm'``)."""
-    return not isinstance(value, bool) and isinstance(value, int | float | np.integer | np.floating) and bool(
-        np.isfinite(value))

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mincam_sim import paper
-from mincam_sim.errors import InputError
+from mincam_sim.errors import InputError, is_finite_real
 from mincam_sim.model.geometry import Pose, clip_polygon_halfspace
 
 INCH_M = 0.0254  # [m]
@@ -55,8 +55,7 @@ class Screen:
     def __post_init__(self) -> None:
         for key in ("width_m", "height_m"):
             v = getattr(self, key)
-            if isinstance(v, bool) or not isinstance(v, int | float | np.integer | np.floating) or not (
-                    np.isfinite(v) and v > 0):
+            if not (is_finite_real(v) and v > 0):
                 raise InputError(f"screen {key} must be a positive size in metres, got {v!r}")
         res = tuple(self.resolution)
         if len(res) != 2 or any(int(r) != r or r < 1 for r in res):
@@ -167,8 +166,7 @@ class Sweep:
         for key, rule, ok in (("size_m", "a positive size [m]", lambda v: v > 0),
                               ("radiance", "a radiance >= 0 W m^-2 sr^-1", lambda v: v >= 0)):
             v = getattr(self, key)
-            real = not isinstance(v, bool) and isinstance(v, int | float | np.integer | np.floating)
-            if not (real and np.isfinite(v) and ok(v)):
+            if not (is_finite_real(v) and ok(v)):
                 raise InputError(f"Sweep.{key} must be {rule}, got {v!r}")
         object.__setattr__(self, "positions_m", positions)
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mincam_sim.errors import InputError
+from mincam_sim.errors import InputError, is_finite_real
 from mincam_sim.model.optics import Mixel
 from mincam_sim.render import backend
 from mincam_sim.render.kernels.mask_eval import opacity_texture
@@ -258,8 +258,7 @@ def textured_plane(albedo: np.ndarray, width_m: float, height_m: float, matrix: 
 
 def _not_number(value) -> bool:
     """Not a real number that a 32-bit float holds (Mitsuba's scene values)."""
-    return (isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating)
-            or not abs(value) <= np.finfo(np.float32).max)
+    return not is_finite_real(value) or abs(value) > np.finfo(np.float32).max
 
 
 def _numbers(value, what: str) -> np.ndarray:

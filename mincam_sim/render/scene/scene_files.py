@@ -11,7 +11,6 @@ with its materials and nodes: :mod:`.gltf_files`).
 
 from __future__ import annotations
 
-import numbers
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -19,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mincam_sim.errors import InputError
+from mincam_sim.errors import InputError, is_finite_real
 from mincam_sim.render import backend
 from mincam_sim.render.scene.mincam_scene import as_param
 
@@ -73,9 +72,9 @@ def check_parameters(parameters) -> dict[str, str]:
                              "<default> without '$')")
         if isinstance(value, (bool, np.bool_)):
             value = "true" if value else "false"
-        elif _finite_number(value):
+        elif is_finite_real(value):
             value = repr(value.item() if isinstance(value, np.generic) else value)
-        elif isinstance(value, (list, tuple, np.ndarray)) and len(value) and all(_finite_number(v) for v in value):
+        elif isinstance(value, (list, tuple, np.ndarray)) and len(value) and all(is_finite_real(v) for v in value):
             value = ", ".join(repr(v.item() if isinstance(v, np.generic) else v) for v in value)
         elif isinstance(value, Path):
             value = str(value)
@@ -84,11 +83,6 @@ def check_parameters(parameters) -> dict[str, str]:
                              "such as '0, 0, 0', a finite number, a boolean or a list of numbers)")
         out[name] = value
     return out
-
-
-def _finite_number(value) -> bool:
-    return (isinstance(value, (numbers.Real, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
-            and bool(np.isfinite(value)))
 
 
 def declared_parameters(path: Path) -> set[str]:
