@@ -58,9 +58,44 @@ def check_printable(task: tr.TrackingTask) -> None:
     check_print_sheet(task.baseline_masks(), _sheet_offsets_m(task), task.dpi, task.film())
 
 
+#: The sequence fields of :class:`~.tracking.TrackingTask`: field -> (length, None for any; its form and unit).
+SEQUENCE_FIELDS: dict[str, tuple[int | None, str]] = {
+    "train_depths_m": (None, "plane depths [m], like (0.35, 0.5, 0.7)"),
+    "background_radiances": (None, "radiances [W m^-2 sr^-1], like (0.0, 0.2)"),
+    "object_size_range_m": (2, "(min, max) sizes [m], like (0.01, 0.15)"),
+    "bar_width_range_m": (2, "(min, max) widths [m], like (0.008, 0.02)"),
+    "contrast_range": (2, "(min, max) radiances [W m^-2 sr^-1], like (0.05, 1.0)"),
+    "background_contrast_range": (2, "(min, max) radiances [W m^-2 sr^-1], like (0.3, 1.0)"),
+    "depth_range_m": (2, "(min, max) depths [m], like (0.3, 0.8)"),
+}
+
+
+def _check_sequences(overrides: dict) -> None:
+    """Refuse a sequence field of ``overrides`` that is not a list or tuple of real numbers (of the right length):
+    one :class:`~mincam_sim.errors.InputError` naming it and its form, before it is unpacked or converted."""
+    from numbers import Real
+
+    from mincam_sim.errors import InputError
+
+    for key, (length, form) in SEQUENCE_FIELDS.items():
+        if key not in overrides:
+            continue
+        value = overrides[key]
+        items = list(value) if isinstance(value, list | tuple | np.ndarray) and np.ndim(value) == 1 else None
+        if (items is None or not all(isinstance(v, Real) and not isinstance(v, bool | np.bool_) for v in items)
+                or (length is not None and len(items) != length) or not items):
+            count = f"{length} numbers" if length is not None else "a non-empty list or tuple of numbers"
+            raise InputError(f"{key} must be {count}: {form}; got {value!r}")
+
+
 def make_task(quick: bool = False, seed: int = 0, **overrides) -> tr.TrackingTask:
     """The task of a run: :meth:`TrackingTask.quick` or the full one, with ``overrides`` (task fields; a
-    ``depth_range_m`` alone spreads the training planes evenly over it)."""
+    ``depth_range_m`` alone spreads the training planes evenly over it).
+
+    A sequence field (:data:`SEQUENCE_FIELDS`) that is not a list or tuple of numbers is an
+    :class:`~mincam_sim.errors.InputError`; the values themselves are the task's checks (a
+    :class:`~.checks.FieldError`).
+    """
     from dataclasses import fields
 
     from mincam_sim.errors import ConfigError
@@ -69,12 +104,12 @@ def make_task(quick: bool = False, seed: int = 0, **overrides) -> tr.TrackingTas
     unknown = sorted(set(overrides) - known)
     if unknown:
         raise ConfigError(f"unknown design task field(s) {', '.join(unknown)}: choose from {', '.join(sorted(known))}")
+    _check_sequences(overrides)
     base = tr.TrackingTask.quick(seed) if quick else tr.TrackingTask(seed=seed)
     if "depth_range_m" in overrides and "train_depths_m" not in overrides:
         lo, hi = overrides["depth_range_m"]
         overrides["train_depths_m"] = tuple(np.linspace(lo, hi, len(base.train_depths_m)).tolist())
-    for key in ("train_depths_m", "object_size_range_m", "bar_width_range_m", "background_radiances",
-                "contrast_range", "background_contrast_range", "depth_range_m"):
+    for key in SEQUENCE_FIELDS:
         if key in overrides:
             overrides[key] = tuple(float(v) for v in overrides[key])
     from dataclasses import replace
@@ -165,11 +200,21 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
     overrides
         Fields of ``TrackingTask`` (training distribution, geometry, film; ``make_task``), or of
         ``mincam_sim.design.scene_tasks.Sizes`` for the scene tasks.
+
+    Raises
+    ------
+    InputError
+        Before any work, for an argument of the wrong type or form (an unknown task, a non-path ``out_dir``, a
+        ``seed`` or ``dpi`` out of range, a flag that is not a bool, a sequence field that is not a list of
+        numbers), naming it and the expected form.
+    ConfigError
+        Before any work, for an unknown or out-of-range task field (:class:`~.checks.FieldError`).
     """
     from mincam_sim.design.gradcheck import check_gradients
     from mincam_sim.design.optimise import design
 
-    _check_request(task_name, dpi, overrides)
+    _check_request(task_name, out_dir, dpi, overrides, quick=quick, seed=seed, show_progress=show_progress,
+                   overwrite=overwrite, baselines=baselines)
     if task_name != "tracking":
         from mincam_sim.design.tasks import get_task
 
@@ -213,14 +258,33 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
     return report
 
 
-def _check_request(task_name: str, dpi: float | None, overrides: dict) -> None:
-    """Refuse an unknown task or a bad ``dpi``; a given ``dpi`` becomes the task's (in ``overrides``)."""
-    if task_name not in TASKS:
-        raise ValueError(f"unknown design task {task_name!r}: choose one of {', '.join(TASKS)}")
+def _check_request(task_name: str, out_dir: str | Path, dpi: float | None, overrides: dict, **flags) -> None:
+    """Refuse a bad argument of :func:`run_design` before any work, with one
+    :class:`~mincam_sim.errors.InputError` naming it and its form: an unknown task, an ``out_dir`` that is not a
+    path, a ``seed`` or ``dpi`` out of range (:data:`~.checks.SHARED`), a flag (``flags``: ``quick``,
+    ``show_progress``, ``overwrite``, ``baselines``) that is not a bool, a tracking task's sequence field
+    that is not a list of numbers. A given ``dpi`` becomes the task's (in ``overrides``)."""
+    import os
+
+    from mincam_sim.design.checks import SHARED
+    from mincam_sim.errors import InputError
+
+    if not isinstance(task_name, str) or task_name not in TASKS:
+        raise InputError(f"unknown design task {task_name!r}: choose one of {', '.join(TASKS)}")
+    if not isinstance(out_dir, str | os.PathLike) or not str(out_dir):
+        raise InputError(f"out_dir must be a folder path (a str or pathlib.Path), got {out_dir!r}")
+    for name, value in flags.items():
+        if name == "seed":
+            if not SHARED["seed"].accepts(value):
+                raise InputError(f"seed {SHARED['seed'].rule()}, got {value!r}")
+        elif not isinstance(value, bool | np.bool_):
+            raise InputError(f"{name} must be True or False, got {value!r}")
     if dpi is not None:
-        if not (np.isfinite(dpi) and dpi > 0):
-            raise ValueError(f"dpi must be a positive number of dots per inch, got {dpi!r}")
+        if not SHARED["dpi"].accepts(dpi):
+            raise InputError(f"dpi {SHARED['dpi'].rule()}, or None for the task's default, got {dpi!r}")
         overrides["dpi"] = float(dpi)
+    if task_name == "tracking":
+        _check_sequences(overrides)
 
 
 @dataclass
@@ -404,4 +468,5 @@ def _setup_report(task: tr.TrackingTask, held_out) -> dict:
 
 
 __all__ = ["BASELINE", "DESIGNED", "IDEAL_TRAINED", "MIRRORED", "PCA", "RAMPS_LEARNED", "RANDOM", "SUMMARY_BASELINES",
-           "TASKS", "FieldBaselines", "field_baselines", "make_task", "run_design", "suite_entries", "suite_summary"]
+           "SEQUENCE_FIELDS", "TASKS", "FieldBaselines", "field_baselines", "make_task", "run_design", "suite_entries",
+           "suite_summary"]

@@ -159,7 +159,7 @@ class TrackingTask(PrintedSizes):
             checks.refuse(self, (field,), what)
 
         checks.check_shared(self)
-        if self.decoder not in FEATURES:
+        if not isinstance(self.decoder, str) or self.decoder not in FEATURES:
             bad("decoder", f"must be one of {', '.join(FEATURES)}")
         if self.decoder_fit not in ("noiseless", "noisy"):
             bad("decoder_fit", "must be 'noiseless' or 'noisy'")

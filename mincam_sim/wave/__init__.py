@@ -63,13 +63,14 @@ from mincam_sim.wave.sampling import (
 )
 from mincam_sim.wave.spectrum import (
     DEFAULT_WAVELENGTHS_M,
+    QE_RANGE_M,
     SI_COLLECTION_DEPTH_M,
     SI_DEAD_LAYER_M,
     SI_SURFACE_LOSS,
     silicon_qe,
     spectral_weights,
 )
-from mincam_sim.wave.table import ResponseTable, response_table
+from mincam_sim.wave.table import TABLE_MEMORY_LIMIT_BYTES, ResponseTable, response_table
 from mincam_sim.wave.validity import (
     U_ONE_PERCENT,
     VALIDITY_TOLERANCE,
@@ -85,10 +86,12 @@ __all__ = [
     "DOMAIN_FACTOR",
     "MAX_CELLS_2D",
     "OPTICS",
+    "QE_RANGE_M",
     "ResponseTable",
     "SI_COLLECTION_DEPTH_M",
     "SI_DEAD_LAYER_M",
     "SI_SURFACE_LOSS",
+    "TABLE_MEMORY_LIMIT_BYTES",
     "U_ONE_PERCENT",
     "Sampling",
     "VALIDITY_TOLERANCE",

@@ -10,6 +10,8 @@ from mincam_sim.masks import profiles as prof
 from mincam_sim.model.optics import Mixel
 from mincam_sim.wave.sampling import separable_axis
 
+QUADRATURE_CHUNK_POINTS = 8192  # directions per block of the one-axis quadrature (~13 MB per array)
+
 
 def _clip_interval(lo: np.ndarray, hi: np.ndarray, a: float, b: float) -> tuple[np.ndarray, np.ndarray]:
     return np.maximum(lo, a), np.minimum(hi, b)
@@ -48,11 +50,15 @@ def geometric_response(mixel: Mixel, tan_theta: np.ndarray, n_gauss: int = 24) -
         nodes = ((k[:, None] + (g[None, :] + 1) / 2) / sub).ravel()
         wts = np.tile(gw / 2 / sub, sub)
         lo, hi = (x0, x1) if axis in ("x", "xy") else (y0, y1)
-        pos = lo[:, None] + (hi - lo)[:, None] * nodes[None, :]
-        zero = np.zeros_like(pos)
-        xy = (pos, zero) if axis in ("x", "xy") else (zero, pos)
-        t = np.broadcast_to(np.asarray(mask.profile.evaluate(*xy, prof.NUMPY_OPS), dtype=np.float64), pos.shape)
-        integral = (t @ wts) * (hi - lo)
+        integral = np.empty(len(tan))
+        for start in range(0, len(tan), QUADRATURE_CHUNK_POINTS):  # blocks: ~200 nodes per point held at once
+            block = slice(start, start + QUADRATURE_CHUNK_POINTS)
+            pos = lo[block, None] + (hi[block] - lo[block])[:, None] * nodes[None, :]
+            zero = np.zeros_like(pos)
+            xy = (pos, zero) if axis in ("x", "xy") else (zero, pos)
+            t = np.broadcast_to(np.asarray(mask.profile.evaluate(*xy, prof.NUMPY_OPS), dtype=np.float64),
+                                pos.shape)
+            integral[block] = (t @ wts) * (hi[block] - lo[block])
         other = (y1 - y0) if axis in ("x", "xy") else (x1 - x0)
         return np.where(ok, integral * other / area, 0.0)
     for i in np.nonzero(ok)[0]:

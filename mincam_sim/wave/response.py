@@ -36,6 +36,16 @@ def _check_optics(optics: str) -> str:
     return optics
 
 
+def _check_solver_sizes(max_cells: int | None, workers: int) -> None:
+    """Refuse a ``max_cells`` (grid cells per axis) or ``workers`` (FFT threads) the solvers cannot use."""
+    if max_cells is not None and (isinstance(max_cells, bool) or not isinstance(max_cells, int | np.integer)
+                                  or max_cells < MIN_CELLS):
+        raise InputError(f"max_cells must be None (the default) or an integer >= {MIN_CELLS} grid cells per axis "
+                         f"(14 cells read a ramp 3 % off), got {max_cells!r}")
+    if isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 1:
+        raise InputError(f"workers must be an integer >= 1 (threads for the 2D FFTs), got {workers!r}")
+
+
 @dataclass
 class WaveInfo:
     """How a wave response was computed (per wavelength: grid and the fraction of the reachable band held)."""
@@ -91,12 +101,7 @@ def angular_response(
         ``(response, info)``.
     """
     tan = _check_tan(tan_theta)
-    if max_cells is not None and (isinstance(max_cells, bool) or not isinstance(max_cells, int | np.integer)
-                                  or max_cells < MIN_CELLS):
-        raise InputError(f"max_cells must be None (the default) or an integer >= {MIN_CELLS} grid cells per axis "
-                         f"(14 cells read a ramp 3 % off), got {max_cells!r}")
-    if isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 1:
-        raise InputError(f"workers must be an integer >= 1 (threads for the 2D FFTs), got {workers!r}")
+    _check_solver_sizes(max_cells, workers)
     if _check_optics(optics) == "geometric":
         g = geometric_response(mixel, tan)
         info = WaveInfo("geometric", [], [])

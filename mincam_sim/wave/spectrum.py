@@ -23,6 +23,9 @@ _SI_ALPHA_PER_M = 100.0 * np.array(
 )
 
 
+QE_RANGE_M = (400e-9, 1100e-9)  # [m] the wavelengths :func:`silicon_qe` covers (the span of its absorption table)
+
+
 SI_DEAD_LAYER_M = 0.2e-6  # [m] surface layer whose photocarriers recombine before collection (model)
 
 
@@ -55,9 +58,11 @@ def silicon_qe(wavelength_m: float | np.ndarray) -> np.ndarray:
     so the scale does not matter. For a specific
     sensor pass its measured curve as ``qe`` to :func:`spectral_weights`.
     """
+    bad = _outside_qe_range(wavelength_m)
+    if bad:
+        raise InputError(f"silicon_qe: wavelength_m must lie in the silicon QE model's range [{QE_RANGE_M[0]:g}, "
+                         f"{QE_RANGE_M[1]:g}] m, got {bad} m")
     lam_nm = np.asarray(wavelength_m, dtype=np.float64) * 1e9
-    if np.any(~np.isfinite(lam_nm)) or np.any(lam_nm < _SI_ALPHA_NM[0]) or np.any(lam_nm > _SI_ALPHA_NM[-1]):
-        raise InputError(f"silicon_qe: wavelength_m must lie in [400e-9, 1100e-9] m, got {wavelength_m!r}")
     alpha = np.exp(np.interp(lam_nm, _SI_ALPHA_NM, np.log(_SI_ALPHA_PER_M)))
     return (1.0 - SI_SURFACE_LOSS) * (np.exp(-alpha * SI_DEAD_LAYER_M) - np.exp(-alpha * SI_COLLECTION_DEPTH_M))
 
@@ -67,29 +72,68 @@ def spectral_weights(
 ) -> np.ndarray:
     """Weights (sum 1) of the wavelengths for a flat photon spectrum seen by a detector of quantum efficiency ``qe``.
 
+    Parameters
+    ----------
+    wavelengths_m : sequence of float
+        Distinct wavelengths [m], in any order.
+    qe : callable or None
+        Quantum efficiency [electrons per photon] at an array of wavelengths [m] (default :func:`silicon_qe`,
+        which refuses wavelengths outside :data:`QE_RANGE_M`); ``None`` weighs the bands by their width only.
+
+    Returns
+    -------
+    ndarray
+        One weight per wavelength, in the order given, summing to 1.
+
+    Notes
+    -----
     Each wavelength stands for the band between its neighbours' midpoints (trapezoid rule); a single
-    wavelength gets weight 1. ``qe=None`` weighs the bands by their width only.
+    wavelength gets weight 1, but it is still checked against ``qe`` (a wavelength the QE curve does not
+    cover, or where it is 0, is refused whether it comes alone or with others).
     """
     lam = _check_wavelengths(wavelengths_m)
-    if len(lam) == 1:
-        return np.ones(1)
+    bad = _outside_qe_range(lam) if qe is silicon_qe else ""
+    if bad:
+        raise InputError(f"wavelengths_m {bad} m lie outside the silicon QE model's range [{QE_RANGE_M[0]:g}, "
+                         f"{QE_RANGE_M[1]:g}] m: give wavelengths in that range, or pass qe=None (weights by band "
+                         "width only) or your sensor's measured QE curve as qe")
     order = np.argsort(lam)
     s = lam[order]
-    edges = np.concatenate(([s[0]], 0.5 * (s[1:] + s[:-1]), [s[-1]]))
-    width = np.diff(edges)
+    if len(s) == 1:
+        width = np.ones(1)
+    else:
+        edges = np.concatenate(([s[0]], 0.5 * (s[1:] + s[:-1]), [s[-1]]))
+        width = np.diff(edges)
     w_sorted = width * (np.ones_like(s) if qe is None else np.asarray(qe(s), dtype=np.float64))
     w = np.empty_like(w_sorted)
     w[order] = w_sorted
     if not np.all(np.isfinite(w)) or w.sum() <= 0:
-        raise InputError("spectral_weights: the QE curve gives no weight to these wavelengths")
+        raise InputError(f"spectral_weights: the QE curve gives no weight to wavelengths_m "
+                         f"{list(map(float, lam))} m: give wavelengths where it is positive, or pass qe=None")
     return w / w.sum()
 
 
+def _outside_qe_range(wavelength_m: float | np.ndarray) -> str:
+    """The wavelengths [m] (listed, as text) that :func:`silicon_qe` does not cover; empty when none."""
+    lam_m = np.atleast_1d(np.asarray(wavelength_m, dtype=np.float64))
+    outside = ~(lam_m >= QE_RANGE_M[0]) | ~(lam_m <= QE_RANGE_M[1])  # NaN is outside too
+    return ", ".join(f"{v:.4g}" for v in lam_m[outside])
+
+
 def _check_wavelengths(wavelengths_m: Sequence[float]) -> np.ndarray:
-    lam = np.atleast_1d(np.asarray(wavelengths_m, dtype=np.float64))
-    if lam.ndim != 1 or lam.size == 0 or not np.all(np.isfinite(lam)) or np.any(lam <= 0):
+    try:
+        lam = np.atleast_1d(np.asarray(wavelengths_m, dtype=np.float64))
+    except (TypeError, ValueError):
+        lam = np.empty(0)  # not numbers: refused below
+    if (isinstance(wavelengths_m, str | bytes) or lam.ndim != 1 or lam.size == 0 or not np.all(np.isfinite(lam))
+            or np.any(lam <= 0)):
         raise InputError(f"wavelengths_m must be a non-empty list of positive wavelengths in metres, got "
                          f"{wavelengths_m!r}")
     if np.any(lam > 1e-4):
         raise InputError(f"wavelengths_m {wavelengths_m!r} look like nanometres; give metres (550e-9 for 550 nm)")
+    values, counts = np.unique(lam, return_counts=True)
+    if np.any(counts > 1):
+        repeated = ", ".join(f"{v:g} m" for v in values[counts > 1])
+        raise InputError(f"wavelengths_m repeats {repeated}: give each wavelength once (the spectral weights "
+                         "already give each its band)")
     return lam

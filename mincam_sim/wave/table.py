@@ -8,13 +8,23 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mincam_sim.errors import InputError
+from mincam_sim.errors import InputError, is_finite_real
 from mincam_sim.model.optics import Mixel
 from mincam_sim.wave.geometric import geometric_response, open_fraction
 from mincam_sim.wave.propagation import _response_1d
-from mincam_sim.wave.response import WaveInfo, _axis_setup, _uniform_value, angular_response
+from mincam_sim.wave.response import WaveInfo, _axis_setup, _check_solver_sizes, _uniform_value, angular_response
 from mincam_sim.wave.sampling import dot_pitch_m, separable_axis
 from mincam_sim.wave.spectrum import DEFAULT_WAVELENGTHS_M, _check_wavelengths, silicon_qe, spectral_weights
+
+TABLE_MEMORY_LIMIT_BYTES = 8 * 2**30  # [B] the most memory one response table may take while it is built
+
+
+TABLE_BYTES_PER_CELL = 256  # [B] peak memory per (tan_x, tan_y) cell while a table is built (~19 float64 measured)
+
+
+def table_memory_bytes(n_tan: int) -> float:
+    """[B] the memory :func:`response_table` takes (at its peak) for ``n_tan`` points per axis."""
+    return float(TABLE_BYTES_PER_CELL) * float(n_tan) ** 2
 
 
 @dataclass(frozen=True, eq=False)
@@ -63,19 +73,50 @@ def response_table(
 ) -> ResponseTable:
     """Tabulate the mixel's wave response over its whole field of view (``|tan| <= half_fov_tan``).
 
-    ``n_tan`` points per axis (default: 513 for one-axis masks, whose 1D factors are solved on 129 points and
-    interpolated, see ``_table_separable``; 33 for 2D masks, whose cost is one 2D propagation per point).
+    Parameters
+    ----------
+    mixel : Mixel
+        The mixel (mask, ``d_f_m``, detector size).
+    wavelengths_m : sequence of float
+        Distinct wavelengths [m], combined with :func:`~mincam_sim.wave.spectral_weights`.
+    n_tan : int, optional
+        Points per axis (default: 513 for one-axis masks, whose 1D factors are solved on 129 points and
+        interpolated, see ``_table_separable``; 33 for 2D masks, whose cost is one 2D propagation per point).
+        Its ``n_tan**2`` arrays take about :data:`TABLE_BYTES_PER_CELL` ``* n_tan**2`` bytes while it is
+        built (besides the solver's own grids, ~0.25 GB for one-axis masks), at most
+        :data:`TABLE_MEMORY_LIMIT_BYTES`: a larger ``n_tan`` is refused before any work.
+    qe : callable or None
+        Quantum efficiency curve for the spectral weights (``None``: band widths only).
+    max_cells : int, optional
+        Cap on grid cells per axis of the solver.
+    workers : int
+        Threads for the 2D FFTs.
+
+    Returns
+    -------
+    ResponseTable
+
+    Notes
+    -----
     The renderer reads the table bilinearly: its spacing must resolve the response's angular detail (about
     ``min(detector, period) / d_f``); a 2D table is therefore only as good as its ``n_tan`` allows.
     """
     axis = separable_axis(mixel.mask)
     if n_tan is None:
         n_tan = 513 if axis is not None else 33
-    if int(n_tan) != n_tan or n_tan < 3:
+    if not is_finite_real(n_tan) or int(n_tan) != n_tan or n_tan < 3:
         raise InputError(f"n_tan must be an integer >= 3 points per axis, got {n_tan!r}")
+    n_tan = int(n_tan)
+    if table_memory_bytes(n_tan) > TABLE_MEMORY_LIMIT_BYTES:
+        most = int((TABLE_MEMORY_LIMIT_BYTES / TABLE_BYTES_PER_CELL) ** 0.5)
+        raise InputError(f"n_tan = {n_tan} points per axis would make a response table of about "
+                         f"{table_memory_bytes(n_tan) / 2**30:.3g} GiB (at most {TABLE_MEMORY_LIMIT_BYTES / 2**30:g} "
+                         f"GiB): lower n_tan to at most {most} (or leave it out: 513 for one-axis masks, 33 for 2D)")
+    _check_solver_sizes(max_cells, workers)
+    lam = _check_wavelengths(wavelengths_m)
     hx, hy = mixel.half_fov_tan()
-    tx = np.linspace(-hx, hx, int(n_tan))
-    ty = np.linspace(-hy, hy, int(n_tan))
+    tx = np.linspace(-hx, hx, n_tan)
+    ty = np.linspace(-hy, hy, n_tan)
     gx, gy = np.meshgrid(tx, ty)
     pts = np.column_stack([gx.ravel(), gy.ravel()])
     if axis is not None:  # one-axis masks: each axis on a few wavelength levels, interpolated
@@ -94,7 +135,7 @@ def response_table(
         wave = wave.reshape(gy.shape)
     geometric = geometric_response(mixel, pts).reshape(gy.shape)
     opened = open_fraction(mixel, pts).reshape(gy.shape)
-    meta = {"n_tan": int(n_tan), "wavelengths_m": list(map(float, _check_wavelengths(wavelengths_m))),
+    meta = {"n_tan": n_tan, "wavelengths_m": list(map(float, lam)),
             "qe": getattr(qe, "__name__", "custom") if qe is not None else None, **info.as_dict()}
     return ResponseTable(tx, ty, wave, geometric, opened, meta)
 

@@ -32,7 +32,7 @@ def rim_onset_deg(mixel: Mixel, wavelength_m: float = DEFAULT_WAVELENGTHS_M[0],
     open_mixel = Mixel(_open_like(mixel.mask), mixel.d_f_m, mixel.detector_size_m)
     t = np.linspace(0.0, open_mixel.half_fov_tan()[0], n)
     pts = np.column_stack([t, 0 * t])
-    r = angular_response(open_mixel, pts, (wavelength_m,))
+    r = angular_response(open_mixel, pts, (wavelength_m,), qe=None)  # one wavelength: no spectral weighting
     g = geometric_response(open_mixel, pts)
     bad = np.nonzero(np.abs(r - g) > tolerance * np.maximum(g, 1e-12))[0]
     return float(np.degrees(np.arctan(t[bad[0]]))) if len(bad) else float(np.degrees(np.arctan(t[-1])))
