@@ -3,7 +3,16 @@ metadata."""
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
+import io
+import os
+import sys
+import tempfile
+import threading
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -124,9 +133,78 @@ def _source(path: str | Path, encoding: str) -> tuple[Path, str]:
     return p, fmt
 
 
+_C_OUTPUT_LOCK = threading.Lock()
+
+
+def _flush_c_streams() -> None:
+    """Flush the C library's buffered streams (``std::cout`` writes through C's ``stdout`` buffer)."""
+    with contextlib.suppress(OSError, AttributeError, TypeError):
+        ctypes.CDLL(None).fflush(None)
+
+
+@contextlib.contextmanager
+def _library_output_held() -> Iterator[None]:
+    """Hold what a native library prints to the standard output and error inside the block.
+
+    OpenEXR prints its own lines about a damaged file before it raises: ``t.exr: (EXR_ERR_BAD_CHUNK_LEADER) ...``
+    from C straight to file descriptor 2, ``Warning: Exception raised reading pixel data ...`` through Python's
+    ``sys.stdout``; the caller's one ``error:`` line says what is wrong. Both levels are held: the descriptors 1
+    and 2 (where they can be redirected) and ``sys.stdout`` / ``sys.stderr``. When the block ends without an
+    exception, what was held is written where it was going (nothing is lost); when it raises, it is added to the
+    exception as a note instead (shown with its traceback, e.g. under ``--debug``)."""
+    with _C_OUTPUT_LOCK, tempfile.TemporaryFile() as out_sink, tempfile.TemporaryFile() as err_sink:
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        _flush_c_streams()
+        saved: dict[int, tuple[int, Any]] = {}
+        with contextlib.suppress(OSError):  # a closed descriptor: only Python's streams are held
+            for fd, sink in ((1, out_sink), (2, err_sink)):
+                copy = os.dup(fd)
+                saved[fd] = (copy, sink)
+                os.dup2(sink.fileno(), fd)
+        python = {1: io.StringIO(), 2: io.StringIO()}
+        native: dict[int, bytes] = {}
+        try:
+            with contextlib.redirect_stdout(python[1]), contextlib.redirect_stderr(python[2]):
+                yield
+        except BaseException as err:
+            _restore(saved, native)
+            text = "\n".join(part for part in (
+                *(python[fd].getvalue().strip() for fd in (1, 2)),
+                *(native.get(fd, b"").decode("utf-8", errors="replace").strip() for fd in (1, 2))) if part)
+            if text:
+                err.add_note(f"OpenEXR said:\n{text}")
+            raise
+        _restore(saved, native)
+        for fd, stream in ((1, sys.stdout), (2, sys.stderr)):
+            with contextlib.suppress(Exception):
+                if python[fd].getvalue():
+                    stream.write(python[fd].getvalue())
+                    stream.flush()
+                if native.get(fd):
+                    os.write(fd, native[fd])
+
+
+def _restore(saved: dict[int, tuple[int, Any]], native: dict[int, bytes]) -> None:
+    """Put the descriptors back and keep in ``native`` what was written to each meanwhile."""
+    _flush_c_streams()
+    for fd, (copy, sink) in saved.items():
+        os.dup2(copy, fd)
+        os.close(copy)
+        sink.seek(0)
+        if data := sink.read():
+            native[fd] = data
+    saved.clear()
+
+
 def _read_exr(p: Path) -> tuple[np.ndarray, dict, dict]:
-    """An OpenEXR mask's transmission (finite, in [0, 1]), its header and the stored metadata (the same dict)."""
-    arr, info = imageio.read_exr(p)
+    """An OpenEXR mask's transmission (finite, in [0, 1]), its header and the stored metadata (the same dict).
+
+    OpenEXR's own lines about a damaged file are held back (:func:`_library_output_held`): a truncated file is
+    one ``ValueError`` saying so, nothing more."""
+    with _library_output_held():
+        arr, info = imageio.read_exr(p)
     arr = np.asarray(arr, dtype=np.float64)
     t = _to_transmission(arr, info["channels"], str(p))
     bad = ~np.isfinite(t)

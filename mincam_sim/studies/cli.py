@@ -15,7 +15,9 @@ def run_study_command(study_file: Path, workers: int | None, scheduler: str | No
     """Run a parameter study on dask.distributed; results.zarr (xarray), summary.json and a plot in --out.
 
     Ctrl-C: one line ``error: interrupted: K of N points are complete and kept in ...; run the same command
-    again to resume ...`` on stderr and exit code 130 (the generic Ctrl-C line of the CLI is not added)."""
+    again to resume ...`` on stderr and exit code 130 (the generic Ctrl-C line of the CLI is not added); before
+    the study's store exists (its modules still loading, its file being read, its store not created yet), the
+    line says that nothing was written and names no file."""
     from mincam_sim.errors import StoreError
     from mincam_sim.studies.cluster import check_workers, mute_dask_for_exit, watched_interrupts
     from mincam_sim.studies.plots import plot_study
@@ -26,18 +28,24 @@ def run_study_command(study_file: Path, workers: int | None, scheduler: str | No
     limit_s = DEFAULT_TIME_LIMIT_S if time_limit_s is None else time_limit_s
     check_time_limit(limit_s)
     # an interrupt swallowed while the study loads still stops it; from the first one, this process only ends
-    with watched_interrupts(on_interrupt=mute_dask_for_exit):
-        spec = load_study(study_file, quick=quick,
-                          max_points=DEFAULT_MAX_POINTS if max_points is None else max_points)
-        out = out_dir or spec.out_dir
-        try:
+    try:
+        with watched_interrupts(on_interrupt=mute_dask_for_exit):
+            spec = load_study(study_file, quick=quick,
+                              max_points=DEFAULT_MAX_POINTS if max_points is None else max_points)
+            out = out_dir or spec.out_dir
             ds, summary = run_study(spec, workers=workers, scheduler=scheduler, quick=quick, out_dir=out,
                                     overwrite=overwrite, show_progress=not quiet,
                                     say=lambda m: typer.echo(m, err=True), time_limit_s=limit_s)
-        except StudyInterrupted as stop:
-            mute_dask_for_exit()  # muted by the first SIGINT already, unless it came by another way
-            typer.echo(f"error: {stop}", err=True)
-            raise SystemExit(130) from None
+    except StudyInterrupted as stop:
+        mute_dask_for_exit()  # muted by the first SIGINT already, unless it came by another way
+        typer.echo(f"error: {stop}", err=True)
+        raise SystemExit(130) from None
+    except KeyboardInterrupt:  # any other comes before the study starts writing (run_study converts the rest)
+        from mincam_sim.cli import STUDY_NOT_STARTED
+
+        mute_dask_for_exit()
+        typer.echo(f"error: {STUDY_NOT_STARTED}", err=True)
+        raise SystemExit(130) from None
     try:
         plot = plot_study(ds, list(spec.metrics), Path(out) / "study.png")
     except OSError as err:

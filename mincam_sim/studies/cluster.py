@@ -348,10 +348,14 @@ def _quiet_resource_tracker() -> None:
 
 
 @contextlib.contextmanager
-def embedded_client(n_workers: int, cache_root: Path, log_path: Path | None = None) -> Iterator:
+def embedded_client(n_workers: int, log_path: Path | None = None) -> Iterator:
     """A client of a ``LocalCluster`` of ``n_workers`` spawned process workers (Dr.Jit threads capped so that
-    workers x threads <= cores, one kernel cache each under ``cache_root``, their stderr appended to
-    ``log_path`` if given); stopped at once on any exception."""
+    workers x threads <= cores, their stderr appended to ``log_path`` if given); stopped at once on any
+    exception.
+
+    Each worker gets its own Dr.Jit kernel cache (``DRJIT_CACHE_DIR``, unless the user set it) in a temporary
+    folder, outside the study's output folder, removed when the block ends (after the workers are gone), also on
+    an error or a Ctrl-C."""
     import dask
     from distributed import Client, LocalCluster
     from distributed.deploy.spec import SpecCluster
@@ -359,7 +363,8 @@ def embedded_client(n_workers: int, cache_root: Path, log_path: Path | None = No
     before = {p.pid for p in multiprocessing.active_children()}
     clusters_before = set(SpecCluster._instances)
     client = cluster = None
-    with _spawned_ignoring_sigint(log_path):
+    with (tempfile.TemporaryDirectory(prefix="mincam_drjit_cache_", ignore_cleanup_errors=True) as cache_root,
+          _spawned_ignoring_sigint(log_path)):
         try:
             threads = max(1, available_cores() // n_workers)
             with dask.config.set({"distributed.worker.multiprocessing-method": "spawn",

@@ -2,8 +2,9 @@
 
 * Each point is one task. ``workers = 1`` runs the points in this process; ``workers >= 2`` starts an embedded
   ``LocalCluster`` of *process* workers (spawned, never forked; one Dr.Jit per process, each with its own
-  ``DRJIT_CACHE_DIR`` and a thread pool capped so that workers x threads <= cores); ``scheduler=ADDRESS`` uses
-  an existing cluster instead (e.g. one started by ``dask-jobqueue`` on Slurm/PBS). ``workers < 1`` is refused.
+  ``DRJIT_CACHE_DIR`` in a temporary folder removed when the study ends, and a thread pool capped so that
+  workers x threads <= cores); ``scheduler=ADDRESS`` uses an existing cluster instead (e.g. one started by
+  ``dask-jobqueue`` on Slurm/PBS). ``workers < 1`` is refused.
 * Each point runs ``replicates`` times; a metric is the mean over them and ``<metric>_stderr`` its standard
   error (the replicates' spread / sqrt(n); with one replicate, the point's own Monte Carlo standard error where
   it reports one, else NaN). With common random numbers (the default) replicate ``r`` has the same seed at every
@@ -219,8 +220,10 @@ def _create(spec: StudySpec, store: Path, identity: dict) -> None:
         ds = _empty_dataset(spec, identity)
         ds.chunk({dim: 1 for dim in spec.dims}).to_zarr(tmp, mode="w", consolidated=True, zarr_format=2)
         os.replace(tmp, store)  # the store appears whole or not at all
-    except OSError as err:
+    except BaseException as err:  # a full disk (or a Ctrl-C outside the main thread): no half-written store is left
         shutil.rmtree(tmp, ignore_errors=True)
+        if not isinstance(err, OSError):
+            raise
         raise StoreError(f"cannot create the study store {store}: {err.strerror or err} ({err.filename or tmp}); "
                          "free space or choose another --out") from None
 
@@ -364,12 +367,26 @@ def _holder(out: Path) -> str:
 
 
 class StudyInterrupted(KeyboardInterrupt):
-    """Ctrl-C stopped a study; the message says how many points are kept and how to resume."""
+    """Ctrl-C stopped a study; the message says how many points are kept and how to resume.
 
-    def __init__(self, kept: int, total: int, store: Path):
+    Parameters
+    ----------
+    kept, total : int
+        Points complete (kept) and points of the study.
+    store : Path or None
+        The study's store; None when it was not created yet (the message then names nothing: nothing was
+        written, and the same command starts the study).
+    """
+
+    def __init__(self, kept: int, total: int, store: Path | None):
         self.kept, self.total, self.store = kept, total, store
-        super().__init__(f"interrupted: {kept} of {total} points are complete and kept in {store}; run the same "
-                         "command again to resume (the kept points are reused, the numbers are the same)")
+        if store is None:
+            message = (f"interrupted before the first of {total} points was stored: nothing was written yet; run "
+                       "the same command again to start the study")
+        else:
+            message = (f"interrupted: {kept} of {total} points are complete and kept in {store}; run the same "
+                       "command again to resume (the kept points are reused, the numbers are the same)")
+        super().__init__(message)
 
 
 def estimated_seconds(spec: StudySpec, n_points: int, workers: int, quick: bool) -> float:
@@ -447,21 +464,59 @@ def run_study(spec: StudySpec, workers: int | None = None, scheduler: str | None
     check_points(spec, quick)
     if overwrite or not (out / STORE_NAME).exists():  # before the lock creates the out dir: nothing is left behind
         check_time(spec, len(spec.points), n_workers, quick, time_limit_s, where)
+    created = next((p for p in reversed((out, *out.parents)) if not p.exists()), None)
     try:
         lock = lock_out_dir(out)
     except OutDirLockedError as err:
         raise OutDirLockedError(f"{err} [{_holder(out)}]") from None
+    stored = True
     try:
         plan = _Plan(n_workers, scheduler, quick, overwrite, show_progress, time_limit_s, where)
         with watched_interrupts():
-            result = _run_locked(spec, out, plan, say)
+            try:
+                result = _run_locked(spec, out, plan, say)
+            except Exception:
+                raise_if_interrupted()  # a Ctrl-C a library turned into another error: the interrupt all the same
+                raise
             raise_if_interrupted()  # one swallowed during the last point: still an interrupted run (rc 130)
         return result
     except KeyboardInterrupt:
+        stored = (out / STORE_NAME).exists()
+        if not stored:  # stopped before the store was created: no point is kept, whatever old records say
+            raise StudyInterrupted(0, len(spec.points), None) from None
         raise StudyInterrupted(_kept_points(out / RECORDS_NAME), len(spec.points), out / STORE_NAME) from None
     finally:
         (out / HOLDER_NAME).unlink(missing_ok=True)
         lock.release()
+        if not stored and created is not None:
+            _remove_if_only_lock(out, created)
+
+
+def _remove_if_only_lock(out: Path, top: Path) -> None:
+    """Remove ``out`` (and the folders above it up to ``top``, all created by this study) if it holds nothing
+    but its lock file: a study stopped before it wrote anything leaves no folder behind. A lock another process
+    holds by now is left alone."""
+    from mincam_sim.storage.store import LOCK_NAME
+
+    lock = out / LOCK_NAME
+    try:
+        if any(entry.name != LOCK_NAME for entry in out.iterdir()):
+            return
+        if lock.exists():
+            import fcntl
+
+            fd = os.open(lock, os.O_RDWR)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # refused: another run holds the folder now
+                lock.unlink()
+            finally:
+                os.close(fd)
+        for folder in (out, *out.parents):
+            folder.rmdir()  # stops (OSError) at the first folder that holds anything
+            if folder == top:
+                break
+    except (OSError, ImportError):
+        return
 
 
 @dataclass(frozen=True)
@@ -496,7 +551,8 @@ def _run_locked(spec: StudySpec, out: Path, plan: _Plan, say: Callable[[str], No
         _check_layout(spec, store, ds)
     else:
         shutil.rmtree(records, ignore_errors=True)  # records of a store that is gone describe nothing
-        _create(spec, store, identity)
+        with held_interrupts():  # zarr writes from a thread of its own: a Ctrl-C waits for the store to be whole
+            _create(spec, store, identity)
         ds, _ = _open(store)
     records.mkdir(parents=True, exist_ok=True)
     complete = _verified(spec, ds, records, say)
@@ -532,7 +588,7 @@ def _run_distributed(spec: StudySpec, store: Path, records: Path, pending: list,
     from distributed import as_completed
 
     opened = (scheduler_client(plan.scheduler) if plan.scheduler is not None
-              else embedded_client(plan.workers, out / "drjit_cache", out / WORKERS_LOG))
+              else embedded_client(plan.workers, out / WORKERS_LOG))
     with opened as client:
         futures = {client.submit(compute_point, spec.experiment.ref, params, point_seeds(spec, params), plan.quick,
                                  list(spec.metrics), pure=False): (idx, params) for idx, params in pending}

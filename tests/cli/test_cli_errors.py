@@ -833,6 +833,35 @@ def test_real_executable_exit_code(tmp_path):
 
 
 
+def _truncated_exr(path: Path) -> None:
+    """The first half of a valid EXR mask (its header whole, its pixel data cut short)."""
+    from mincam_sim.masks import ramp, save_exr
+
+    save_exr(ramp("x", 256, width_m=0.002), path)
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+
+
+def test_a_truncated_exr_mask_is_our_one_line_and_nothing_of_openexr(tmp_path, capfd):
+    """OpenEXR printed its own lines about the damaged file (``m.exr: (EXR_ERR_BAD_CHUNK_LEADER) ...`` on the
+    standard error, ``Warning: Exception raised reading pixel data ...`` on the standard output) before our one
+    ``error:`` line. They are written by C++ straight to the file descriptors: capfd sees them, CliRunner not."""
+    import ctypes
+
+    _truncated_exr(tmp_path / "m.exr")
+    (tmp_path / "c.toml").write_text(toml(mixel(mask='"file:m.exr"'), mincam=CUSTOM))
+    capfd.readouterr()
+    for argv in (["masks", "export", "file:m.exr", "--out", "m.png"], ["render", "c.toml", "--check"]):
+        result = _cli(argv, tmp_path)
+        ctypes.CDLL(None).fflush(None)  # what C++ buffered on the standard output
+        fd_out, fd_err = capfd.readouterr()
+        lines = [line for line in _stderr(result).splitlines() if line.strip()]
+        assert result.exit_code == 2 and len(lines) == 1, (argv, _stderr(result))
+        assert lines[0].startswith("error: ") and "m.exr" in lines[0] and "truncated or corrupt" in lines[0]
+        assert (fd_out, fd_err) == ("", "") and "Warning" not in result.output, (argv, result.output)
+    assert not (tmp_path / "m.png").exists()
+
+
 def test_ctrl_c_while_typer_builds_the_commands_is_one_line_and_130(monkeypatch, capsys):
     """The window after the imports and before a command runs (typer reading every command's signature): a
     Ctrl-C there is one line and exit code 130 too, not a traceback."""

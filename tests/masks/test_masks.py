@@ -272,6 +272,33 @@ def test_load_missing_empty_and_non_image_files(tmp_path):
         M.load(tmp_path / "trunc.exr", width_m=1e-3)
 
 
+def test_native_output_held_while_an_exr_is_read_is_kept_unless_the_read_fails(tmp_path, capfd):
+    """What native code writes during a read goes where it was going when the read succeeds, and becomes a
+    note of the error (seen with its traceback, not above the one-line error) when it fails."""
+    import os
+
+    from mincam_sim.masks import files
+
+    with files._library_output_held():
+        os.write(1, b"native out\n")
+        os.write(2, b"native err\n")
+        print("python out")  # OpenEXR's bindings print their warnings through sys.stdout
+    out, err = capfd.readouterr()
+    assert sorted(out.splitlines()) == ["native out", "python out"] and err == "native err\n"
+    with pytest.raises(ValueError, match="bad file") as failed, files._library_output_held():
+        os.write(2, b"t.exr: EXR_ERR_BAD_CHUNK_LEADER\n")
+        print("Warning: Exception raised reading pixel data")
+        raise ValueError("bad file")
+    assert capfd.readouterr() == ("", "")
+    assert failed.value.__notes__ == ["OpenEXR said:\nWarning: Exception raised reading pixel data\n"
+                                      "t.exr: EXR_ERR_BAD_CHUNK_LEADER"]
+    good = M.save_exr(M.ramp("x", 256, width_m=2e-3), tmp_path / "g.exr").read_bytes()
+    (tmp_path / "half.exr").write_bytes(good[: len(good) // 2])
+    with pytest.raises(ValueError, match="could not be decoded") as failed:
+        M.load(tmp_path / "half.exr")
+    assert capfd.readouterr() == ("", "") and "EXR_ERR" in "".join(failed.value.__notes__)
+
+
 def test_write_png_bad_inputs(tmp_path):
     with pytest.raises(ValueError, match=r"\[0, 1\]"):
         imageio.write_png(tmp_path / "x.png", np.array([[2.0]]))

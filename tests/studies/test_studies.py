@@ -33,6 +33,7 @@ def test_two_workers_equal_one(tmp_path):
     xr.testing.assert_identical(serial, parallel)  # values, coordinates, units and the study's identity
     assert serial["avg_after_pct"].dims == ("spacing_m", "depth_m")
     assert (tmp_path / "two" / "summary.json").is_file()
+    assert not (tmp_path / "two" / "drjit_cache").exists()  # the workers' kernel caches are not left in OUT
 
 
 def test_units_on_every_variable_and_coordinate_and_consolidated_metadata(tmp_path):

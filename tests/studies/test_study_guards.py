@@ -166,6 +166,145 @@ def test_ctrl_c_while_a_record_is_written_keeps_that_point_and_the_rerun_reuses_
     assert summary["points_reused"] == 4
 
 
+def test_ctrl_c_before_the_store_exists_names_no_store_and_leaves_nothing_behind(tmp_path, monkeypatch, capsys):
+    """The one line named OUT/results.zarr although it had not been created, and the out folder the study had
+    created (holding only its lock file) was left behind."""
+    from mincam_sim import cli
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt  # lands after the out folder is locked, before the store is created
+
+    study = tmp_path / "tiny.toml"
+    study.write_text(CTRL_C_STUDY)
+    out = tmp_path / "new" / "out"
+    monkeypatch.setattr(runner_mod, "study_identity", interrupted)
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main(["--quiet", "study", "run", str(study), "--quick", "--workers", "1", "--out", str(out)])
+    assert exit_info.value.code == 130
+    err = capsys.readouterr().err
+    assert err == ("error: interrupted before the first of 6 points was stored: nothing was written yet; run the "
+                   "same command again to start the study\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["tiny.toml"]  # no out folder
+
+    mine = tmp_path / "mine"  # a folder of the user's: kept, with what it held, and nothing of the study's
+    mine.mkdir()
+    (mine / "notes.txt").write_text("mine")
+    with pytest.raises(StudyInterrupted, match="nothing was written yet") as stop:
+        run_quick(load_study(TINY, quick=True), mine, workers=1)
+    assert stop.value.store is None and "results.zarr" not in str(stop.value)
+    assert sorted(p.name for p in mine.iterdir()) == [".mincam.lock", "notes.txt"]
+
+
+def test_ctrl_c_while_the_store_is_created_waits_for_it_to_be_whole(tmp_path, monkeypatch):
+    """zarr writes from a thread of its own: a Ctrl-C while the store was created left OUT/.results.zarr.tmp
+    behind (its writes went on after it was removed) and a line naming a store that did not exist."""
+    spec = load_study(TINY, quick=True)
+    original = runner_mod._empty_dataset
+
+    def interrupted(*args, **kwargs):
+        _sigint_to_self()
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(runner_mod, "_empty_dataset", interrupted)
+    with pytest.raises(StudyInterrupted, match=r"interrupted: 0 of 4 points are complete and kept in .*results\.zarr"):
+        run_quick(spec, tmp_path, workers=1)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".mincam.lock", "results.zarr"]  # no .results.zarr.tmp
+    monkeypatch.setattr(runner_mod, "_empty_dataset", original)
+    _, summary = run_quick(spec, tmp_path, workers=1)  # the store is whole: the rerun uses it
+    assert summary["points_computed"] == 4
+
+
+@pytest.mark.parametrize("where", ["check_variant", "an import", "load_study"])
+def test_ctrl_c_before_the_study_started_says_nothing_was_written(tmp_path, monkeypatch, capsys, where):
+    """While the study's modules are imported (a second or two) or its file is read, a Ctrl-C said "results
+    written so far are kept" (the command line's line for any command): nothing was written. One that lands in
+    an import can come out as another error (matplotlib, seen once in 25 Ctrl-Cs): the same line."""
+    from mincam_sim import cli, interrupts
+    from mincam_sim.studies import spec as spec_mod
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    def half_imported(*args, **kwargs):
+        interrupts.note()  # what the CLI's SIGINT handler counts
+        raise NameError("name '_api' is not defined")
+
+    if where == "load_study":
+        monkeypatch.setattr(spec_mod, where, interrupted)
+    else:
+        monkeypatch.setattr(cli, "check_variant", interrupted if where == "check_variant" else half_imported)
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main(["--quiet", "study", "run", str(tmp_path / "any.toml"), "--out", str(tmp_path / "out")])
+    assert exit_info.value.code == 130
+    assert capsys.readouterr().err == ("error: interrupted before the study started: nothing was written; run the "
+                                       "same command again to start it\n")
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("parsing", ["the options", "the study command's arguments"])
+def test_ctrl_c_while_the_command_line_is_parsed_says_nothing_was_run(tmp_path, monkeypatch, capsys, parsing):
+    """typer imports pydantic while it parses the first option (a second on a busy machine) and builds a
+    validator for the first path argument: a Ctrl-C there said "results written so far are kept" although no
+    command had started."""
+    import typer.core
+
+    from mincam_sim import cli
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    parser = cli._MincamGroup if parsing == "the options" else typer.core.TyperCommand
+    monkeypatch.setattr(parser, "make_context", interrupted)
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main(["--quiet", "study", "run", str(tmp_path / "any.toml"), "--out", str(tmp_path / "out")])
+    assert exit_info.value.code == 130
+    assert capsys.readouterr().err == "error: interrupted while starting; nothing was run\n"
+
+
+def test_a_ctrl_c_a_library_turned_into_another_error_is_the_studys_interrupt(tmp_path, monkeypatch):
+    """A Ctrl-C swallowed by a library that then fails otherwise (a module left half-imported) stopped the study
+    with the command line's generic line; it is the study's own: how many points are kept, and where. An error
+    without a Ctrl-C is still that error."""
+    spec = load_study(TINY, quick=True)
+    original, calls = runner_mod.compute_point, []
+
+    def half_imported(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:
+            try:  # an import guard that catches BaseException
+                _sigint_to_self()
+            except BaseException:
+                pass
+            raise NameError("name '_api' is not defined")
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(runner_mod, "compute_point", half_imported)
+    with pytest.raises(StudyInterrupted, match=r"interrupted: 1 of 4 points are complete and kept in .*results\.zarr"):
+        run_quick(spec, tmp_path / "interrupted", workers=1)
+
+    def broken(*args, **kwargs):
+        raise NameError("name '_api' is not defined")
+
+    monkeypatch.setattr(runner_mod, "compute_point", broken)
+    with pytest.raises(NameError):
+        run_quick(spec, tmp_path / "broken", workers=1)
+
+
+def test_the_workers_kernel_caches_are_outside_the_out_dir_and_removed_also_on_an_error(tmp_path, monkeypatch):
+    """Each worker's Dr.Jit kernel cache was a folder OUT/drjit_cache left in the user's output folder; it is a
+    temporary folder now, removed when the cluster stops, also when the study fails or is interrupted."""
+    monkeypatch.delenv("DRJIT_CACHE_DIR", raising=False)
+    monkeypatch.chdir(tmp_path)
+    caches: list[str] = []
+    with pytest.raises(RuntimeError, match="a point failed"), cluster_mod.embedded_client(1) as client:
+        caches += client.run(lambda: os.environ["DRJIT_CACHE_DIR"]).values()
+        assert caches and all(Path(c).is_dir() for c in caches)
+        raise RuntimeError("a point failed")
+    assert not any(Path(c).exists() for c in caches)
+    assert all(tmp_path not in Path(c).parents for c in caches)
+    assert list(tmp_path.iterdir()) == []
+
+
 def _session_processes(sid: int) -> list[str]:
     """Live (not zombie) processes of session ``sid``: ``pid state command``."""
     found = []
