@@ -357,6 +357,12 @@ def visible_screen_polygon_local_m(screen: Screen, mixel) -> np.ndarray:
     return poly
 
 
+def visible_screen_area_m2(screen: Screen, mixel) -> float:
+    """Area [m^2] of the part of the screen that some detector point of ``mixel`` sees through its aperture
+    (:func:`visible_screen_polygon_local_m`; mask transmission and the other mixels' bodies ignored)."""
+    return _polygon_area_m2(visible_screen_polygon_local_m(screen, mixel))
+
+
 def screen_in_body_polygon_local_m(screen: Screen, mixel, tolerance_m: float = 1e-12) -> np.ndarray:
     """The part of the screen (polygon (k, 3) [m], local frame) inside the mixel's body box, shrunk by
     ``tolerance_m`` on every side so that a screen touching a face (e.g. lying on the mask) is not counted."""

@@ -5,11 +5,12 @@ the file units scaled to metres (``unit_m``)."""
 from __future__ import annotations
 
 import warnings
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 
 from mincam_sim.errors import InputError
-from mincam_sim.model.optics import Mincam
+from mincam_sim.model.optics import Mincam, Mixel
 from mincam_sim.render import backend
 from mincam_sim.render.scene.world_input import WorldWarning
 
@@ -124,15 +125,21 @@ def inside_shapes(scene, mincam: Mincam, skip: set[str], n_directions: int = 256
     """Mixels (name -> shape id) that look out at the back of one shape's one-sided faces in at least
     :data:`INSIDE_FRACTION` of the directions in front of their mask: a mixel inside a closed shape (a wall, a
     box) sees only the inside of its faces, which a one-sided material leaves black."""
-    import drjit as dr
-
     mi = backend.mitsuba()
     candidates = [s for s in scene.shapes() if s.id() not in skip and s.sensor() is None and _one_sided(mi, s)]
     if not candidates:
         return {}
+    mixels = list(mincam)
+    return _looking_at_backs(scene, mixels, *front_rays(mixels, n_directions), candidates)
+
+
+def front_rays(mixels: Sequence[Mixel], n_directions: int = 256) -> tuple[object, np.ndarray]:
+    """Rays (one ``mi.Ray3f``) from each mixel's mask centre into the directions of ``n_directions`` spread over
+    the sphere that lie in front of its mask, and the index of the mixel of each ray."""
+    mi = backend.mitsuba()
     dirs = fibonacci_directions(n_directions)
     origins, directions, owners = [], [], []
-    for k, mixel in enumerate(mincam):
+    for k, mixel in enumerate(mixels):
         forward = np.asarray(mixel.pose.axes()[2])
         front = dirs[dirs @ forward > 0.05]
         centre = mixel.pose.to_world(np.array([0.0, 0.0, mixel.d_f_m]))
@@ -142,12 +149,21 @@ def inside_shapes(scene, mincam: Mincam, skip: set[str], n_directions: int = 256
     o, d, owner = np.concatenate(origins), np.concatenate(directions), np.concatenate(owners)
     ray = mi.Ray3f(mi.Point3f(*[mi.Float(o[:, j]) for j in range(3)]),
                    mi.Vector3f(*[mi.Float(d[:, j]) for j in range(3)]))
+    return ray, owner
+
+
+def _looking_at_backs(scene, mixels: Sequence[Mixel], ray, owner: np.ndarray, candidates) -> dict[str, str]:
+    """:func:`inside_shapes` with its rays (:func:`front_rays` of ``mixels``) and its candidate shapes given;
+    ``scene`` is what the rays are traced in (a Mitsuba scene, or a split scene)."""
+    import drjit as dr
+
+    mi = backend.mitsuba()
     si = scene.ray_intersect(ray)
     back = si.is_valid() & (dr.dot(si.n, ray.d) > 0)
     found: dict[str, str] = {}
     for shape in candidates:
         hits = np.array(back & (si.shape == mi.ShapePtr(shape)), dtype=bool)
-        for k, mixel in enumerate(mincam):
+        for k, mixel in enumerate(mixels):
             mine = owner == k
             if mixel.name not in found and hits[mine].mean() >= INSIDE_FRACTION:
                 found[mixel.name] = shape.id()
@@ -170,6 +186,60 @@ def warn_if_inside(scene, mincam: Mincam, skip: set[str]) -> None:
         warnings.warn(f"the mincam is inside a shape ({where}): its mixels see the back of one-sided faces, which "
                       "are black; move the mincam out of the shape (or give the shape a two-sided material)",
                       WorldWarning, stacklevel=4)
+
+
+class EngulfedWarning(WorldWarning):
+    """A shape that a run moves closes round a mixel in one of the run's frames: the mixel sees only the back of
+    the shape's faces there (black for a one-sided material), and its reading drops to about 0."""
+
+
+class EngulfWatch:
+    """Watches the shapes a run moves, frame by frame, for one that closes round a mixel (the check
+    :func:`warn_if_inside` makes of the world as built), and says the first one found with one
+    :class:`EngulfedWarning`; later frames are not checked.
+
+    Per frame it costs a bounding box per moved shape against the mixels' mask centres (numpy); only a box that
+    holds a mask centre runs the exact test of :func:`inside_shapes` (rays from the mask centres, built once; a
+    launch of about 1.5 ms on 2 CPU cores) in the scene the run traces.
+
+    Parameters
+    ----------
+    mincam : Mincam
+        The mincam in the coordinates of the scenes checked (the simulation's ``scene_mincam``).
+    """
+
+    def __init__(self, mincam: Mincam) -> None:
+        self.mixels = list(mincam)
+        self.mask_centres_m = np.array([m.pose.to_world(np.array([0.0, 0.0, m.d_f_m])) for m in self.mixels])
+        self.found: tuple[str, str, list[str]] | None = None  # (where, shape, mixels) of the first finding
+        self._rays: tuple[object, np.ndarray] | None = None  # the exact test's rays, built once when first needed
+
+    def check(self, scene, shapes: Iterable, where: str) -> None:
+        """Warn (once per watch) when one of ``shapes`` (the shapes the current frame moved, as ``scene`` has
+        them) closes round a mixel; ``where`` names the frame (``"frame 12"``, ``"the background"``)."""
+        if self.found is not None:
+            return
+        for shape in shapes:
+            box = shape.bbox()
+            lo, hi = np.array(box.min, dtype=float).ravel(), np.array(box.max, dtype=float).ravel()
+            near = np.flatnonzero(np.all((self.mask_centres_m >= lo) & (self.mask_centres_m <= hi), axis=1))
+            if not near.size:
+                continue
+            if shape.sensor() is not None or not _one_sided(backend.mitsuba(), shape):
+                continue
+            if self._rays is None:
+                self._rays = front_rays(self.mixels)
+            inside = _looking_at_backs(scene, self.mixels, *self._rays, [shape])
+            names = [self.mixels[k].name for k in near if self.mixels[k].name in inside]
+            if names:
+                self.found = (where, shape.id(), names)
+                warnings.warn(
+                    f"the moving shape {shape.id()!r} closes round mixel(s) {', '.join(names)} in {where} (the first "
+                    f"place of this run where a moved shape does; later frames are not checked): they see only the "
+                    "back of its one-sided faces, which are black, so they read about 0 there (a change measured "
+                    "there is off by the whole P), though the scene did not go dark; move the shape's path clear "
+                    "of the mincam, or give the shape a two-sided material", EngulfedWarning, stacklevel=2)
+                return
 
 
 def check_unit(unit_m) -> float:

@@ -16,7 +16,9 @@ import numpy as np
 from mincam_sim.budget import Budget
 from mincam_sim.measurements import Measurements
 from mincam_sim.render import backend
+from mincam_sim.render.kernels.change_geometry import moving_shapes
 from mincam_sim.render.kernels.monte_carlo import replicate_mean_stderr
+from mincam_sim.render.scene.world_checks import EngulfWatch
 from mincam_sim.render.solvers.base import DisplayRaySolver, Plan, Row, check_update_frames
 
 DEFAULT_WORLD_REPLICATES = 8
@@ -57,6 +59,7 @@ class WorldAperturePlan(Plan):
         self.budget, self.replicates = budget, budget.replicates_or(DEFAULT_WORLD_REPLICATES)
         self.as_built = sim.complete_background(self.frames, {})
         self.n_rows, self.columns = len(self.frames), list(sim.mincam.names)
+        self.engulf = EngulfWatch(sim.scene_mincam)  # a moved shape that closes round a mixel, said once
 
     def estimates(self, pending: np.ndarray) -> Iterator[tuple[int, np.ndarray]]:
         """(frame index, (replicates, n_mixels) estimates) of each pending frame."""
@@ -65,6 +68,9 @@ class WorldAperturePlan(Plan):
             for i in pending:
                 sim.update(self.as_built)
                 sim.update(self.frames[int(i)])
+                shapes = sim.shapes_by_id
+                self.engulf.check(sim.scene, [shapes[name] for name in sorted(moving_shapes([self.frames[int(i)]]))
+                                              if name in shapes], f"frame {int(i)}")
                 yield int(i), sim.mincam_scene.fast_estimates(self.budget.rays(), self.replicates, self.budget.seed)
         finally:
             sim.update(self.as_built)

@@ -13,7 +13,7 @@ The display ray solvers (:class:`~.aperture.Aperture` and :class:`~.reference.Re
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any, ClassVar
 
@@ -186,13 +186,14 @@ class DisplayRayPlan(Plan):
                               self.cap)
 
 
-def finish_display(result: Measurements, solver: Solver, target: float, used: int, cap: int) -> Measurements:
+def finish_display(result: Measurements, solver: Solver, target: float, used: int, cap: int,
+                   warn_unseen: Callable[[Measurements], None] = warn_unreached) -> Measurements:
     """A display result with the reached noise in its meta and the solver's name, and the warnings of a missed
-    target or an unseen measurement."""
+    target or an unseen measurement (``warn_unseen``: a solver that can tell why a value was not seen says it)."""
     result.meta["solver"] = solver.name
     result.meta["reached_rel_stderr"] = worst_relative_stderr(result.irradiance_w_m2, result.stderr_w_m2)
     warn_target_missed(result.meta["reached_rel_stderr"], target, used, cap)
-    warn_unreached(result)
+    warn_unseen(result)
     return result
 
 

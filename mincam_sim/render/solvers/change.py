@@ -82,6 +82,7 @@ from mincam_sim.render.kernels.stratified import (
 )
 from mincam_sim.render.scene.mincam_scene import geometry_meta
 from mincam_sim.render.scene.static_split import StaticSplit, split_refusal
+from mincam_sim.render.scene.world_checks import EngulfWatch
 from mincam_sim.render.scene.world_input import check_frames
 from mincam_sim.render.solvers.base import Plan, Row, Solver
 
@@ -331,6 +332,8 @@ class ChangePlan(Plan):
         self.run = solver.run(sim, frames, background, self.spp, self.seed, replicates, self.bg,
                               Target(self.target or 0.0, self.cap))
         self.run.note_delta_movers(moving_shapes([background, *frames]))
+        # the world scene holds the background here: a moved shape closed round a mixel there is said too
+        self.run.watch(sim.scene, sim.shapes_by_id, moving_shapes([background]), "the background")
         names = sim.mincam.names
         self.n_rows = len(frames)
         self.columns = ([f"dP_{m}" for m in names] + [f"P_{m}" for m in names]
@@ -447,6 +450,12 @@ class _Run:
         self.fallbacks: dict[str, str] = {}
         self.sigma_rows: np.ndarray | None = None  # the last frame's replicates whose spread gives sigma (None: all)
         self.per_mixel_replicates = False  # replicates allocated per mixel: a column of them per mixel
+        self.engulf = EngulfWatch(sim.scene_mincam)  # a moved shape that closes round a mixel, said once a run
+
+    def watch(self, scene, shapes: Mapping, names, where: str) -> None:
+        """Check the shapes ``names`` (of ``shapes``, by id, as ``scene`` has them now) for one that closes round
+        a mixel (:class:`~mincam_sim.render.scene.world_checks.EngulfWatch`)."""
+        self.engulf.check(scene, [shapes[name] for name in sorted(names) if name in shapes], where)
 
     def note_delta_movers(self, moving) -> None:
         """Say it when a moving shape is glass or a mirror (a delta BSDF) whose redirected light is not guided:
@@ -522,8 +531,11 @@ class _PlainRun(_Run):
         bg = (self.bg if replicates == self.replicates and not purpose
               else r.mincam_scene.fast_estimates(spp, replicates, frame_seed))
         r.update(frames[i])
+        changed = changed_shapes(frames[i], self.background)
+        if not purpose:
+            self.watch(r.scene, r.shapes_by_id, changed, f"frame {i}")
         est = r.mincam_scene.fast_estimates(spp, replicates, frame_seed)
-        changes = np.full(len(r.mincam), bool(changed_shapes(frames[i], self.background)))
+        changes = np.full(len(r.mincam), bool(changed))
         info = (0.0, 0.0, 1.0, float(self.spp))  # not guided, no guide sphere, the whole aperture, its rays
         return est - bg, est.mean(0), est.std(0, ddof=1) / np.sqrt(replicates), changes, info
 
@@ -675,6 +687,11 @@ class _StratifiedRun(_Run):
                 self.split.move(self.background_movers)
 
         to_frame()
+        if not purpose:
+            if self.split is None:
+                self.watch(r.scene, self.shapes, changed, f"frame {i}")
+            else:
+                self.watch(self.split.scene, self.split.copies, changed, f"frame {i}")
         each, guide, why = r.change_reach_each(changed, scene=None if self.split is None else self.split.view)
         for reason in why:
             self.note_fallback(next(iter(sorted(changed))), reason)

@@ -9,6 +9,7 @@ budget's target (:func:`maps_to_target`), then the frames measured through the m
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import ClassVar
@@ -17,6 +18,7 @@ import numpy as np
 
 from mincam_sim.budget import DEFAULT_SAMPLES_PER_TEXEL, Budget
 from mincam_sim.measurements import Measurements
+from mincam_sim.model.optics import Mincam
 from mincam_sim.progress import progress
 from mincam_sim.render.kernels.map_tracing import (
     FIRST_SAMPLES_PER_TEXEL,
@@ -28,8 +30,9 @@ from mincam_sim.render.kernels.map_tracing import (
     ResponseMaps,
     response_maps,
 )
-from mincam_sim.render.kernels.monte_carlo import pilot_to_target
+from mincam_sim.render.kernels.monte_carlo import UnseenWarning, pilot_to_target, warn_unreached
 from mincam_sim.render.solvers.base import Plan, Row, Solver, finish_display
+from mincam_sim.scene.display import Screen, visible_screen_area_m2
 
 DEFAULT_MAP_BLOCKS = 4  # independent blocks of samples per texel
 FRAME_CHUNK = 64  # frames measured per row chunk (at most FRAME_CHUNK_BYTES of frame data)
@@ -83,7 +86,82 @@ class MapPlan(Plan):
         budget = {"target_rel_stderr": self.target, "samples_per_texel": self.used, "replicates": self.replicates}
         m = Measurements(values, errors, self.sim.mincam.names, {**self.maps.meta, **budget, **self.provenance})
         m.maps = self.maps
-        return finish_display(m, self.solver, self.target, self.used, MAX_SAMPLES_PER_TEXEL)
+        return finish_display(m, self.solver, self.target, self.used, MAX_SAMPLES_PER_TEXEL,
+                              lambda result: warn_unseen_maps(result, self.maps, self.sim.mincam, self.sim.screen,
+                                                              self.used, self.replicates))
+
+
+SPARSE_VIEW_SAMPLES = 10.0  # a map that found nothing with fewer samples than this expected in the view missed it
+WANTED_VIEW_SAMPLES = 1000  # samples in the view the advice of samples per texel aims at (a few % noise)
+
+
+def warn_unseen_maps(m: Measurements, maps: ResponseMaps, mincam: Mincam, screen: Screen, samples_per_texel: int,
+                     replicates: int) -> None:
+    """The :class:`UnseenWarning` of a response-map result, with why each unseen mixel read 0 +/- 0.
+
+    A mixel whose map holds weights saw the screen, and the frames' lit texels lay outside its view
+    (:func:`~mincam_sim.render.kernels.monte_carlo.warn_unreached`). A mixel whose map is empty saw the screen
+    too (a display scene refuses a screen outside a mixel's field of view), so either its view on the screen
+    (:func:`~mincam_sim.scene.display.visible_screen_area_m2`) is so much smaller than a texel that the
+    per-texel samples hardly land in it (fewer than :data:`SPARSE_VIEW_SAMPLES` expected: say so, with the
+    samples per texel that would put :data:`WANTED_VIEW_SAMPLES` there), or its mask or the other mixels' bodies
+    shut it off.
+
+    Parameters
+    ----------
+    m : Measurements
+        The result [W/m^2].
+    maps : ResponseMaps
+        The maps it was measured with.
+    mincam, screen : Mincam, Screen
+        The set-up the maps were traced for.
+    samples_per_texel, replicates : int
+        The maps' samples per texel and their independent blocks.
+    """
+    dark = (m.irradiance_w_m2 == 0) & (m.stderr_w_m2 == 0)
+    if not dark.any():
+        return
+    texel_area = screen.texel_area_m2
+    sparse: list[tuple[int, float]] = []
+    shut: list[int] = []
+    seen: list[int] = []
+    for k in (int(k) for k in np.flatnonzero(dark.any(axis=0))):
+        if np.any(maps.weights_sr[k]):
+            seen.append(k)
+            continue
+        view = visible_screen_area_m2(screen, mincam[k])
+        if view > 0 and samples_per_texel * view / texel_area < SPARSE_VIEW_SAMPLES:
+            sparse.append((k, view))
+        else:
+            shut.append(k)
+    if seen:
+        warn_unreached(Measurements(m.irradiance_w_m2[:, seen], m.stderr_w_m2[:, seen],
+                                    [m.mixel_names[k] for k in seen]))
+
+    def where(columns: list[int]) -> str:
+        frames = np.flatnonzero(dark[:, columns].any(axis=1))
+        return (f"mixel(s) {', '.join(m.mixel_names[k] for k in columns)} read 0 +/- 0 W/m^2 in {len(frames)} "
+                f"frame(s) (first: {frames[0]})")
+
+    if sparse:
+        k, view = min(sparse, key=lambda member: member[1])  # the smallest view: its numbers are said
+        width_mm, height_mm = (1e3 * v for v in screen.texel_size_m)
+        strata = int(np.ceil(np.sqrt(WANTED_VIEW_SAMPLES * texel_area / view / replicates)))
+        warnings.warn(
+            f"{where([k for k, _ in sparse])}, and their response maps are empty though the screen is in view: the "
+            f"maps sample each texel, and a texel ({width_mm:.3g} x {height_mm:.3g} mm, {1e6 * texel_area:.4g} "
+            f"mm^2) is {texel_area / view:.4g} times the part of the screen {m.mixel_names[k]} sees through its "
+            f"aperture ({1e6 * view:.3g} mm^2), so {samples_per_texel} samples per texel put about "
+            f"{samples_per_texel * view / texel_area:.2g} sample(s) in that view and none got through: this 0 is "
+            f"not a measurement. Measure with ms.Aperture() (rays through the aperture, whatever the texels' "
+            f"size), or raise samples_per_texel to at least {replicates * strata * strata} (about "
+            f"{WANTED_VIEW_SAMPLES} samples in the view)", UnseenWarning, stacklevel=3)
+    if shut:
+        warnings.warn(
+            f"{where(shut)}: no sample of their response maps ({samples_per_texel} per texel) got through their "
+            "apertures to the screen, though the screen lies in their fields of view: their masks are opaque "
+            "toward it or the other mixels' bodies hide it; 0 +/- 0 there means 'not seen', not a certain zero "
+            "(ms.Aperture() traces rays through the apertures to check)", UnseenWarning, stacklevel=3)
 
 
 def maps_to_target(sim, frames, target_rel_stderr: float, seed: int = 0,
@@ -134,4 +212,4 @@ def stratum_steps(replicates: int, cap: int):
     return quantize
 
 
-__all__ = ["MapPlan", "ResponseMap", "maps_to_target", "stratum_steps"]
+__all__ = ["MapPlan", "ResponseMap", "maps_to_target", "stratum_steps", "warn_unseen_maps"]
