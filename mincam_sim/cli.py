@@ -37,7 +37,7 @@ ENV_DEBUG = "MINCAM_DEBUG"
 _PACKAGE_DIR = Path(__file__).resolve().parent
 _BACKEND_FILE = _PACKAGE_DIR / "render" / "backend.py"
 
-_state: dict[str, Any] = {"verbose": False, "quiet": False, "debug": False, "variant": None}
+_state: dict[str, Any] = {"verbose": False, "quiet": False, "debug": False, "variant": None, "invoked": False}
 
 
 # ------------------------------------------------------------------------------------------- error handling
@@ -154,7 +154,7 @@ class _MincamGroup(TyperGroup):
              standalone_mode: bool = True, **extra: Any) -> Any:
         _created.clear()
         _state.update(verbose=False, quiet=False, debug=os.environ.get(ENV_DEBUG, "") not in ("", "0"),
-                      variant=None)
+                      variant=None, invoked=False)
         install_warning_format()
         interrupts.reset()
         recording = signal.getsignal(signal.SIGINT) is signal.default_int_handler
@@ -184,7 +184,9 @@ class _MincamGroup(TyperGroup):
                 signal.signal(signal.SIGINT, signal.default_int_handler)
         if bug is not None:
             raise bug  # outside the handler: its traceback and its own cause as they were
-        if code == 130:  # Ctrl-C (typer turns KeyboardInterrupt into exit code 130)
+        if code == 130 and not _state["invoked"]:  # Ctrl-C before a command began (:func:`_marked_started`)
+            typer.echo(INTERRUPTED_WHILE_STARTING, err=True)
+        elif code == 130:  # Ctrl-C (typer turns KeyboardInterrupt into exit code 130)
             typer.echo("error: interrupted; results written so far are kept, and the same command resumes", err=True)
         if standalone_mode:
             sys.exit(code)
@@ -490,14 +492,55 @@ def render(
     typer.echo(f"# written to {cfg.run.out_dir} (figures: {', '.join(p.name for p in figures)})")
 
 
+#: The ``[run]`` keys of a display file's budget, in the order a warning names them.
+_RUN_BUDGET_KEYS = ("spp", "samples_per_texel", "target_rel_stderr", "replicates", "seed")
+
+
+def _without_run_budget_warnings(read, *args: Any) -> Any:
+    """``read(*args)`` (a display config's reader) without its warnings about ``[run]`` budget keys: they judge
+    the keys by the file's ``[run] solver``, which ``export-maps`` does not use (:func:`_export_budget` warns by
+    the solver it does use). Every other warning is shown as it came."""
+    import warnings
+
+    from mincam_sim.errors import IgnoredSettingWarning
+
+    budget_keys = tuple(f"[run] {key}" for key in _RUN_BUDGET_KEYS)
+    with warnings.catch_warnings(record=True) as held:
+        result = read(*args)
+    for w in held:
+        if not (issubclass(w.category, IgnoredSettingWarning) and str(w.message).startswith(budget_keys)):
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+    return result
+
+
+def _export_budget(raw: dict, solver: Any) -> Any:
+    """The :class:`~mincam_sim.budget.Budget` that ``export-maps`` traces with: the file's ``[run]`` keys that
+    ``solver`` (the export's, whatever the file's ``[run] solver``) reads, checked as the file's reader checks
+    them; one warning naming the keys the file wrote that the export ignores, as the file writes them
+    (``[run] spp``), not as the Python API names them (``Budget.spp``)."""
+    from mincam_sim.configuration.config import RENDER_SCHEMA, RunSection, make_budget
+    from mincam_sim.configuration.schema import warn_ignored
+
+    given = RENDER_SCHEMA.tables(raw)["run"]
+    run = RENDER_SCHEMA.read("run", given)
+    reads = solver.budget_fields("display")
+    why = ("--ideal exports the idealised dot-product model: deterministic quadrature (no samples)"
+           if not reads else 'export-maps traces response maps at samples_per_texel (spp is for the "aperture" '
+                             'and "reference" solvers of render)')
+    warn_ignored("run", given, [key for key in _RUN_BUDGET_KEYS if key not in reads], why, RunSection)
+    return make_budget(solver, "display", run.spp, run.samples_per_texel, run.target_rel_stderr, run.replicates,
+                       run.seed)
+
+
 @app.command("export-maps")
 def export_maps_command(
     config: Annotated[Path, typer.Argument(help="TOML display configuration (see `mincam-sim config-example`)")],
     out_dir: Annotated[Path, typer.Option("--out", help="directory for maps/*.npy, forward_matrix.npy, maps.json")],
     psf_grid: Annotated[tuple[int, int] | None, typer.Option(help="also write psfs.npy: responses to point sources "
                                                                   "on an NX x NY grid over the screen")] = None,
-    ideal: Annotated[bool, typer.Option("--ideal", help="the idealised dot-product model (DotProduct, exact) "
-                                                        "instead of the physics (response maps)")] = False,
+    ideal: Annotated[bool, typer.Option("--ideal", help="the idealised dot-product model (DotProduct, with the "
+                                                        "file's [run.dot_product] options) instead of the physics "
+                                                        "(response maps)")] = False,
 ) -> None:
     """Write each mixel's response map (W/m^2 per W m^-2 sr^-1 of each screen texel) as NumPy arrays with a JSON
     sidecar (units, screen, geometry), at the config's [run] samples_per_texel, for other tools.
@@ -505,9 +548,10 @@ def export_maps_command(
     The folder holds one export: files of an earlier export there that this one does not write (maps of mixels
     no longer there, psfs.npy without --psf-grid) are removed, saying so; other files are kept. A second export
     into the folder while one runs is refused."""
+    from mincam_sim.configuration.config import RENDER_SCHEMA, display_solver
     from mincam_sim.configuration.toml_files import read_document
     from mincam_sim.render.simulation import Simulation
-    from mincam_sim.render.solvers import DotProduct
+    from mincam_sim.render.solvers import ResponseMap
 
     raw, _, _ = read_document(config, None)
     if "world" in raw:
@@ -515,15 +559,18 @@ def export_maps_command(
                           "display config ([screen] and [frames])")
     if psf_grid is not None and min(psf_grid) < 1:
         raise ConfigError(f"--psf-grid needs two positive integers NX NY, got {psf_grid[0]} {psf_grid[1]}")
-    cfg = load_config(config)
+    with _warnings_once_valid():
+        cfg = _without_run_budget_warnings(load_config, config)
+        solver = (display_solver("dot_product", RENDER_SCHEMA.tables(raw)["run.dot_product"]) if ideal
+                  else ResponseMap())
+        budget = _export_budget(raw, solver)
     check_out_dir(out_dir)
     if not ideal:
         cfg.run.variant = check_variant(cfg.run.variant)
         _announce_variant()
     sim = Simulation(cfg.mincam, screen=cfg.screen)
     with lock_out_dir(out_dir, "export folder"):  # one export at a time in a folder
-        sidecar = sim.export_maps(out_dir, cfg.run.budget, solver=DotProduct() if ideal else None,
-                                  psf_grid=psf_grid, show_progress=_show_progress(),
+        sidecar = sim.export_maps(out_dir, budget, solver=solver, psf_grid=psf_grid, show_progress=_show_progress(),
                                   say=lambda msg: _say(f"mincam-sim: {msg}"))
     typer.echo(f"# {len(cfg.mincam)} response maps ({'dot_product' if ideal else 'response_map'}) of "
                f"{cfg.screen.shape[0]} x {cfg.screen.shape[1]} texels written to {out_dir} (sidecar {sidecar.name})")
@@ -875,6 +922,11 @@ def reproduce(
     typer.echo(f"# results.json and plots in {out_dir}")
 
 
+#: What a Ctrl-C says before a study has started (its modules imported, its file read): nothing was written.
+STUDY_NOT_STARTED = ("interrupted before the study started: nothing was written; run the same command again to "
+                     "start it")
+
+
 @study_app.command("run")
 def study_run(
     study_file: Annotated[Path, typer.Argument(help="study TOML (see scenes/studies/*.toml)")],
@@ -894,9 +946,19 @@ def study_run(
     """Run a parameter study on dask.distributed: results.zarr (xarray), summary.json and study.png in --out.
 
     Ctrl-C stops it within seconds (exit code 130), keeping every completed point; the same command resumes."""
-    from mincam_sim.studies.cli import run_study_command
+    try:  # the study's modules take a second or two to import: nothing is written meanwhile
+        from mincam_sim.studies.cli import run_study_command
 
-    check_variant()
+        check_variant()
+    except Exception as err:
+        if not interrupts.arrived():
+            raise
+        # a Ctrl-C that landed in an import can come out as another error (a module left half-imported)
+        typer.echo(f"error: {STUDY_NOT_STARTED}", err=True)
+        raise SystemExit(130) from err
+    except KeyboardInterrupt:
+        typer.echo(f"error: {STUDY_NOT_STARTED}", err=True)
+        raise SystemExit(130) from None
     run_study_command(study_file, workers, scheduler, out_dir, quick, overwrite, quiet=not _show_progress(),
                       max_points=max_points, time_limit_s=time_limit_s)
 
@@ -1140,6 +1202,30 @@ def figures(
 
 
 INTERRUPTED_WHILE_STARTING = "error: interrupted while starting; nothing was run"
+
+
+def _marked_started(callback: Any) -> Any:
+    """``callback`` (a command's function), noting that a command began: a Ctrl-C before it (typer still parsing
+    the command line, which imports pydantic the first time) ran nothing, and is answered so."""
+    import functools
+
+    @functools.wraps(callback)
+    def started(*args: Any, **kwargs: Any) -> Any:
+        _state["invoked"] = True
+        return callback(*args, **kwargs)
+
+    return started
+
+
+def _mark_commands(typer_app: typer.Typer) -> None:
+    for info in typer_app.registered_commands:
+        info.callback = _marked_started(info.callback)
+    for group in typer_app.registered_groups:
+        if group.typer_instance is not None:
+            _mark_commands(group.typer_instance)
+
+
+_mark_commands(app)
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -153,7 +153,7 @@ def make_solver(name: str) -> Solver:
     return SOLVERS[name]()
 
 
-def _display_solver(name: str, dot_product_table: dict) -> Solver:
+def display_solver(name: str, dot_product_table: dict) -> Solver:
     """The solver of a display file: ``make_solver(name)``, or for ``"dot_product"`` the model with the options of
     ``[run.dot_product]`` (the solver's own checks, as one ``[run.dot_product]`` line)."""
     if name != "dot_product":
@@ -252,7 +252,8 @@ class RunSection:
 
     solver: str = setting("response_map", '"response_map" (maps over the screen, then a dot product per frame), '
                           '"aperture" (rays through the mask aperture), "reference" (the literal scene) or '
-                          '"dot_product" (the idealised model, exact; its options in [run.dot_product])',
+                          '"dot_product" (the idealised model, deterministic quadrature; its options in '
+                          '[run.dot_product])',
                           solver_check("display"))
     spp: int = setting(65536, 'samples per mixel per frame ("aperture"/"reference"); rounded UP to a multiple of '
                        "replicates (65536 with 8 replicates runs exactly)", budget_field)
@@ -281,9 +282,12 @@ class DotProductTable:
     vignetting: bool = setting(False, "weigh the mask by cos^4 about the mixel's axis (the physical fall-off) "
                                "instead of uniformly")
     detector_blur: bool = setting(False, "average the pinhole over the detector's area (the finite detector's "
-                                  "blur; costs nodes^2 times the bare model)")
-    nodes: int = setting(4, "Gauss-Legendre points per axis of each texel's image (and of the detector)",
-                         Integer())
+                                  "blur; costs (detector_cells * nodes)^2 times the bare model)")
+    nodes: int = setting(4, "Gauss-Legendre points per axis of each texel's image (of each part of it, for a "
+                         "raster mask) and of each detector cell", Integer())
+    detector_cells: int = setting(1, "with detector_blur: squares per axis the detector is split into; raise it "
+                                  "where the error estimate (stderr_w_m2) is too large (a detector large beside "
+                                  "d_f)", Integer())
 
 
 @dataclass(frozen=True)
@@ -742,7 +746,8 @@ def _warn_ignored(tables: dict, run: RunSection, mincam: Mincam, frames_kind: st
     """One warning line per key the rest of a display file makes ineffective (nothing is refused)."""
     if run.solver == "dot_product":
         warn_ignored("run", tables["run"], ("spp", "samples_per_texel", "target_rel_stderr", "replicates", "seed"),
-                     'solver = "dot_product" is exact quadrature (no samples, standard error 0)', RunSection)
+                     'solver = "dot_product" is deterministic quadrature (no samples; its error is the '
+                     "quadrature's estimate)", RunSection)
     else:
         warn_ignored("run.dot_product", tables["run.dot_product"], list(tables["run.dot_product"]),
                      f'they are the options of solver = "dot_product", and this file\'s solver is "{run.solver}"',
@@ -787,7 +792,7 @@ def load_config(source: str | Path | dict, base_dir: str | Path | None = None) -
     refuse_old_solver_keys(tables["run"], "display")
     sections = {name: RENDER_SCHEMA.read(name, tables[name]) for name in _SECTIONS}
     run: RunSection = sections["run"]
-    solver = _display_solver(run.solver, tables["run.dot_product"])
+    solver = display_solver(run.solver, tables["run.dot_product"])
     budget = make_budget(solver, "display", run.spp, run.samples_per_texel, run.target_rel_stderr, run.replicates,
                          run.seed)
     mincam = _build_mincam(sections["mincam"], tables["mixel"], base)

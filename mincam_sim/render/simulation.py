@@ -644,7 +644,7 @@ class Simulation:
         reads = solver.budget_fields(self.kind)
         ignored = [name for name in budget.given_fields() if name not in reads]
         if ignored:
-            what = f"reads {', '.join(reads)}" if reads else "is exact and reads no budget"
+            what = f"reads {', '.join(reads)}" if reads else "is deterministic and reads no budget"
             warnings.warn(f"Budget.{', Budget.'.join(ignored)} {'is' if len(ignored) == 1 else 'are'} ignored: the "
                           f"{solver.name} solver on {self.kind} scenes {what}", IgnoredSettingWarning, stacklevel=4)
 

@@ -148,3 +148,41 @@ def test_an_export_into_a_folder_another_process_holds_is_refused_naming_it(tmp_
         holder.wait()
         holder.stdout.close()
     assert {rel: (out / rel).read_bytes() for rel in _files(out) if rel != ".mincam.lock"} == before  # untouched
+
+
+def _warnings(result) -> list[str]:
+    return [line for line in result.output.splitlines() if line.startswith("warning: ")]
+
+
+def test_ignored_run_keys_are_named_as_the_file_writes_them_and_the_export_reads_its_own(tmp_path):
+    """A file written for another solver: the warning said ``Budget.spp`` (the Python API's name) where the
+    file says ``[run] spp``, also for an spp the file never wrote; and the file's samples_per_texel was dropped
+    (the maps were traced at the default 64) while a warning said it was ignored."""
+    from mincam_sim.cli import app
+    from mincam_sim.render import backend
+
+    if not backend.is_jit():
+        pytest.skip("response maps need a JIT variant (LLVM or CUDA)")
+    head = CONFIG.format(layout="pair") + '[run]\nsolver = "aperture"\n'
+    cases = {  # [run] keys -> the warnings of export-maps (and of export-maps --ideal)
+        "spp = 1000\n": (['warning: [run] spp is ignored: export-maps traces response maps at samples_per_texel '
+                          '(spp is for the "aperture" and "reference" solvers of render) (IgnoredSettingWarning)'],
+                         ["warning: [run] spp is ignored: --ideal exports the idealised dot-product model: exact "
+                          "quadrature (no samples, standard error 0) (IgnoredSettingWarning)"]),
+        "samples_per_texel = 16\nreplicates = 4\n": ([], ["warning: [run] samples_per_texel, replicates are "
+                                                          "ignored: --ideal exports the idealised dot-product model: "
+                                                          "exact quadrature (no samples, standard error 0) "
+                                                          "(IgnoredSettingWarning)"]),
+        "seed = 3\n": ([], ["warning: [run] seed is ignored: --ideal exports the idealised dot-product model: exact "
+                            "quadrature (no samples, standard error 0) (IgnoredSettingWarning)"]),
+    }
+    for k, (keys, (physics, ideal)) in enumerate(cases.items()):
+        config = tmp_path / f"c{k}.toml"
+        config.write_text(head + keys)
+        for extra, expected in (([], physics), (["--ideal"], ideal)):
+            out = tmp_path / f"out{k}{len(extra)}"
+            result = CliRunner().invoke(app, ["--quiet", "export-maps", str(config), "--out", str(out), *extra])
+            assert result.exit_code == 0, result.output
+            assert _warnings(result) == expected, (keys, extra, result.output)
+    source = json.loads((tmp_path / "out10" / "maps.json").read_text())["source"]
+    assert source["samples_per_texel"] == 16 and source["replicate_blocks"] == 4  # the file's, not the defaults

@@ -31,11 +31,14 @@ def test_the_bare_model_of_an_open_mask_is_the_closed_form_at_the_centre_and_all
     bare = sim.measure([frame], ms.DotProduct())
     centre = np.pi * RADIANCE * point_to_parallel_rect(-1e-3, 1e-3, -1e-3, 1e-3, 2e-3)
     np.testing.assert_allclose(bare.irradiance_w_m2[0, 0], centre, rtol=1e-12)
-    assert bare.stderr_w_m2[0, 0] == 0 and bare.meta["exact"] and bare.meta["solver"] == "dot_product"
-    assert "cos^4 vignetting" in bare.meta["ignored"] and bare.meta["reached_rel_stderr"] == 0
+    # an open mask: the texels' rule is exact, and the error estimate is the sums' rounding alone
+    assert 0 < bare.stderr_w_m2[0, 0] <= 2e-12 * centre and bare.meta["deterministic"]
+    assert bare.meta["solver"] == "dot_product" and "cos^4 vignetting" in bare.meta["ignored"]
+    assert bare.meta["reached_rel_stderr"] <= 2e-12
     full = sim.measure([frame], ms.DotProduct(parallax=True, vignetting=True, detector_blur=True))
     physics = open_aperture_irradiance(RADIANCE, 1e-4, 2e-3, 2e-3, 2e-3, (-0.5, 0.5, -0.5, 0.5), 0.5)
     np.testing.assert_allclose(full.irradiance_w_m2[0, 0], physics, rtol=1e-9)
+    assert abs(full.irradiance_w_m2[0, 0] - physics) <= full.stderr_w_m2[0, 0] <= 1e-3 * physics
     assert abs(physics / centre - 1) > 1e-4  # the detector's size is seen: the two checks are different numbers
 
 
@@ -61,6 +64,53 @@ def test_parallax_and_vignetting_approach_the_quadrature_oracle_as_the_detector_
     assert deviations[1] < 1e-4 and deviations[1] < deviations[0] / 10  # ~ (detector / field)^2
 
 
+@pytest.mark.slow
+def test_a_large_detector_is_the_quadrature_oracle_within_the_error_estimate():
+    """A 0.5 mm detector at d_f = 1 mm sweeps the field's edge over texels lit differently: the pinhole's
+    measurement has a kink at each. Against the independent quadrature oracle (the detector in 16 x 16 panels of
+    2 x 2 points) the error is within the estimate with one detector cell and with four, where it is smaller."""
+    screen = ms.Screen(2.0, 2.0, (40, 40))  # 5 cm texels; the field's edge at x = 0.5 m
+    mixel = ms.Mixel(masks.ramp("x"), d_f_m=1e-3, detector_size_m=5e-4, name="big")
+    regions = {(0.3, 0.5, -0.2, 0.0): 1.0, (0.5, 0.7, -0.2, 0.0): 3.0, (0.3, 0.5, 0.0, 0.2): 2.0,
+               (0.5, 0.7, 0.0, 0.2): 4.0}
+    frame = sum(radiance * coverage(screen, *region) for region, radiance in regions.items())
+    oracle = sum(mixel_irradiance_polygon(mixel, screen, region, radiance, n_detector=2, n_triangle=6,
+                                          detector_panels=16) for region, radiance in regions.items())
+    sim = ms.Simulation(ms.Mincam((mixel,)), screen=screen)
+    errors, estimates = [], []
+    for cells in (1, 4):
+        m = sim.measure([frame], ms.DotProduct(parallax=True, vignetting=True, detector_blur=True,
+                                               detector_cells=cells))
+        errors.append(abs(m.irradiance_w_m2[0, 0] - oracle))
+        estimates.append(m.stderr_w_m2[0, 0])
+        assert errors[-1] <= estimates[-1], (cells, errors[-1] / oracle, estimates[-1] / oracle)
+    assert errors[0] > 1e-4 * oracle  # one cell's error is real, and now said
+    assert errors[1] < errors[0] / 4 and estimates[1] < estimates[0] / 4
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_detector_error_estimate_covers_the_error_on_random_set_ups(seed):
+    """A ramp mask blurred by a random detector (0.1-0.5 mm at d_f 1-2 mm) on random frames, against the same
+    model with finer rules (the detector in 6 x 6 cells of 3 x 3 points, texels split twice as finely). Over 37
+    blurred values of a probe (16 x 9 to 64 x 36 texels; ramp and raster masks) the estimate was below the error
+    once, for a raster mask; the raster masks' texel estimate is not covered here: it was below the error in 18 of
+    100 random set-ups (docs/ideal_model.md)."""
+    from mincam_sim.render.solvers.dot_product import _pinhole_weights, detector_rule
+
+    rng = np.random.default_rng(seed)
+    screen = ms.Screen(1.107, 0.623, (16, 9))
+    mixel = ms.Mixel(masks.ramp("x"), d_f_m=float(rng.choice([1e-3, 2e-3])),
+                     detector_size_m=float(rng.choice([1e-4, 3e-4, 5e-4])), name="m")
+    frame = rng.uniform(0, 2, screen.shape)
+    m = ms.Simulation(ms.Mincam((mixel,)), screen=screen).measure(
+        [frame], ms.DotProduct(parallax=True, vignetting=True, detector_blur=True))
+    rot, origin = mixel.pose.matrix()[:3, :3], np.asarray(mixel.pose.position_m, dtype=np.float64)
+    finer = sum(w * _pinhole_weights(mixel, screen, origin + rot @ np.array([a, b, 0.0]), rot, (a, b), None, 4, 2)
+                for a, b, w in detector_rule(mixel.detector_size_m, 6, 3))
+    error = abs(m.irradiance_w_m2[0, 0] - float((finer * frame).sum()))
+    assert 0 < error <= m.stderr_w_m2[0, 0], (error, m.stderr_w_m2[0, 0])
+
+
 def test_parallax_moves_each_mixels_field_by_its_offset():
     """Two mixels 4 cm apart: from the centre both see the same field; with parallax each sees it shifted."""
     cam = ms.pair_layout(spacing_m=0.04)
@@ -72,12 +122,16 @@ def test_parallax_moves_each_mixels_field_by_its_offset():
     shift = centroid[True] - centroid[False]
     offsets = np.array([m.pose.position_m[0] for m in cam]) - cam.centre_m[0]
     np.testing.assert_allclose(shift, offsets, atol=2e-3)  # 2 cm each way, within a tenth of a texel
-    assert sim.measure([np.ones(SCREEN.shape)], ms.DotProduct(parallax=True)).stderr_w_m2.max() == 0
+    ones = sim.measure([np.ones(SCREEN.shape)], ms.DotProduct(parallax=True))  # a ramp: only the sums round
+    assert np.all(ones.stderr_w_m2 <= 2e-12 * ones.irradiance_w_m2)
 
 
 def test_bad_options_and_wave_optics_are_refused():
     with pytest.raises(InputError, match="nodes must be an integer"):
         ms.DotProduct(nodes=0)
+    for cells in (0, 33, 2.0, True):
+        with pytest.raises(InputError, match="detector_cells must be an integer from 1 to 32"):
+            ms.DotProduct(detector_blur=True, detector_cells=cells)
     with pytest.raises(InputError, match="parallax must be True or False"):
         ms.DotProduct(parallax="yes")
     wave = ms.Mincam((ms.Mixel(masks.constant(1.0), optics="wave"),))
@@ -174,7 +228,8 @@ def test_a_display_file_names_the_model_and_its_options_and_measures_what_python
     written = np.load(tmp_path / "out" / "measurements.npz")["irradiance_w_m2"]
     python = ms.Simulation(cfg.mincam, screen=cfg.screen).measure(cfg.frames, ms.DotProduct(parallax=True))
     np.testing.assert_allclose(written, python.irradiance_w_m2, rtol=1e-12)
-    assert np.all(np.load(tmp_path / "out" / "measurements.npz")["stderr_w_m2"] == 0)
+    np.testing.assert_allclose(np.load(tmp_path / "out" / "measurements.npz")["stderr_w_m2"], python.stderr_w_m2,
+                               rtol=1e-12)
 
 
 def test_a_display_file_refuses_bad_model_options_and_says_which_keys_it_ignores():
@@ -190,7 +245,8 @@ def test_a_display_file_refuses_bad_model_options_and_says_which_keys_it_ignores
             load_config(f'[run]\nsolver = "dot_product"\n[run.dot_product]\n{table}\n')
     with pytest.warns(IgnoredSettingWarning, match=r"\[run.dot_product\] parallax is ignored: .*\"aperture\""):
         load_config('[run]\nsolver = "aperture"\n[run.dot_product]\nparallax = true\n')
-    with pytest.warns(IgnoredSettingWarning, match=r"\[run\] spp is ignored: solver = \"dot_product\" is exact"):
+    with pytest.warns(IgnoredSettingWarning,
+                      match=r"\[run\] spp is ignored: solver = \"dot_product\" is deterministic"):
         load_config('[run]\nsolver = "dot_product"\nspp = 1000\n')
     with pytest.raises(ConfigError, match="does not solve world scenes"):
         load_world_config('[run]\nsolver = "dot_product"\n[world]\nscene = "x.xml"\n')
@@ -248,3 +304,15 @@ def test_the_idealised_model_refuses_what_the_ray_solvers_refuse(where):
     for solver in (ms.DotProduct(parallax=True, vignetting=True, detector_blur=True), ms.ResponseMap()):
         with pytest.raises(InputError, match=where):
             sim.measure([np.ones(screen.shape)], solver=solver)
+
+
+def test_export_maps_ideal_uses_the_files_model_options(tmp_path):
+    """``export-maps --ideal`` exports the model the file's ``[run.dot_product]`` names (it was the bare model
+    whatever the file said)."""
+    config = tmp_path / "c.toml"
+    config.write_text('[run]\nsolver = "dot_product"\n[run.dot_product]\nparallax = true\nvignetting = true\n'
+                      "[screen]\nresolution = [16, 9]\n")
+    r = CliRunner().invoke(app, ["export-maps", str(config), "--out", str(tmp_path / "out"), "--ideal"])
+    assert r.exit_code == 0, r.output
+    meta = json.loads((tmp_path / "out" / "maps.json").read_text())
+    assert meta["source"]["effects"] == ["parallax", "vignetting"]
