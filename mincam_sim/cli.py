@@ -922,11 +922,6 @@ def reproduce(
     typer.echo(f"# results.json and plots in {out_dir}")
 
 
-#: What a Ctrl-C says before a study has started (its modules imported, its file read): nothing was written.
-STUDY_NOT_STARTED = ("interrupted before the study started: nothing was written; run the same command again to "
-                     "start it")
-
-
 @study_app.command("run")
 def study_run(
     study_file: Annotated[Path, typer.Argument(help="study TOML (see scenes/studies/*.toml)")],
@@ -954,10 +949,10 @@ def study_run(
         if not interrupts.arrived():
             raise
         # a Ctrl-C that landed in an import can come out as another error (a module left half-imported)
-        typer.echo(f"error: {STUDY_NOT_STARTED}", err=True)
+        typer.echo(f"error: {interrupts.STUDY_NOT_STARTED}", err=True)
         raise SystemExit(130) from err
     except KeyboardInterrupt:
-        typer.echo(f"error: {STUDY_NOT_STARTED}", err=True)
+        typer.echo(f"error: {interrupts.STUDY_NOT_STARTED}", err=True)
         raise SystemExit(130) from None
     run_study_command(study_file, workers, scheduler, out_dir, quick, overwrite, quiet=not _show_progress(),
                       max_points=max_points, time_limit_s=time_limit_s)

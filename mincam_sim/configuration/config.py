@@ -212,6 +212,10 @@ def _wavelengths(section: str, key: str, value: Any) -> tuple[float, ...]:
     if not all(np.isfinite(v) and 400e-9 <= v <= 1100e-9 for v in value):
         raise ConfigError(f"{where} = {value!r}: give wavelengths in metres between 400e-9 and 1100e-9 "
                           "(550e-9 for 550 nm; the silicon QE curve spans 400-1100 nm)")
+    repeated = sorted({float(v) for v in value if list(value).count(v) > 1})
+    if repeated:
+        raise ConfigError(f"{where} repeats {', '.join(f'{v:g}' for v in repeated)} m: give each wavelength once "
+                          "(each is weighted by its own band)")
     return tuple(float(v) for v in value)
 
 

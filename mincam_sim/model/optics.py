@@ -95,6 +95,10 @@ class Mixel:
         if not lam or not all(np.isfinite(v) and 0 < v < 1e-4 for v in lam):
             raise InputError(f"mixel {self.name!r}: wavelengths_m must be positive wavelengths in metres "
                              f"(550e-9 for 550 nm), got {self.wavelengths_m!r}")
+        if len(set(lam)) < len(lam):
+            repeated = sorted({v for v in lam if lam.count(v) > 1})
+            raise InputError(f"mixel {self.name!r}: wavelengths_m repeats {', '.join(f'{v:g}' for v in repeated)} m: "
+                             "give each wavelength once (each is weighted by its own band)")
         object.__setattr__(self, "wavelengths_m", lam)
         if self.detector_size_m > min(self.mask.width_m, self.mask.height_m):
             raise InputError(

@@ -20,6 +20,7 @@ from functools import cache
 from pathlib import Path
 from types import ModuleType
 
+from mincam_sim import interrupts
 from mincam_sim.errors import BackendUnavailableError
 
 ENV_VARIANT = "MINCAM_VARIANT"
@@ -80,6 +81,11 @@ def _wanted_variant() -> str | None:
 
 @cache
 def _loaded_variant() -> str:
+    with interrupts.held():  # a Ctrl-C inside Dr.Jit's native start-up aborted the process
+        return _load_variant()
+
+
+def _load_variant() -> str:
     configure_libllvm()
     import drjit as dr
     import mitsuba as mi

@@ -631,9 +631,9 @@ def _budget_text(cfg: RenderConfig | WorldConfig) -> str:
     b, solver = cfg.run.budget, cfg.run.solver
     if isinstance(solver, DotProduct):
         effects = ", ".join(solver.effects()) or "the bare model"
-        n = solver.nodes
-        points = f"{n} x {n} points per texel" + (f" x {n} x {n} on the detector" if solver.detector_blur else "")
-        return f"{effects}, exact quadrature ({points}, no samples)"
+        n, c = solver.nodes, solver.detector_nodes_per_axis()
+        points = f"{n} x {n} points per texel" + (f" x {c} x {c} on the detector" if solver.detector_blur else "")
+        return f"{effects}, deterministic quadrature ({points}, no samples; an error estimate as stderr)"
     if b.target_rel_stderr > 0:
         text = f"target relative stderr {b.target_rel_stderr:g}"
     elif isinstance(cfg.run.solver, ResponseMap):

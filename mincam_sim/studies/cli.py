@@ -18,6 +18,7 @@ def run_study_command(study_file: Path, workers: int | None, scheduler: str | No
     again to resume ...`` on stderr and exit code 130 (the generic Ctrl-C line of the CLI is not added); before
     the study's store exists (its modules still loading, its file being read, its store not created yet), the
     line says that nothing was written and names no file."""
+    from mincam_sim import interrupts
     from mincam_sim.errors import StoreError
     from mincam_sim.studies.cluster import check_workers, mute_dask_for_exit, watched_interrupts
     from mincam_sim.studies.plots import plot_study
@@ -41,10 +42,8 @@ def run_study_command(study_file: Path, workers: int | None, scheduler: str | No
         typer.echo(f"error: {stop}", err=True)
         raise SystemExit(130) from None
     except KeyboardInterrupt:  # any other comes before the study starts writing (run_study converts the rest)
-        from mincam_sim.cli import STUDY_NOT_STARTED
-
         mute_dask_for_exit()
-        typer.echo(f"error: {STUDY_NOT_STARTED}", err=True)
+        typer.echo(f"error: {interrupts.STUDY_NOT_STARTED}", err=True)
         raise SystemExit(130) from None
     try:
         plot = plot_study(ds, list(spec.metrics), Path(out) / "study.png")

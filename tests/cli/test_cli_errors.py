@@ -885,7 +885,7 @@ def test_ctrl_c_while_typer_builds_the_commands_is_one_line_and_130(monkeypatch,
     assert stderr == cli.INTERRUPTED_WHILE_STARTING + "\n"
 
 
-@pytest.mark.parametrize("delay_s", [0.05, 0.3])
+@pytest.mark.parametrize("delay_s", [0.0, 0.1])
 def test_ctrl_c_while_the_package_imports_is_one_line_and_130(delay_s, tmp_path):
     """A Ctrl-C in the first second (Python still importing numpy, scipy, typer, or typer building the commands)
     ends like any interrupt: exit code 130 and one line, no traceback."""
@@ -897,6 +897,18 @@ def test_ctrl_c_while_the_package_imports_is_one_line_and_130(delay_s, tmp_path)
         pytest.skip("mincam-sim console script not installed beside this Python")
     proc = subprocess.Popen([str(exe), "render", "--help"], cwd=tmp_path, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
+    # numpy mapped into the process: the package is importing, past the console entry's handler (a Ctrl-C during
+    # Python's own start-up, before any of this project's code runs, is Python's to answer; a fixed delay hit
+    # that window on a loaded machine)
+    maps = Path(f"/proc/{proc.pid}/maps")
+    deadline = time.monotonic() + 60
+    while maps.exists() and time.monotonic() < deadline and proc.poll() is None:
+        try:
+            if "_multiarray_umath" in maps.read_text():
+                break
+        except OSError:
+            break
+        time.sleep(0.005)
     time.sleep(delay_s)
     proc.send_signal(signal.SIGINT)
     _, stderr = proc.communicate(timeout=120)

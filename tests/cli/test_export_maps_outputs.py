@@ -167,14 +167,14 @@ def test_ignored_run_keys_are_named_as_the_file_writes_them_and_the_export_reads
     cases = {  # [run] keys -> the warnings of export-maps (and of export-maps --ideal)
         "spp = 1000\n": (['warning: [run] spp is ignored: export-maps traces response maps at samples_per_texel '
                           '(spp is for the "aperture" and "reference" solvers of render) (IgnoredSettingWarning)'],
-                         ["warning: [run] spp is ignored: --ideal exports the idealised dot-product model: exact "
-                          "quadrature (no samples, standard error 0) (IgnoredSettingWarning)"]),
+                         ["warning: [run] spp is ignored: --ideal exports the idealised dot-product model: "
+                          "deterministic quadrature (no samples) (IgnoredSettingWarning)"]),
         "samples_per_texel = 16\nreplicates = 4\n": ([], ["warning: [run] samples_per_texel, replicates are "
                                                           "ignored: --ideal exports the idealised dot-product model: "
-                                                          "exact quadrature (no samples, standard error 0) "
+                                                          "deterministic quadrature (no samples) "
                                                           "(IgnoredSettingWarning)"]),
-        "seed = 3\n": ([], ["warning: [run] seed is ignored: --ideal exports the idealised dot-product model: exact "
-                            "quadrature (no samples, standard error 0) (IgnoredSettingWarning)"]),
+        "seed = 3\n": ([], ["warning: [run] seed is ignored: --ideal exports the idealised dot-product model: "
+                            "deterministic quadrature (no samples) (IgnoredSettingWarning)"]),
     }
     for k, (keys, (physics, ideal)) in enumerate(cases.items()):
         config = tmp_path / f"c{k}.toml"

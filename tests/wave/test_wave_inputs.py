@@ -102,3 +102,15 @@ def test_geometric_quadrature_of_many_directions_holds_a_block_at_a_time(ramp_mi
     assert peak < 120e6, f"{peak / 1e6:.0f} MB"  # ~300 MB when every direction's nodes were held at once
     monkeypatch.setattr(geometric, "QUADRATURE_CHUNK_POINTS", 7)
     np.testing.assert_allclose(wave.geometric_response(ramp_mixel, tan[:50]), whole[:50], rtol=0, atol=1e-15)
+
+
+def test_repeated_wavelengths_are_refused_where_the_mixel_or_the_file_names_them():
+    """A mixel or a display file with a wavelength twice was taken and failed only when the wave table was built."""
+    import mincam_sim as ms
+    from mincam_sim.configuration.config import load_config
+    from mincam_sim.errors import ConfigError
+
+    with pytest.raises(InputError, match=r"mixel 'w': wavelengths_m repeats 5\.5e-07 m: give each wavelength once"):
+        ms.Mixel(ms.masks.ramp("x"), name="w", optics="wave", wavelengths_m=(550e-9, 600e-9, 550e-9))
+    with pytest.raises(ConfigError, match=r"\[mincam\] wavelengths_m repeats 5\.5e-07 m"):
+        load_config("[mincam]\noptics = \"wave\"\nwavelengths_m = [550e-9, 550e-9]\n")

@@ -21,7 +21,8 @@ file                   role
 ``plane_replay.py``    :class:`PlaneReplay` (worlds): the aperture's rays traced once, a frame that moves a
                        textured plane within its plane replayed per ray (:class:`SlidingPlane`)
 ``dot_product.py``     :class:`DotProduct` (displays): the idealised model (mask stretched over the field, dotted
-                       with the frame), physics added one effect at a time; exact quadrature, pure numpy
+                       with the frame), physics added one effect at a time; deterministic quadrature with an error
+                       estimate, pure numpy
 =====================  ===========================================================================================
 """
 

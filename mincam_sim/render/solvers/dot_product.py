@@ -121,6 +121,10 @@ class DotProduct(Solver):
             raise InputError(f"DotProduct detector_cells must be an integer from 1 to {MAX_DETECTOR_CELLS} (squares "
                              f"per axis of the detector, nodes x nodes points each), got {cells!r}")
 
+    def detector_nodes_per_axis(self) -> int:
+        """Pinholes per axis of the detector's rule (``detector_cells * nodes``; 1 without ``detector_blur``)."""
+        return self.detector_cells * self.nodes if self.detector_blur else 1
+
     def effects(self) -> list[str]:
         """The physical effects this model includes (besides the bare mapping)."""
         return [k for k in ("parallax", "vignetting", "detector_blur") if getattr(self, k)]
