@@ -94,7 +94,7 @@ def make_task(quick: bool = False, seed: int = 0, **overrides) -> tr.TrackingTas
 
     A sequence field (:data:`SEQUENCE_FIELDS`) that is not a list or tuple of numbers is an
     :class:`~mincam_sim.errors.InputError`; the values themselves are the task's checks (a
-    :class:`~.checks.FieldError`).
+    ``checks.FieldError``).
     """
     from dataclasses import fields
 
@@ -208,7 +208,7 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
         ``seed`` or ``dpi`` out of range, a flag that is not a bool, a sequence field that is not a list of
         numbers), naming it and the expected form.
     ConfigError
-        Before any work, for an unknown or out-of-range task field (:class:`~.checks.FieldError`).
+        Before any work, for an unknown or out-of-range task field (``checks.FieldError``).
     """
     from mincam_sim.design.gradcheck import check_gradients
     from mincam_sim.design.optimise import design

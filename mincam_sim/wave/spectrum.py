@@ -78,7 +78,7 @@ def spectral_weights(
         Distinct wavelengths [m], in any order.
     qe : callable or None
         Quantum efficiency [electrons per photon] at an array of wavelengths [m] (default :func:`silicon_qe`,
-        which refuses wavelengths outside :data:`QE_RANGE_M`); ``None`` weighs the bands by their width only.
+        which refuses wavelengths outside ``QE_RANGE_M``); ``None`` weighs the bands by their width only.
 
     Returns
     -------

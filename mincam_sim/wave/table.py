@@ -82,9 +82,9 @@ def response_table(
     n_tan : int, optional
         Points per axis (default: 513 for one-axis masks, whose 1D factors are solved on 129 points and
         interpolated, see ``_table_separable``; 33 for 2D masks, whose cost is one 2D propagation per point).
-        Its ``n_tan**2`` arrays take about :data:`TABLE_BYTES_PER_CELL` ``* n_tan**2`` bytes while it is
+        Its ``n_tan**2`` arrays take about ``TABLE_BYTES_PER_CELL`` ``* n_tan**2`` bytes while it is
         built (besides the solver's own grids, ~0.25 GB for one-axis masks), at most
-        :data:`TABLE_MEMORY_LIMIT_BYTES`: a larger ``n_tan`` is refused before any work.
+        ``TABLE_MEMORY_LIMIT_BYTES``: a larger ``n_tan`` is refused before any work.
     qe : callable or None
         Quantum efficiency curve for the spectral weights (``None``: band widths only).
     max_cells : int, optional

@@ -140,7 +140,7 @@ class DotProduct(Solver):
         the detector rule with half the points per cell and minus the midpoint rule of one cell more per axis (0
         without ``detector_blur``) and, at the
         detector's centre, twice the texels' finer rule minus their rule. A frame's error estimate is
-        :func:`error_estimate` of the checks' products with it."""
+        ``error_estimate`` of the checks' products with it."""
         for m in mincam:
             if m.optics != "geometric":
                 raise InputError(f"mixel {m.name!r} has optics = {m.optics!r}; the dot-product model is geometric: "

@@ -97,14 +97,14 @@ WANTED_VIEW_SAMPLES = 1000  # samples in the view the advice of samples per texe
 
 def warn_unseen_maps(m: Measurements, maps: ResponseMaps, mincam: Mincam, screen: Screen, samples_per_texel: int,
                      replicates: int) -> None:
-    """The :class:`UnseenWarning` of a response-map result, with why each unseen mixel read 0 +/- 0.
+    """The ``UnseenWarning`` of a response-map result, with why each unseen mixel read 0 +/- 0.
 
     A mixel whose map holds weights saw the screen, and the frames' lit texels lay outside its view
-    (:func:`~mincam_sim.render.kernels.monte_carlo.warn_unreached`). A mixel whose map is empty saw the screen
+    (``monte_carlo.warn_unreached``). A mixel whose map is empty saw the screen
     too (a display scene refuses a screen outside a mixel's field of view), so either its view on the screen
     (:func:`~mincam_sim.scene.display.visible_screen_area_m2`) is so much smaller than a texel that the
-    per-texel samples hardly land in it (fewer than :data:`SPARSE_VIEW_SAMPLES` expected: say so, with the
-    samples per texel that would put :data:`WANTED_VIEW_SAMPLES` there), or its mask or the other mixels' bodies
+    per-texel samples hardly land in it (fewer than ``SPARSE_VIEW_SAMPLES`` expected: say so, with the
+    samples per texel that would put ``WANTED_VIEW_SAMPLES`` there), or its mask or the other mixels' bodies
     shut it off.
 
     Parameters
