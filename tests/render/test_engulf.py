@@ -76,3 +76,16 @@ def test_a_background_that_closes_round_the_mincam_is_said():
     """A change run whose background holds the box round the mixel: said as 'the background'."""
     _, told = _said(lambda: _world().measure_changes([_at(0.0)], _at(-1.0), ms.PlainChange(), BUDGET))
     assert len(told) == 1 and "closes round mixel(s) m0 in the background" in told[0]
+
+
+def test_a_world_aperture_run_that_reaches_nothing_lit_says_so():
+    """The world ``Aperture`` solver returned 0 +/- 0 without a word where the mixel saw nothing lit (the display
+    solvers and the change solvers warned): one UnseenWarning, as theirs."""
+    from mincam_sim.render.kernels.monte_carlo import UnseenWarning
+
+    cam = ms.single(pose=Pose((0.0, 0.0, 0.5), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)))  # looking down at no floor
+    lamp = sd.area_light(0.4, 0.4, Pose((0.0, 0.0, 1.0), (0.0, 0.0, -1.0)).matrix(), 5.0)
+    sim = ms.Simulation(cam, world={"lamp": lamp})
+    with pytest.warns(UnseenWarning, match="no sample of mixel"):
+        m = sim.measure([{}], ms.Aperture(), BUDGET)
+    assert m.irradiance_w_m2[0, 0] == 0 and m.stderr_w_m2[0, 0] == 0

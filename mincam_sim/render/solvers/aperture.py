@@ -17,7 +17,7 @@ from mincam_sim.budget import Budget
 from mincam_sim.measurements import Measurements
 from mincam_sim.render import backend
 from mincam_sim.render.kernels.change_geometry import moving_shapes
-from mincam_sim.render.kernels.monte_carlo import replicate_mean_stderr
+from mincam_sim.render.kernels.monte_carlo import replicate_mean_stderr, warn_unreached
 from mincam_sim.render.scene.world_checks import EngulfWatch
 from mincam_sim.render.solvers.base import DisplayRaySolver, Plan, Row, check_update_frames
 
@@ -84,7 +84,9 @@ class WorldAperturePlan(Plan):
         meta = {"solver": self.solver.name, "form": "fast_world", "seed": self.budget.seed,
                 "replicates": self.replicates, "spp_per_mixel_per_frame": self.budget.rays(), **self.sim.world_meta()}
         shape = (self.n_rows, len(self.columns))  # (0, n_mixels) for no frames
-        return Measurements(values.reshape(shape), errors.reshape(shape), self.sim.mincam.names, meta)
+        m = Measurements(values.reshape(shape), errors.reshape(shape), self.sim.mincam.names, meta)
+        warn_unreached(m)  # 0 +/- 0: nothing lit was reached, not a certain zero
+        return m
 
 
 __all__ = ["Aperture", "WorldAperturePlan"]
