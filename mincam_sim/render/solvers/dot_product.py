@@ -120,6 +120,9 @@ class DotProduct(Solver):
         if isinstance(cells, bool) or not isinstance(cells, int) or not 1 <= cells <= MAX_DETECTOR_CELLS:
             raise InputError(f"DotProduct detector_cells must be an integer from 1 to {MAX_DETECTOR_CELLS} (squares "
                              f"per axis of the detector, nodes x nodes points each), got {cells!r}")
+        if self.detector_blur and self.nodes < 2:
+            raise InputError("DotProduct with detector_blur needs nodes >= 2: the detector's error estimate compares "
+                             "its rule with rules of fewer points per cell (raise detector_cells for more pinholes)")
 
     def detector_nodes_per_axis(self) -> int:
         """Pinholes per axis of the detector's rule (``detector_cells * nodes``; 1 without ``detector_blur``)."""
@@ -137,8 +140,7 @@ class DotProduct(Solver):
     def maps_and_checks(self, mincam: Mincam, screen: Screen,
                         show_progress: bool = False) -> tuple[ResponseMaps, np.ndarray]:
         """The maps and the three check maps of the error estimate, (3, n_mixels, rows, cols) [sr]: the maps minus
-        the detector rule with half the points per cell and minus the midpoint rule of one cell more per axis (0
-        without ``detector_blur``) and, at the
+        the detector rules with half and with one fewer points per cell (0 without ``detector_blur``) and, at the
         detector's centre, twice the texels' finer rule minus their rule. A frame's error estimate is
         ``error_estimate`` of the checks' products with it."""
         for m in mincam:
@@ -160,8 +162,7 @@ class DotProduct(Solver):
             "detector_rule": (f"{self.detector_cells} x {self.detector_cells} cells of {self.nodes} x "
                               f"{self.nodes} Gauss-Legendre points" if self.detector_blur
                               else "a pinhole (no detector blur)"),
-            "error_estimate": "max(|P - P(nodes // 2 per cell)|, |P - P(midpoints of detector_cells + 1)|) + "
-                              "2 |P_centre(texel "
+            "error_estimate": "max(|P - P(nodes // 2 per cell)|, |P - P(nodes - 1 per cell)|) + 2 |P_centre(texel "
                               "images split twice as fine) - P_centre|: deterministic, an estimate (not a bound); "
                               "each measurement's stderr_w_m2",
             "uniform_frame_rel_error": {m.name: float(e) for m, e in zip(mincam, uniform, strict=True)}}}

@@ -129,6 +129,8 @@ def test_parallax_moves_each_mixels_field_by_its_offset():
 def test_bad_options_and_wave_optics_are_refused():
     with pytest.raises(InputError, match="nodes must be an integer"):
         ms.DotProduct(nodes=0)
+    with pytest.raises(InputError, match="detector_blur needs nodes >= 2"):
+        ms.DotProduct(detector_blur=True, nodes=1)
     for cells in (0, 33, 2.0, True):
         with pytest.raises(InputError, match="detector_cells must be an integer from 1 to 32"):
             ms.DotProduct(detector_blur=True, detector_cells=cells)
