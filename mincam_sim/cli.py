@@ -326,29 +326,10 @@ _created: list[tuple[Path, Path]] = []
 def _remove_created_if_empty() -> None:
     """Remove the output directories this command created (and the folders made for them) that hold nothing but
     their lock file: a refused run leaves no empty folder behind. A lock another process holds is left alone."""
-    from mincam_sim.storage.store import LOCK_NAME
+    from mincam_sim.storage.store import remove_if_only_lock
 
     while _created:
-        path, top = _created.pop()
-        lock = path / LOCK_NAME
-        try:
-            if any(entry.name != LOCK_NAME for entry in path.iterdir()):
-                continue
-            if lock.exists():
-                import fcntl
-
-                fd = os.open(lock, os.O_RDWR)
-                try:
-                    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # refused: another run holds the folder
-                    lock.unlink()
-                finally:
-                    os.close(fd)
-            for folder in (path, *path.parents):
-                folder.rmdir()  # stops (OSError) at the first folder that holds anything
-                if folder == top:
-                    break
-        except (OSError, ImportError):
-            continue
+        remove_if_only_lock(*_created.pop())
 
 
 def check_out_dir(path: Path, what: str = "output directory", create: bool = True) -> Path:
@@ -367,7 +348,9 @@ def check_out_dir(path: Path, what: str = "output directory", create: bool = Tru
     if ancestor.exists() and not os.access(ancestor, os.W_OK | os.X_OK):
         raise ConfigError(f"{what} {path} cannot be written: no permission in {ancestor}")
     if create:
-        top = next((p for p in reversed((path, *path.parents)) if not p.exists()), None)
+        from mincam_sim.storage.store import topmost_missing
+
+        top = topmost_missing(path)
         try:
             path.mkdir(parents=True, exist_ok=True)
         except OSError as err:

@@ -569,6 +569,37 @@ def lock_out_dir(directory: str | Path, what: str = "output directory") -> DirLo
     return DirLock(directory, what)
 
 
+def topmost_missing(directory: str | Path) -> Path | None:
+    """The topmost folder of ``directory``'s path that does not exist yet (what creating it would make), or None."""
+    directory = Path(directory)
+    return next((p for p in reversed((directory, *directory.parents)) if not p.exists()), None)
+
+
+def remove_if_only_lock(directory: Path, top: Path) -> None:
+    """Remove ``directory`` and the folders above it up to ``top`` (all made for it) if it holds nothing but its
+    lock file: a run stopped or refused before it wrote anything leaves no folder behind. A lock another process
+    holds by now, and any folder that holds something, are left alone; nothing here raises."""
+    lock = directory / LOCK_NAME
+    try:
+        if any(entry.name != LOCK_NAME for entry in directory.iterdir()):
+            return
+        if lock.exists():
+            import fcntl
+
+            fd = os.open(lock, os.O_RDWR)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # refused: another run holds the folder now
+                lock.unlink()
+            finally:
+                os.close(fd)
+        for folder in (directory, *directory.parents):
+            folder.rmdir()  # stops (OSError) at the first folder that holds anything
+            if folder == top:
+                break
+    except (OSError, ImportError):
+        return
+
+
 # ---------------------------------------------------------------------------------------- content cache
 
 

@@ -50,7 +50,7 @@ from mincam_sim.experiments.study_targets import unit_of
 from mincam_sim.progress import progress
 from mincam_sim.storage.atomic import atomic_write_json, atomic_write_text
 from mincam_sim.storage.identity import build_identity, canonical, diff_identities, fingerprint
-from mincam_sim.storage.store import lock_out_dir
+from mincam_sim.storage.store import lock_out_dir, remove_if_only_lock, topmost_missing
 from mincam_sim.studies.cluster import (
     ENV_THREADS,
     check_scheduler,
@@ -464,7 +464,7 @@ def run_study(spec: StudySpec, workers: int | None = None, scheduler: str | None
     check_points(spec, quick)
     if overwrite or not (out / STORE_NAME).exists():  # before the lock creates the out dir: nothing is left behind
         check_time(spec, len(spec.points), n_workers, quick, time_limit_s, where)
-    created = next((p for p in reversed((out, *out.parents)) if not p.exists()), None)
+    created = topmost_missing(out)
     try:
         lock = lock_out_dir(out)
     except OutDirLockedError as err:
@@ -489,34 +489,7 @@ def run_study(spec: StudySpec, workers: int | None = None, scheduler: str | None
         (out / HOLDER_NAME).unlink(missing_ok=True)
         lock.release()
         if not stored and created is not None:
-            _remove_if_only_lock(out, created)
-
-
-def _remove_if_only_lock(out: Path, top: Path) -> None:
-    """Remove ``out`` (and the folders above it up to ``top``, all created by this study) if it holds nothing
-    but its lock file: a study stopped before it wrote anything leaves no folder behind. A lock another process
-    holds by now is left alone."""
-    from mincam_sim.storage.store import LOCK_NAME
-
-    lock = out / LOCK_NAME
-    try:
-        if any(entry.name != LOCK_NAME for entry in out.iterdir()):
-            return
-        if lock.exists():
-            import fcntl
-
-            fd = os.open(lock, os.O_RDWR)
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # refused: another run holds the folder now
-                lock.unlink()
-            finally:
-                os.close(fd)
-        for folder in (out, *out.parents):
-            folder.rmdir()  # stops (OSError) at the first folder that holds anything
-            if folder == top:
-                break
-    except (OSError, ImportError):
-        return
+            remove_if_only_lock(out, created)
 
 
 @dataclass(frozen=True)
