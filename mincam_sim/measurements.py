@@ -47,6 +47,10 @@ class Measurements:
     maps : ResponseMaps or None
         The response maps a :class:`~mincam_sim.render.solvers.ResponseMap` solver measured through (None for
         other solvers, and once saved: not written to the npz).
+    stderr_dof : (n_frames, n_mixels) ndarray or None
+        Degrees of freedom of each standard error where the solver knows them per value (a response map's:
+        ``map_tracing.effective_dof``; ``inf`` where nothing spread); None
+        otherwise (a ray solver's are its replicates - 1), and once saved.
     """
 
     irradiance_w_m2: np.ndarray
@@ -54,6 +58,7 @@ class Measurements:
     mixel_names: list[str]
     meta: dict = field(default_factory=dict)
     maps: Any = field(default=None, repr=False, compare=False)
+    stderr_dof: Any = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         self.irradiance_w_m2 = np.atleast_2d(np.asarray(self.irradiance_w_m2, dtype=np.float64))

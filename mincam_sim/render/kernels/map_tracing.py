@@ -90,14 +90,24 @@ class ResponseMaps:
         v = self.variance_sr2.reshape(len(self.mixel_names), -1).T
         values = np.empty((len(frames), w.shape[1]))
         var = np.empty_like(values)
+        var_of_var = np.empty_like(values)
         for i in range(0, len(frames), chunk):
             f = frames[i : i + chunk].reshape(len(frames[i : i + chunk]), -1)
             # einsum's own loops, not BLAS: each value is summed in one order whatever the chunk (BLAS blocks by
             # the number of rows, so a frame streamed in another chunk differed in the last bits)
             values[i : i + chunk] = np.einsum("ft,tm->fm", f, w, optimize=False)
-            var[i : i + chunk] = np.einsum("ft,tm->fm", f * f, v, optimize=False)
+            f2 = f * f
+            var[i : i + chunk] = np.einsum("ft,tm->fm", f2, v, optimize=False)
+            var_of_var[i : i + chunk] = np.einsum("ft,tm->fm", f2 * f2, v * v, optimize=False)
         meta = {**self.meta, "form": "response_map"}
-        return Measurements(values, np.sqrt(var), list(self.mixel_names), meta)
+        return Measurements(values, np.sqrt(var), list(self.mixel_names), meta,
+                            stderr_dof=effective_dof(var, var_of_var, self.replicate_blocks))
+
+    @property
+    def replicate_blocks(self) -> int:
+        """Independent blocks per texel whose spread gave each weight's variance (``meta["replicate_blocks"]``;
+        4, the solver's default, for maps built without it)."""
+        return int(self.meta.get("replicate_blocks", 4))
 
     def measure_source(self, frames: FrameSource, indices=None, show_progress: bool = False,
                        desc: str = "frames") -> Measurements:
@@ -106,6 +116,7 @@ class ResponseMaps:
         indices = np.arange(len(frames)) if indices is None else np.asarray(indices)
         values = np.empty((len(indices), len(self.mixel_names)))
         errors = np.empty_like(values)
+        dof = np.empty_like(values)
         step = frames.chunk_size(FRAME_CHUNK_BYTES)
         for lo in progress(range(0, len(indices), step), desc=desc, disable=not show_progress):
             idx = indices[lo : lo + step]
@@ -113,7 +124,9 @@ class ResponseMaps:
             check_radiance(stack, idx)
             m = self.measure(stack)
             values[lo : lo + len(idx)], errors[lo : lo + len(idx)] = m.irradiance_w_m2, m.stderr_w_m2
-        return Measurements(values, errors, list(self.mixel_names), {**self.meta, "form": "response_map"})
+            dof[lo : lo + len(idx)] = m.stderr_dof
+        return Measurements(values, errors, list(self.mixel_names), {**self.meta, "form": "response_map"},
+                            stderr_dof=dof)
 
     def save_exr(self, directory: str | Path) -> list[Path]:
         """One OpenEXR per mixel (channels W and sigma), the picture of what the mixel sees."""
@@ -143,6 +156,16 @@ class ResponseMaps:
 
 
 FLOAT32_MAX = float(np.finfo(np.float32).max)  # [W m^-2 sr^-1] the largest radiance a texture holds
+
+
+def effective_dof(var: np.ndarray, var_of_var: np.ndarray, replicates: int) -> np.ndarray:
+    """Degrees of freedom of each value's variance ``var = sum_t f_t^2 v_t`` (Welch-Satterthwaite): every texel's
+    ``v_t`` is the spread of ``replicates`` independent blocks, ``replicates - 1`` degrees of freedom each, so
+    ``dof = (replicates - 1) var^2 / sum_t (f_t^2 v_t)^2`` (``var_of_var``). One texel in a value: ``replicates -
+    1``; many alike: their number times that. ``inf`` where ``var`` is 0 (no spread to estimate)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dof = (replicates - 1) * var * var / var_of_var
+    return np.where(var > 0, dof, np.inf)
 
 
 def check_radiance(stack: np.ndarray, indices: np.ndarray) -> None:

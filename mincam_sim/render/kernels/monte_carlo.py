@@ -186,6 +186,11 @@ class UnseenWarning(UserWarning):
     """A measurement that no Monte Carlo sample reached."""
 
 
+class UncertainSigmaWarning(UserWarning):
+    """Standard errors estimated from few degrees of freedom: their z-scores have heavier tails than the ray
+    solvers' 8 replicates give."""
+
+
 @functools.lru_cache(maxsize=256)
 def dominance_threshold(replicates: int, false_alarm: float = 1e-4) -> float:
     """Share of the replicates' squared deviations that one of ``replicates`` Gaussian replicates exceeds with

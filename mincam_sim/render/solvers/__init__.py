@@ -27,6 +27,7 @@ file                   role
 """
 
 from mincam_sim.render.kernels.map_tracing import ResponseMaps
+from mincam_sim.render.kernels.monte_carlo import UncertainSigmaWarning
 from mincam_sim.render.solvers.aperture import Aperture
 from mincam_sim.render.solvers.base import Plan, Solver
 from mincam_sim.render.solvers.change import FallbackWarning, HeavyTailWarning, PlainChange, StratifiedChange
@@ -39,4 +40,5 @@ SOLVERS = (Reference, Aperture, ResponseMap, PlainChange, StratifiedChange, Plan
 """Every public solver class (the contract test crosses them with its scenes)."""
 
 __all__ = ["SOLVERS", "Aperture", "DotProduct", "FallbackWarning", "HeavyTailWarning", "Plan", "PlainChange",
-           "PlaneReplay", "Reference", "ResponseMap", "ResponseMaps", "SlidingPlane", "Solver", "StratifiedChange"]
+           "PlaneReplay", "Reference", "ResponseMap", "ResponseMaps", "SlidingPlane", "Solver", "StratifiedChange",
+           "UncertainSigmaWarning"]

@@ -30,7 +30,12 @@ from mincam_sim.render.kernels.map_tracing import (
     ResponseMaps,
     response_maps,
 )
-from mincam_sim.render.kernels.monte_carlo import UnseenWarning, pilot_to_target, warn_unreached
+from mincam_sim.render.kernels.monte_carlo import (
+    UncertainSigmaWarning,
+    UnseenWarning,
+    pilot_to_target,
+    warn_unreached,
+)
 from mincam_sim.render.solvers.base import Plan, Row, Solver, finish_display
 from mincam_sim.scene.display import Screen, visible_screen_area_m2
 
@@ -72,6 +77,7 @@ class MapPlan(Plan):
         self.maps, self.provenance = solver.maps(sim, budget, self.frames, cache, show_progress)
         self.used = int(self.maps.meta["samples_per_texel"])
         self.n_rows, self.columns = len(self.frames), list(sim.mincam.names)
+        self.dof = DofWatch(len(self.columns))
 
     def rows(self, pending: np.ndarray) -> Iterator[Row]:
         step = max(1, min(FRAME_CHUNK, self.frames.chunk_size(FRAME_CHUNK_BYTES)))
@@ -79,6 +85,7 @@ class MapPlan(Plan):
         for idx in progress(batches, desc="response_map: frames", disable=not self.show_progress,
                             total=len(batches), unit="chunk" if step > 1 else "frame"):
             m = self.maps.measure_source(self.frames, idx, show_progress=False, desc="frames")
+            self.dof.note(idx, m.stderr_dof)
             yield idx, m.irradiance_w_m2, m.stderr_w_m2
 
     def result(self, values: np.ndarray, errors: np.ndarray) -> Measurements:
@@ -86,9 +93,57 @@ class MapPlan(Plan):
         budget = {"target_rel_stderr": self.target, "samples_per_texel": self.used, "replicates": self.replicates}
         m = Measurements(values, errors, self.sim.mincam.names, {**self.maps.meta, **budget, **self.provenance})
         m.maps = self.maps
+        m.meta["stderr_dof_min"] = self.dof.fewest()
+        self.dof.warn(m.mixel_names, self.replicates)
         return finish_display(m, self.solver, self.target, self.used, MAX_SAMPLES_PER_TEXEL,
                               lambda result: warn_unseen_maps(result, self.maps, self.sim.mincam, self.sim.screen,
                                                               self.used, self.replicates))
+
+
+SIGMA_DOF_FLOOR = 7.0  # the ray solvers' 8 replicates: |z| > 4.5 in ~0.3 % of runs (Student's t, 7 d.o.f.)
+
+
+class DofWatch:
+    """The fewest degrees of freedom of the standard errors a map plan measured, per mixel, and the values
+    below :data:`SIGMA_DOF_FLOOR` (rows found done in a resumed run were watched when they were measured)."""
+
+    def __init__(self, n_mixels: int) -> None:
+        self.least = np.full(n_mixels, np.inf)
+        self.few = np.zeros(n_mixels, dtype=int)
+        self.first_frame: int | None = None
+
+    def note(self, frames: np.ndarray, dof: np.ndarray) -> None:
+        """Take the degrees of freedom ``dof`` (len(frames), n_mixels) of the values of ``frames``."""
+        self.least = np.minimum(self.least, dof.min(axis=0, initial=np.inf))
+        few = dof < SIGMA_DOF_FLOOR * (1 - 1e-9)  # 8 blocks in one texel: 7 up to rounding
+        self.few += few.sum(axis=0)
+        if few.any() and self.first_frame is None:
+            self.first_frame = int(np.asarray(frames)[np.flatnonzero(few.any(axis=1))[0]])
+
+    def fewest(self) -> float | None:
+        """The fewest degrees of freedom of any value's standard error (None: none had a spread)."""
+        least = float(self.least.min(initial=np.inf))
+        return least if np.isfinite(least) else None
+
+    def warn(self, names: list[str], replicates: int) -> None:
+        """One :class:`UncertainSigmaWarning` if any value's standard error has fewer than
+        :data:`SIGMA_DOF_FLOOR` degrees of freedom: which mixels, how many values, what to do."""
+        if not self.few.any():
+            return
+        from scipy import stats
+
+        least = self.fewest()
+        mixels = [names[k] for k in np.flatnonzero(self.few)]
+        wanted = int(np.ceil(1 + (replicates - 1) * SIGMA_DOF_FLOOR / least))
+        warnings.warn(
+            f"the standard errors of {int(self.few.sum())} value(s) of mixel(s) {', '.join(mixels)} (first: frame "
+            f"{self.first_frame}) rest on fewer than {SIGMA_DOF_FLOOR:g} degrees of freedom (fewest {least:.3g}): "
+            f"each is the spread of the maps' {replicates} blocks over the few texels that carry the value (a "
+            f"frame lit in a few texels, or texels larger than what the mixel sees), so |z| > 4.5 happens in about "
+            f"{100 * 2 * stats.t.sf(4.5, least):.2g} % of runs (Student's t), not the 0.3 % of 8 replicates. "
+            f"Raise replicates to {wanted} or more (Budget(replicates=...); samples_per_texel a multiple of "
+            f"replicates x k^2), or measure with ms.Aperture(); see meta['stderr_dof_min'] and "
+            f"Measurements.stderr_dof", UncertainSigmaWarning, stacklevel=5)
 
 
 SPARSE_VIEW_SAMPLES = 10.0  # a map that found nothing with fewer samples than this expected in the view missed it
@@ -174,6 +229,9 @@ def maps_to_target(sim, frames, target_rel_stderr: float, seed: int = 0,
     ``rel ~ n^-a`` measured on the last two attempts (``a`` in [0.5, 1.5]: stratified sampling converges
     faster than ``n^-1/2``; 0.5 until two attempts exist), by 2x to 8x per step, and traced as ``replicates x
     k^2`` (at least one stratum per axis more each step), until an attempt reaches the target or the cap.
+    The first attempt puts at least ``SPARSE_VIEW_SAMPLES`` samples in every mixel's view on the screen
+    (:func:`view_floor_samples_per_texel`; more than 16 per texel only where texels dwarf a view), so that an
+    attempt that registers nothing is a frame that changes nothing the mixels see, where the search stops.
     Every attempt's maps go to ``cache`` (so a rerun or a resumed run repeats the search in milliseconds).
     Returns the last attempt's maps and the trail of (samples_per_texel, worst relative stderr) tried.
     """
@@ -190,12 +248,26 @@ def maps_to_target(sim, frames, target_rel_stderr: float, seed: int = 0,
         m = last[1].measure_source(frames, show_progress=show_progress, desc=f"target search ({n} samples/texel)")
         return m.irradiance_w_m2, m.stderr_w_m2
 
+    floor = min(max_samples_per_texel, view_floor_samples_per_texel(sim.mincam, sim.screen))
     first = MapSampling.of(max(FIRST_SAMPLES_PER_TEXEL, replicates), replicates).samples_per_texel
+    if floor > first:  # round up to the next replicates x k^2 (MapSampling.of rounds down), within the cap
+        first = stratum_steps(replicates, max_samples_per_texel)(floor, first)
     n, trail = pilot_to_target(measure, first, target_rel_stderr, max_samples_per_texel, significance=0.0,
                                rounds=None, measured_exponent=SEARCH_EXPONENT, growth=SEARCH_GROWTH, unseen_growth=1,
                                quantize=stratum_steps(replicates, max_samples_per_texel))
     maps = last[1] if n == last[0] else trace(n)  # the quantised search ends on its latest attempt
     return maps, [{"samples_per_texel": t["samples"], "worst_rel_stderr": t["worst_rel_stderr"]} for t in trail]
+
+
+def view_floor_samples_per_texel(mincam: Mincam, screen: Screen) -> int:
+    """Samples per texel that put ``SPARSE_VIEW_SAMPLES`` in the smallest of the mixels' views on the screen
+    (:func:`~mincam_sim.scene.display.visible_screen_area_m2`; a texel's samples spread over its area): small
+    wherever every view holds several texels, 1 where no mixel sees the screen."""
+    views = [visible_screen_area_m2(screen, mixel) for mixel in mincam]
+    smallest = min((v for v in views if v > 0), default=0.0)
+    if smallest <= 0:
+        return 1
+    return max(1, int(np.ceil(SPARSE_VIEW_SAMPLES * screen.texel_area_m2 / smallest)))
 
 
 def stratum_steps(replicates: int, cap: int):
@@ -212,4 +284,5 @@ def stratum_steps(replicates: int, cap: int):
     return quantize
 
 
-__all__ = ["MapPlan", "ResponseMap", "maps_to_target", "stratum_steps", "warn_unseen_maps"]
+__all__ = ["DofWatch", "MapPlan", "ResponseMap", "maps_to_target", "stratum_steps", "view_floor_samples_per_texel",
+           "warn_unseen_maps"]
