@@ -462,11 +462,15 @@ class Simulation:
             self.update(background)
             background_film = self.camera_image(elsewhere_spp, seed) if elsewhere_spp else None
             changes = []
+            # the background over a window is the same render whichever frame asks for it (one scene state, one
+            # seed, random numbers by the window's shape): each window rendered once
+            background_pixels: dict[tuple, tuple[np.ndarray, ...]] = {}
             for k in progress(range(len(frames)), desc="ground truth: background", disable=not show_progress):
                 elsewhere = None if background_film is None else outside(frame_films[k] - background_film, windows[k])
                 frame_films[k] = None  # one film a frame held at a time beyond the differences
-                changes.append(CameraChange(windows[k], frame_pixels[k], self._camera_windows(windows[k], spp, seed),
-                                            elsewhere))
+                if windows[k] not in background_pixels:
+                    background_pixels[windows[k]] = self._camera_windows(windows[k], spp, seed)
+                changes.append(CameraChange(windows[k], frame_pixels[k], background_pixels[windows[k]], elsewhere))
             return changes
 
     def _change_hulls(self, names: list[str]) -> list:

@@ -340,3 +340,28 @@ def test_two_movers_apart_are_both_in_the_window():
     assert np.ptp(cols_seen) > 10 or np.ptp(rows_seen) > 10, "the two changes must lie apart"
     assert (np.abs(change.change_image(bg.shape)) > 0.02 * bg.max()).sum() > 0.8 * seen.sum()
     assert len(change.windows) == 2 and inside.mean() < 0.5
+
+
+def test_the_background_of_a_window_is_rendered_once_and_equals_its_own_render():
+    """Frames whose box stays within one window share its background: rendered once (the background is one
+    scene state, one seed, random numbers by the window's shape), and equal bit for bit to the background
+    rendered over that window on its own."""
+    world, background = _world(pixels=64)
+    frames = [_box_at(x, 0.0) for x in (0.0, 0.0005, 0.001, 0.03)]
+    rendered = []
+    own = world._camera_windows
+
+    def counted(windows, spp, seed):
+        rendered.append(windows)
+        return own(windows, spp, seed)
+
+    world._camera_windows = counted
+    changes = world.camera_changes(frames, background, spp=8, seed=3)
+    distinct = {c.windows for c in changes}
+    assert 1 < len(distinct) < len(frames), [c.windows for c in changes]
+    assert len(rendered) == len(frames) + len(distinct)  # a window per frame, one per distinct background
+    world._camera_windows = own
+    world.update(background)
+    for change in changes:
+        alone = world._camera_windows(change.windows, 8, 3)
+        assert all(np.array_equal(a, b) for a, b in zip(change.background, alone, strict=True))
