@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from mincam_sim import paper
 from mincam_sim.errors import ConfigError
 
 MAX_SEED = 2**32 - 1  # seeds of the design runs: any unsigned 32-bit integer
@@ -131,11 +132,29 @@ SHARED: dict[str, Range] = {
 }
 
 
+def lowest_printable_dpi(side_m: float = paper.MASK_SIZE_M) -> int:
+    """[dots per inch] the smallest dpi at which a ``side_m`` [m] mask prints as at least
+    :data:`~mincam_sim.masks.printing.MIN_PRINT_DOTS` dots a side (102 for the design tasks' 2 mm masks)."""
+    from mincam_sim.masks.printing import METRES_PER_INCH, MIN_PRINT_DOTS, few_print_dots
+
+    dpi = int(np.ceil(MIN_PRINT_DOTS * METRES_PER_INCH / side_m))
+    while few_print_dots(side_m, side_m, dpi) is not None:  # the dot grid rounds: the first dpi that gives them
+        dpi += 1
+    return dpi
+
+
 def check_shared(record: Any) -> None:
-    """The checks of :data:`SHARED` and ``film_t_min < film_t_max`` on ``record`` (any design task's sizes)."""
+    """The checks of :data:`SHARED`, ``film_t_min < film_t_max`` and a dpi that prints every mask (2 mm a side)
+    as enough dots to show it, on ``record`` (any design task's sizes)."""
     check_ranges(record, SHARED)
     if not record.film_t_min < record.film_t_max:
         refuse(record, ("film_t_min", "film_t_max"), "must satisfy 0 <= t_min < t_max <= 1")
+    lowest = lowest_printable_dpi()
+    if record.dpi < lowest:
+        from mincam_sim.masks.printing import MIN_PRINT_DOTS
+
+        refuse(record, ("dpi",), f"must be at least {lowest} dots per inch to print each {1e3 * paper.MASK_SIZE_M:g} "
+                                 f"mm mask as at least {MIN_PRINT_DOTS} dots a side")
 
 
 def memory_bytes(*counts: float) -> float:
@@ -151,4 +170,4 @@ def check_memory(record: Any, fields: tuple[str, ...], n_bytes: float, what: str
 
 
 __all__ = ["MAX_SEED", "MEMORY_LIMIT_BYTES", "SHARED", "FieldError", "Range", "check_memory", "check_ranges",
-           "check_shared", "memory_bytes", "refuse"]
+           "check_shared", "lowest_printable_dpi", "memory_bytes", "refuse"]

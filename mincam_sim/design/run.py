@@ -5,6 +5,7 @@ figures), all written atomically. A finished design of another identity in the s
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -52,10 +53,65 @@ def _sheet_offsets_m(task: tr.TrackingTask) -> list[tuple[float, float]]:
     return [(dx / tr.SPACING_M * task.spacing_m, dy / tr.SPACING_M * task.spacing_m) for dx, dy in tr.OFFSETS_M]
 
 
+def _sheet_names(task: tr.TrackingTask) -> tuple[list[str], str]:
+    """The labels of the four masks on the print sheet and its title (what :func:`run_design` writes)."""
+    return ([f"{p} mixel" for p in tr.POSITIONS],
+            f"designed tracking masks (seed {task.seed}), seen from the detectors")
+
+
 def check_printable(task: tr.TrackingTask) -> None:
-    """Refuse a task whose print sheet (the four masks at its spacing and dpi) would be too large: what the run
-    writes last, refused before any work (:func:`~mincam_sim.masks.sheet.check_print_sheet`)."""
-    check_print_sheet(task.baseline_masks(), _sheet_offsets_m(task), task.dpi, task.film())
+    """Refuse a task whose print sheet (the four masks at their places, at its spacing and dpi) cannot be written:
+    what the run writes last, refused before any work (:func:`~mincam_sim.masks.sheet.check_print_sheet`).
+
+    Raises
+    ------
+    checks.FieldError
+        ``spacing_m`` and ``dpi`` whose sheet holds more than ``MAX_TEXELS`` dots (naming the largest spacing at
+        this dpi and the dpis that work at this spacing), each inside the ranges of :data:`~.checks.SHARED` (a dpi
+        too low for the masks' dots is refused by the task itself, :func:`~.checks.check_shared`).
+    """
+    from mincam_sim.design import checks
+    from mincam_sim.masks.mask import MAX_TEXELS
+    from mincam_sim.masks.sheet import print_sheet_dots
+
+    masks = task.baseline_masks(16)  # the sheet depends on the masks' sizes and places, not on their texels
+    names, title = _sheet_names(task)
+
+    def dots(spacing_m: float, dpi: float) -> tuple[int, int]:
+        offsets = [(dx / tr.SPACING_M * spacing_m, dy / tr.SPACING_M * spacing_m) for dx, dy in tr.OFFSETS_M]
+        return print_sheet_dots(masks, offsets, dpi, task.film(), names, title)
+
+    def fits(spacing_m: float, dpi: float) -> bool:
+        width, height = dots(spacing_m, dpi)
+        return width * height <= MAX_TEXELS
+
+    lowest_dpi = float(checks.lowest_printable_dpi(tr.MASK_SIZE_M))  # a lower one is refused with the task
+    if fits(task.spacing_m, task.dpi):
+        check_print_sheet(masks, _sheet_offsets_m(task), task.dpi, task.film(), names, title)
+        return
+    dpi_range, spacing_range = checks.SHARED["dpi"], checks.SHARED["spacing_m"]
+    width, height = dots(task.spacing_m, task.dpi)
+    at_dpi = (f"at {task.dpi:g} dpi the spacing can be at most "
+              f"{np.floor(_largest(lambda s: fits(s, task.dpi), spacing_range.low, spacing_range.high) * 1e4) / 1e4:g}"
+              " m" if fits(spacing_range.low, task.dpi) else f"no spacing fits at {task.dpi:g} dpi")
+    at_spacing = (f"at spacing {task.spacing_m:g} m the dpi can be {lowest_dpi:g} to "
+                  f"{np.floor(_largest(lambda d: fits(task.spacing_m, d), lowest_dpi, dpi_range.high)):g}"
+                  if fits(task.spacing_m, lowest_dpi) else f"no dpi fits at spacing {task.spacing_m:g} m")
+    checks.refuse(task, ("spacing_m", "dpi"),
+                  f"must give a print sheet of at most {MAX_TEXELS} dots (the four masks at their places with "
+                  f"margins, marks and notes; this one is {width} x {height}): {at_dpi}; {at_spacing}")
+
+
+def _largest(fits: Callable[[float], bool], low: float, high: float, rel_tol: float = 1e-4) -> float:
+    """The largest ``x`` in ``[low, high]`` with ``fits(x)``, given ``fits(low)`` and that ``fits`` holds on an
+    interval starting at ``low`` (bisection to ``rel_tol`` of ``high``; the result itself fits)."""
+    if fits(high):
+        return high
+    lo, hi = low, high
+    while hi - lo > rel_tol * high:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if fits(mid) else (lo, mid)
+    return lo
 
 
 #: The sequence fields of :class:`~.tracking.TrackingTask`: field -> (length, None for any; its form and unit).
@@ -252,7 +308,7 @@ def run_design(task_name: str, out_dir: str | Path, quick: bool = False, seed: i
                       "total": time.perf_counter() - start},
     }
     write_print_sheet(list(result.printer_masks), offsets_m, task.dpi, task.film(), out / "print_sheet.png",
-                      names=labels, title=f"designed {task_name} masks (seed {seed}), seen from the detectors")
+                      names=labels, title=_sheet_names(task)[1])  # what check_printable measured
     atomic_write_json(out / "design.json", report, indent=1, default=float)
     check_identity(out, identity, overwrite=True, name=IDENTITY_FILE)  # last: the design is finished
     return report
@@ -349,7 +405,7 @@ def _write_figures_and_data(out: Path, task: tr.TrackingTask, result, ev: _Evalu
     if ev.learned is not None:
         result.decoder.to_json(out / "decoder.json")
     plot_loss(result.histories, result.start, out / "loss.png")
-    labels = [f"{p} mixel" for p in tr.POSITIONS]
+    labels = _sheet_names(task)[0]
     extra = field.printer_masks if field is not None else {}
     printed = {short: [film.print(m) for m in extra[label]] for label, short in SUITE_KEYS.items() if label in extra}
     plot_masks({"current ramps (baseline)": ev.current, "designed": ev.designed, **printed}, labels,

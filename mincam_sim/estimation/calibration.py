@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from mincam_sim.errors import InputError
 from mincam_sim.storage.atomic import atomic_write_text
 
 _RANGE_TOLERANCE = 1e-9  # relative to the fitted range: points this close to its boundary are not flagged
@@ -105,10 +106,39 @@ def _write_json(path: str | Path, payload: dict[str, Any]) -> None:
 
 
 def _read_json(path: str | Path, kind: str) -> dict[str, Any]:
-    payload = json.loads(Path(path).read_text())
-    if payload.get("kind") != kind:
-        raise ValueError(f"{path}: expected a JSON file with kind={kind!r}, got kind={payload.get('kind')!r}")
+    try:
+        payload = json.loads(Path(path).read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise InputError(f"{path}: cannot read a {kind} JSON file ({err}); give a file written by "
+                         f"{kind}.to_json") from None
+    if not isinstance(payload, dict) or payload.get("kind") != kind:
+        got = payload.get("kind") if isinstance(payload, dict) else type(payload).__name__
+        raise InputError(f"{path}: expected a JSON file with kind={kind!r}, got kind={got!r}")
     return payload
+
+
+def _checked_payload(payload: Any, kind: str, keys: tuple[str, ...]) -> dict[str, Any]:
+    """``payload`` when it is a mapping holding ``keys``; otherwise one InputError naming what is missing."""
+    if not isinstance(payload, dict):
+        raise InputError(f"{kind}.from_dict needs a dict (from to_dict), got {type(payload).__name__}")
+    missing = [k for k in keys if k not in payload]
+    if missing:
+        raise InputError(f"{kind} data lacks {', '.join(missing)}: give what {kind}.to_dict / to_json wrote")
+    return payload
+
+
+def _checked_calibration_numbers(kind: str, degree: Any, n_coefficients: int, expected: int,
+                                 ranges: np.ndarray, values: np.ndarray) -> None:
+    """Refuse (InputError) a loaded calibration whose degree, coefficient count, fitted range or numbers cannot
+    be those of a fit: it would evaluate to nonsense (a zero-width range divides by zero)."""
+    if isinstance(degree, bool) or not isinstance(degree, int) or degree < 0:
+        raise InputError(f"{kind} data: degree must be an integer >= 0, got {degree!r}")
+    if n_coefficients != expected:
+        raise InputError(f"{kind} data: a degree-{degree} calibration has {expected} coefficients, got "
+                         f"{n_coefficients}")
+    if not (np.all(np.isfinite(values)) and np.all(np.isfinite(ranges)) and np.all(ranges[..., 1] > ranges[..., 0])):
+        raise InputError(f"{kind} data: coefficients must be finite and each fitted range (min, max) must have "
+                         f"min < max, got ranges {ranges.tolist()}")
 
 
 # ------------------------------------------------------------------------------------------------ 1D
@@ -246,15 +276,22 @@ class Calibration1D:
 
     @classmethod
     def from_dict(cls, payload: dict[str, Any]) -> Calibration1D:
-        """Inverse of :meth:`to_dict`."""
-        return cls(
-            int(payload["degree"]),
-            np.asarray(payload["coefficients"], dtype=np.float64),
-            (float(payload["fit_range"][0]), float(payload["fit_range"][1])),
-            float(payload["rms_residual_m"]),
-            int(payload["n_points"]),
-            dict(payload.get("metadata", {})),
-        )
+        """Inverse of :meth:`to_dict`; data that cannot be a fit's (missing keys, a coefficient count that is not
+        ``degree + 1``, an empty or non-finite range) is an InputError."""
+        payload = _checked_payload(payload, "Calibration1D",
+                                   ("degree", "coefficients", "fit_range", "rms_residual_m", "n_points"))
+        try:
+            coefficients = np.asarray(payload["coefficients"], dtype=np.float64).reshape(-1)
+            fit_range = np.asarray(payload["fit_range"], dtype=np.float64).reshape(2)
+            rms, n_points = float(payload["rms_residual_m"]), int(payload["n_points"])
+        except (TypeError, ValueError) as err:
+            raise InputError(f"Calibration1D data: coefficients must be numbers, fit_range two numbers, "
+                             f"rms_residual_m a number and n_points an integer ({err})") from None
+        degree = payload["degree"]
+        _checked_calibration_numbers("Calibration1D", degree, coefficients.size,
+                                     degree + 1 if isinstance(degree, int) else -1, fit_range, coefficients)
+        return cls(degree, coefficients, (float(fit_range[0]), float(fit_range[1])), rms, n_points,
+                   dict(payload.get("metadata", {})))
 
     def to_json(self, path: str | Path) -> None:
         """Write :meth:`to_dict` to ``path`` (floats round-trip exactly)."""
@@ -485,17 +522,33 @@ class Calibration2D:
 
     @classmethod
     def from_dict(cls, payload: dict[str, Any]) -> Calibration2D:
-        """Inverse of :meth:`to_dict`."""
-        return cls(
-            int(payload["degree"]),
-            [(int(i), int(j)) for i, j in payload["exponents"]],
-            np.stack([payload["coefficients_x"], payload["coefficients_y"]], axis=1).astype(np.float64),
-            np.asarray(payload["fit_box"], dtype=np.float64),
-            np.asarray(payload["fit_hull"], dtype=np.float64).reshape(-1, 2),
-            np.asarray(payload["rms_residual_m"], dtype=np.float64),
-            int(payload["n_points"]),
-            dict(payload.get("metadata", {})),
-        )
+        """Inverse of :meth:`to_dict`; data that cannot be a fit's (missing keys, exponents that are not those of
+        ``degree``, coefficient counts that differ, an empty or non-finite box) is an InputError."""
+        payload = _checked_payload(payload, "Calibration2D",
+                                   ("degree", "exponents", "coefficients_x", "coefficients_y", "fit_box",
+                                    "fit_hull", "rms_residual_m", "n_points"))
+        degree = payload["degree"]
+        try:
+            exponents = [(int(i), int(j)) for i, j in payload["exponents"]]
+            cx = np.asarray(payload["coefficients_x"], dtype=np.float64).reshape(-1)
+            cy = np.asarray(payload["coefficients_y"], dtype=np.float64).reshape(-1)
+            box = np.asarray(payload["fit_box"], dtype=np.float64).reshape(2, 2)
+            hull = np.asarray(payload["fit_hull"], dtype=np.float64).reshape(-1, 2)
+            rms = np.asarray(payload["rms_residual_m"], dtype=np.float64).reshape(2)
+            n_points = int(payload["n_points"])
+        except (TypeError, ValueError) as err:
+            raise InputError(f"Calibration2D data: exponents must be (i, j) pairs, coefficients numbers, fit_box "
+                             f"2 x 2, fit_hull (x, y) points, rms_residual_m two numbers ({err})") from None
+        expected = bivariate_exponents(degree) if isinstance(degree, int) and not isinstance(degree, bool) else None
+        _checked_calibration_numbers("Calibration2D", degree, cx.size if cx.size == cy.size else -1,
+                                     len(expected) if expected is not None else -2, box, np.concatenate([cx, cy]))
+        if exponents != expected:
+            raise InputError(f"Calibration2D data: exponents must be those of degree {degree}, {expected}, got "
+                             f"{exponents}")
+        if len(hull) < 3 or not np.all(np.isfinite(hull)):
+            raise InputError(f"Calibration2D data: fit_hull must be at least 3 finite (x, y) points, got {len(hull)}")
+        return cls(degree, exponents, np.stack([cx, cy], axis=1), box, hull, rms, n_points,
+                   dict(payload.get("metadata", {})))
 
     def to_json(self, path: str | Path) -> None:
         """Write :meth:`to_dict` to ``path`` (floats round-trip exactly)."""

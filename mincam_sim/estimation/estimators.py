@@ -24,10 +24,29 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
+from mincam_sim.errors import InputError, is_finite_real
+
 ChangeNorm = Literal["sum", "l1", "l2", "max"]
 WindowName = Literal["hann", "hamming", "blackman", "rect"]
 
 _CANCELLATION_EPS = 64 * np.finfo(np.float64).eps
+MAX_FFT_SAMPLES = 1 << 26  # zero-padded FFT length (1 GiB of complex128): beyond it the peak search is refused
+
+
+def _number(name: str, value: float, low: float = -np.inf, *, low_open: bool = False, unit: str = "") -> float:
+    """``value`` as a float when it is a finite real number ``>= low`` (``> low`` with ``low_open``); otherwise one
+    :class:`~mincam_sim.errors.InputError` naming ``name``, the rule and what was given."""
+    if not is_finite_real(value) or (value <= low if low_open else value < low):
+        rule = "a finite number" + ("" if low == -np.inf else f" {'>' if low_open else '>='} {low:g}")
+        raise InputError(f"{name} must be {rule}{unit}, got {value!r}")
+    return float(value)
+
+
+def _count(name: str, value: int, low: int) -> int:
+    """``value`` as an int when it is a whole number ``>= low`` (a float such as 16.0 too); else InputError."""
+    if not is_finite_real(value) or int(value) != value or value < low:
+        raise InputError(f"{name} must be an integer >= {low}, got {value!r}")
+    return int(value)
 
 
 # -------------------------------------------------------------------------------------------- change / ratios
@@ -50,7 +69,11 @@ def change_statistic(measurements: ArrayLike, background: ArrayLike, norm: Chang
     -------
     numpy.ndarray, shape (n_frames,)
     """
-    delta = np.asarray(measurements, dtype=np.float64) - np.asarray(background, dtype=np.float64)
+    m, b = np.asarray(measurements, dtype=np.float64), np.asarray(background, dtype=np.float64)
+    if m.ndim == 2 and b.ndim > 0 and b.shape[-1:] not in ((1,), m.shape[-1:]):
+        raise InputError(f"background must hold one value per mixel ({m.shape[-1]}) or one for all, got shape "
+                         f"{b.shape} for measurements of shape {m.shape}")
+    delta = m - b
     if delta.ndim == 1:
         delta = delta[:, np.newaxis]
     if delta.ndim != 2:
@@ -74,8 +97,7 @@ def detect_change(
     The change is :func:`change_statistic` (default: the paper's total change ``|dP1 + dP2 + ...|``);
     ``threshold`` is in the same units. :func:`noise_threshold` derives one from background-only frames.
     """
-    if not np.isfinite(threshold) or threshold < 0:
-        raise ValueError(f"threshold must be a finite number >= 0, got {threshold!r}")
+    _number("threshold", threshold, 0.0, unit=" (the units of the measurements)")
     return change_statistic(measurements, background, norm) > threshold
 
 
@@ -91,7 +113,11 @@ def noise_threshold(
     if frames.ndim == 1:
         frames = frames[:, np.newaxis]
     if frames.ndim != 2 or frames.shape[0] < 2:
-        raise ValueError(f"background_frames must have shape (n_frames >= 2, n_mixels), got {frames.shape}")
+        raise InputError(f"background_frames must have shape (n_frames >= 2, n_mixels), got {frames.shape}")
+    if not np.all(np.isfinite(frames)):
+        raise InputError(f"background_frames hold {int(np.sum(~np.isfinite(frames)))} NaN or infinite value(s): "
+                         "drop those frames first")
+    _number("n_sigma", n_sigma, 0.0, unit=" standard deviations")
     background = frames.mean(axis=0)
     stat = change_statistic(frames, background, norm)
     return background, float(stat.mean() + n_sigma * stat.std(ddof=1))
@@ -125,7 +151,7 @@ def intrusion_position(dP_x: ArrayLike, dP_1mx: ArrayLike, min_total: float = 0.
     """
     a = np.asarray(dP_x, dtype=np.float64)
     b = np.asarray(dP_1mx, dtype=np.float64)
-    return _safe_ratio(a, a + b, np.abs(a) + np.abs(b), min_total)
+    return _safe_ratio(a, a + b, np.abs(a) + np.abs(b), _number("min_total", min_total, 0.0))
 
 
 def _as_frames(dP: ArrayLike, n_mixels: int, name: str) -> np.ndarray:
@@ -163,6 +189,7 @@ def track_3(dP: ArrayLike, min_total: float = 0.0) -> np.ndarray:
     the result, since the denominator comes from a different mixel than each numerator.
     """
     d = _as_frames(dP, 3, "track_3")
+    min_total = _number("min_total", min_total, 0.0)
     total = d[..., 2]
     x = _safe_ratio(d[..., 0], total, np.abs(total), min_total)
     y = _safe_ratio(d[..., 1], total, np.abs(total), min_total)
@@ -191,7 +218,8 @@ def centroid(
         ``integral(D) == 0``.
     """
     d = np.asarray(disturbance, dtype=np.float64)
-    multi = isinstance(coords, tuple | list)
+    # a list or tuple of arrays is several coordinates; a list of numbers is one coordinate array
+    multi = isinstance(coords, tuple | list) and len(coords) > 0 and not all(np.ndim(c) == 0 for c in coords)
     coord_arrays = [np.asarray(c, dtype=np.float64) for c in (coords if multi else [coords])]
     grid_ndim = max(c.ndim for c in coord_arrays)
     if grid_ndim == 0 or grid_ndim > d.ndim:
@@ -294,10 +322,17 @@ def spectrum(
         raise ValueError(f"signal must be 1D with at least 8 samples, got shape {x.shape}")
     if not np.all(np.isfinite(x)):
         raise ValueError("signal has NaN or inf values; interpolate them first (sampling must stay uniform)")
-    if not np.isfinite(sample_rate_hz) or sample_rate_hz <= 0:
-        raise ValueError(f"sample_rate_hz must be a finite number > 0, got {sample_rate_hz!r}")
-    if int(zero_pad_factor) < 1:
-        raise ValueError(f"zero_pad_factor must be an integer >= 1, got {zero_pad_factor!r}")
+    _number("sample_rate_hz", sample_rate_hz, 0.0, low_open=True, unit=" Hz")
+    zero_pad_factor = _count("zero_pad_factor", zero_pad_factor, 1)
+    if zero_pad_factor * x.size > MAX_FFT_SAMPLES:
+        raise InputError(f"zero_pad_factor {zero_pad_factor} x {x.size} samples exceeds {MAX_FFT_SAMPLES} FFT "
+                         f"points: give zero_pad_factor <= {max(1, MAX_FFT_SAMPLES // x.size)}")
+    for name, limit in (("min_frequency_hz", min_frequency_hz), ("max_frequency_hz", max_frequency_hz)):
+        if limit is not None:
+            _number(name, limit, 0.0, unit=" Hz (or None)")
+    if min_frequency_hz is not None and max_frequency_hz is not None and min_frequency_hz > max_frequency_hz:
+        raise InputError(f"min_frequency_hz {min_frequency_hz:g} must not exceed max_frequency_hz "
+                         f"{max_frequency_hz:g}")
     n = x.size
     w = window_weights(window, n)
     weighted = (x - np.sum(w * x) / np.sum(w)) * w
@@ -356,6 +391,10 @@ def frequency_error_std(
     ``sample_rate_hz``. With ``window="rect"`` it equals the Cramer-Rao bound ``12 / (SNR N (N^2 - 1))``,
     SNR = A^2 / (2 sigma^2), for white Gaussian noise of standard deviation sigma.
     """
+    _number("amplitude", amplitude, 0.0, low_open=True)
+    _number("noise_std", noise_std, 0.0)
+    n_samples = _count("n_samples", n_samples, 2)
+    _number("sample_rate_hz", sample_rate_hz, 0.0, low_open=True, unit=" Hz")
     w = window_weights(window, n_samples)
     n = np.arange(n_samples) - (n_samples - 1) / 2.0
     var = 2 * noise_std**2 * np.sum(n**2 * w**2) / (amplitude**2 * np.sum(n**2 * w) ** 2)
@@ -368,9 +407,11 @@ def scene_frequency(omega_df_rad_per_m: float, d_f_m: float, depth_m: ArrayLike)
     ``omega_df_rad_per_m`` is the mask's own angular spatial frequency [rad/m], ``d_f_m`` the mask-to-detector
     distance [m] and ``depth_m`` the detector-to-scene distance [m] (> 0).
     """
+    _number("omega_df_rad_per_m", omega_df_rad_per_m, 0.0, unit=" rad/m")
+    _number("d_f_m", d_f_m, 0.0, low_open=True, unit=" m")
     depth = np.asarray(depth_m, dtype=np.float64)
-    if np.any(~np.isfinite(depth) | (depth <= 0)) or not d_f_m > 0:
-        raise ValueError(f"depth_m and d_f_m must be finite and > 0, got depth_m={depth_m!r}, d_f_m={d_f_m}")
+    if np.any(~np.isfinite(depth) | (depth <= 0)):
+        raise InputError(f"depth_m must be finite and > 0 [m], got depth_m={depth_m!r}")
     result = omega_df_rad_per_m * d_f_m / depth
     return float(result) if result.ndim == 0 else result
 
@@ -484,7 +525,8 @@ def speed_track(
     ``hop_samples`` defaults to ``window_samples // 2``. Each window must hold a few cycles of the signal.
     """
     x = np.asarray(signal, dtype=np.float64)
-    hop = window_samples // 2 if hop_samples is None else hop_samples
+    window_samples = _count("window_samples", window_samples, 8)
+    hop = window_samples // 2 if hop_samples is None else _count("hop_samples", hop_samples, 1)
     if window_samples < 8 or hop < 1 or window_samples > x.size:
         raise ValueError(
             f"need 8 <= window_samples <= len(signal) ({x.size}) and hop_samples >= 1, "
@@ -557,8 +599,9 @@ def trajectory_from_speeds(
         raise ValueError(f"v_left and v_right must be 1D arrays of one length, got {vl.shape} and {vr.shape}")
     if not np.all(np.isfinite(vl)) or not np.all(np.isfinite(vr)):
         raise ValueError("v_left / v_right contain NaN or inf; fill gaps (interpolate) before integrating")
-    if not np.isfinite(width_m) or width_m <= 0:
-        raise ValueError(f"width_m must be a finite number > 0 (mixel separation in metres), got {width_m!r}")
+    _number("width_m", width_m, 0.0, low_open=True, unit=" (mixel separation in metres)")
+    if len(initial_pose) != 3 or not all(is_finite_real(v) for v in initial_pose):
+        raise InputError(f"initial_pose must be three finite numbers (x_m, y_m, heading_rad), got {initial_pose!r}")
     dt = np.broadcast_to(np.asarray(dt_s, dtype=np.float64), vl.shape)
     if np.any(~np.isfinite(dt) | (dt <= 0)):
         raise ValueError("dt_s must be finite and > 0 (seconds per step)")

@@ -126,11 +126,27 @@ def _source(path: str | Path, encoding: str) -> tuple[Path, str]:
     if encoding not in ("linear", "srgb"):
         raise InputError(f"encoding must be 'linear' or 'srgb', got {encoding!r}")
     p = Path(path)
-    fmt = imageio.sniff_format(p, "mask file")
+    with _unreadable_file_is_input_error():
+        fmt = imageio.sniff_format(p, "mask file")
     if fmt == "exr" and encoding == "srgb":
         raise InputError(f"mask file {str(p)!r} is OpenEXR, whose values are linear transmission; the sRGB "
                          "encoding applies to PNG files only (use mask_encoding = \"linear\")")
     return p, fmt
+
+
+@contextlib.contextmanager
+def _unreadable_file_is_input_error() -> Iterator[None]:
+    """The image reader's ``ValueError`` (a directory, an empty, damaged or non-image file) as the
+    :class:`~mincam_sim.errors.InputError` that :func:`load` promises, with the reader's message."""
+    try:
+        yield
+    except InputError:
+        raise
+    except ValueError as err:
+        refused = InputError(str(err))
+        for note in getattr(err, "__notes__", ()):  # what the image library said (see _library_output_held)
+            refused.add_note(note)
+        raise refused from None
 
 
 _C_OUTPUT_LOCK = threading.Lock()
@@ -203,7 +219,7 @@ def _read_exr(p: Path) -> tuple[np.ndarray, dict, dict]:
 
     OpenEXR's own lines about a damaged file are held back (:func:`_library_output_held`): a truncated file is
     one ``ValueError`` saying so, nothing more."""
-    with _library_output_held():
+    with _unreadable_file_is_input_error(), _library_output_held():
         arr, info = imageio.read_exr(p)
     arr = np.asarray(arr, dtype=np.float64)
     t = _to_transmission(arr, info["channels"], str(p))
@@ -224,7 +240,8 @@ def _read_exr(p: Path) -> tuple[np.ndarray, dict, dict]:
 
 def _read_png(p: Path, encoding: str) -> tuple[np.ndarray, dict, dict]:
     """A PNG mask's transmission (value / 255 or / 65535, sRGB-decoded if asked), its info and no stored metadata."""
-    arr, info = imageio.read_png(p)
+    with _unreadable_file_is_input_error():
+        arr, info = imageio.read_png(p)
     if encoding == "srgb":
         arr = np.asarray(arr, dtype=np.float64).copy()
         colour = [k for k, c in enumerate(info["channels"]) if c != "A"] if arr.ndim == 3 else None

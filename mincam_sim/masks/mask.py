@@ -29,6 +29,7 @@ from mincam_sim.masks.profiles import MaskProfile
 DEFAULT_MASK_SIZE_M = paper.MASK_SIZE_M  # [m] square mask side: with d_f = 2 mm, a ~53 degree field of view
 DEFAULT_RESOLUTION = 256  # texels per side of generated masks
 MAX_TEXELS = 8192 * 8192
+MAX_SINUSOID_OMEGA_RAD_PER_M = 1e8  # [rad/m] a 63 nm period: below it the profile is beyond optics and float32
 
 
 @dataclass(frozen=True, eq=False)
@@ -86,7 +87,7 @@ class Mask:
         lo, hi = float(t.min()), float(t.max())
         if lo < 0.0 or hi > 1.0:
             raise InputError(
-                f"mask {self.name!r}: transmission must lie in [0, 1] but spans [{lo:.4g}, {hi:.4g}];"
+                f"mask {self.name!r}: transmission must lie in [0, 1] but spans [{lo:.10g}, {hi:.10g}];"
                 " rescale it (e.g. divide by its maximum) or clip it"
             )
         for key in ("width_m", "height_m"):
@@ -148,10 +149,22 @@ def _normalized_grid(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _check_resolution(resolution: int | tuple[int, int]) -> tuple[int, int]:
-    h, w = (resolution, resolution) if np.isscalar(resolution) else tuple(resolution)  # type: ignore[misc]
-    if int(h) != h or int(w) != w or h < 1 or w < 1:
-        raise InputError(f"mask resolution must be positive integers (H, W), got {resolution!r}")
-    return int(h), int(w)
+    """``(H, W)`` texels from an integer or a pair of integers; anything else, or more than :data:`MAX_TEXELS`
+    texels, is refused (InputError) before an array is allocated."""
+    if np.isscalar(resolution):
+        hw: tuple = (resolution, resolution)
+    else:
+        try:
+            hw = tuple(resolution)  # type: ignore[arg-type]
+        except TypeError:
+            hw = ()
+    if (len(hw) != 2 or not all(is_finite_real(v) and int(v) == v and v >= 1 for v in hw)):
+        raise InputError(f"mask resolution must be a positive integer or a pair of them (H, W) in texels, got "
+                         f"{resolution!r}")
+    h, w = int(hw[0]), int(hw[1])
+    if h * w > MAX_TEXELS:
+        raise InputError(f"mask resolution {(h, w)} is too large (max {MAX_TEXELS} texels); give a smaller one")
+    return h, w
 
 
 def from_function(
@@ -208,8 +221,8 @@ def constant(
     height_m: float | None = None,
 ) -> Mask:
     """Uniform mask of transmission ``value`` (1 = open aperture)."""
-    if not (np.isfinite(value) and 0.0 <= value <= 1.0):
-        raise InputError(f"constant mask transmission must lie in [0, 1], got {value!r}")
+    if not (is_finite_real(value) and 0.0 <= value <= 1.0):
+        raise InputError(f"constant mask transmission must be a number in [0, 1], got {value!r}")
     return from_profile(prof.Constant(float(value)), f"constant_{value:g}", resolution, width_m, height_m,
                         kind="constant", value=value)
 
@@ -237,14 +250,19 @@ def sinusoid(
     direction_deg : float
         Direction t of the wave vector, degrees counter-clockwise from +x (right).
     """
-    if not np.isfinite(omega_rad_per_m) or omega_rad_per_m < 0:
-        raise InputError(f"omega_rad_per_m must be a finite frequency >= 0 [rad/m], got {omega_rad_per_m!r}")
-    if not (np.isfinite(direction_deg) and abs(direction_deg) <= 360.0):
+    if not is_finite_real(omega_rad_per_m) or not 0 <= omega_rad_per_m <= MAX_SINUSOID_OMEGA_RAD_PER_M:
+        raise InputError(f"omega_rad_per_m must be a frequency from 0 to {MAX_SINUSOID_OMEGA_RAD_PER_M:g} rad/m (a "
+                         f"period of at least {2e9 * np.pi / MAX_SINUSOID_OMEGA_RAD_PER_M:.3g} nm, finer than light "
+                         f"resolves), got {omega_rad_per_m!r}")
+    if not (is_finite_real(direction_deg) and abs(direction_deg) <= 360.0):
         raise InputError(f"direction_deg must be an angle in degrees between -360 and 360, got {direction_deg!r} "
                          "(take it modulo 360)")
-    if not (np.isfinite(phase_rad) and abs(phase_rad) <= 1e3):
+    if not (is_finite_real(phase_rad) and abs(phase_rad) <= 1e3):
         raise InputError(f"phase_rad must be a finite phase of at most 1000 rad in size, got {phase_rad!r} "
                          "(take it modulo 2 pi)")
+    for key, v in (("a0", a0), ("a1", a1)):
+        if not is_finite_real(v):
+            raise InputError(f"sinusoid {key} must be a finite number (a0 the mean, a1 the amplitude), got {v!r}")
     if a0 - abs(a1) < -1e-12 or a0 + abs(a1) > 1 + 1e-12:
         raise InputError(f"sinusoid a0={a0}, a1={a1} leaves [0, 1]: need a0 - |a1| >= 0 and a0 + |a1| <= 1")
     hgt = width_m if height_m is None else height_m

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mincam_sim.errors import InputError
+from mincam_sim.errors import InputError, is_finite_real
 from mincam_sim.masks.mask import MAX_TEXELS, Mask, resample
 from mincam_sim.storage import imageio
 from mincam_sim.storage.atomic import atomic_path
@@ -73,17 +73,18 @@ class PrintedFilm:
     gamma: float = 1.0
 
     def __post_init__(self) -> None:
-        if not (0.0 <= self.t_min < self.t_max <= 1.0):
+        if not (is_finite_real(self.t_min) and is_finite_real(self.t_max) and 0.0 <= self.t_min < self.t_max <= 1.0):
             raise InputError(
-                f"PrintedFilm: need 0 <= t_min < t_max <= 1, got t_min={self.t_min}, t_max={self.t_max}"
+                f"PrintedFilm: need 0 <= t_min < t_max <= 1, got t_min={self.t_min!r}, t_max={self.t_max!r}"
             )
-        if not (np.isfinite(self.dpi) and self.dpi > 0):
+        if not (is_finite_real(self.dpi) and self.dpi > 0):
             raise InputError(f"PrintedFilm: dpi must be a positive number of dots per inch, got {self.dpi!r}")
-        if self.levels is not None and (int(self.levels) != self.levels or self.levels < 2):
+        if self.levels is not None and (not is_finite_real(self.levels) or int(self.levels) != self.levels
+                                        or self.levels < 2):
             raise InputError(f"PrintedFilm: levels must be an integer >= 2 or None, got {self.levels!r}")
         if self.halftone not in (None, "ordered"):
             raise InputError(f"PrintedFilm: halftone must be None or 'ordered', got {self.halftone!r}")
-        if not (np.isfinite(self.gamma) and self.gamma > 0):
+        if not (is_finite_real(self.gamma) and self.gamma > 0):
             raise InputError(f"PrintedFilm: gamma must be positive, got {self.gamma!r}")
 
     @property

@@ -232,6 +232,20 @@ def _layout(notes: Sequence[str], masks: Sequence[Mask], pos: np.ndarray, dpi: f
     InputError
         A sheet of more than ``MAX_TEXELS`` dots at ``dpi``.
     """
+    layout, half_span = _layout_unchecked(notes, masks, pos, dpi)
+    width, height = layout.width, layout.height
+    if width * height > MAX_TEXELS:
+        span_cm = 100 * 2 * half_span
+        raise InputError(f"print sheet of {width} x {height} dots at {dpi:g} dpi is too large (max {MAX_TEXELS}): "
+                         f"it holds the masks at their places, {span_cm[0]:.3g} x {span_cm[1]:.3g} cm apart at the "
+                         "edges; lower the dpi, bring the mixels closer (their spacing) or print the masks on "
+                         "separate sheets")
+    return layout
+
+
+def _layout_unchecked(notes: Sequence[str], masks: Sequence[Mask], pos: np.ndarray, dpi: float
+                      ) -> tuple[_Layout, np.ndarray]:
+    """The sheet's layout at ``dpi`` whatever its size, and the masks' half span [m] around the reference centre."""
     from PIL import ImageFont
 
     font = ImageFont.load_default(size=max(6, round(TEXT_PT / 72 * dpi)))
@@ -246,13 +260,27 @@ def _layout(notes: Sequence[str], masks: Sequence[Mask], pos: np.ndarray, dpi: f
     inner_h = 2 * _px(half_span[1], dpi) + 2 * margin
     width = max(inner_w, text_w + 2 * margin)
     height = inner_h + line_h * (len(notes) + 1) + margin
-    if width * height > MAX_TEXELS:
-        span_cm = 100 * 2 * half_span
-        raise InputError(f"print sheet of {width} x {height} dots at {dpi:g} dpi is too large (max {MAX_TEXELS}): "
-                         f"it holds the masks at their places, {span_cm[0]:.3g} x {span_cm[1]:.3g} cm apart at the "
-                         "edges; lower the dpi, bring the mixels closer (their spacing) or print the masks on "
-                         "separate sheets")
-    return _Layout(width, height, inner_h, margin, line_h, font)
+    return _Layout(width, height, inner_h, margin, line_h, font), half_span
+
+
+def print_sheet_dots(masks: Sequence[Mask], positions_m: Sequence[Sequence[float]], dpi: float,
+                     film: PrintedFilm | None = None, names: Sequence[str] | None = None,
+                     title: str = "") -> tuple[int, int]:
+    """The size (width, height) [dots] of the sheet :func:`write_print_sheet` would draw, whether or not it fits.
+
+    Parameters are those of :func:`write_print_sheet` (without the file). A sheet is written only when
+    ``width * height`` is at most ``MAX_TEXELS`` (8192 x 8192 dots).
+
+    Raises
+    ------
+    InputError
+        No masks, a position or label per mask missing, a dpi out of 50..4800, or masks that overlap on the sheet.
+    """
+    masks, pos, labels = _checked_inputs(masks, positions_m, dpi, names)
+    film = film if film is None or film.dpi == dpi else replace(film, dpi=float(dpi))
+    _check_overlaps(masks, pos, labels)
+    layout, _ = _layout_unchecked(_sheet_notes(title, film, dpi, labels, pos, masks), masks, pos, dpi)
+    return layout.width, layout.height
 
 
 def _mask_dots(m: Mask, shape: tuple[int, int], film: PrintedFilm | None) -> np.ndarray:
@@ -359,4 +387,4 @@ def _write_pdf(sheet: np.ndarray, dpi: float, path: Path) -> None:
         fig.savefig(tmp, format="pdf", dpi=dpi)
 
 
-__all__ = ["SheetPlacement", "check_print_sheet", "write_print_sheet"]
+__all__ = ["SheetPlacement", "check_print_sheet", "print_sheet_dots", "write_print_sheet"]

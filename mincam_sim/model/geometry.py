@@ -19,7 +19,11 @@ Vec3 = tuple[float, float, float]
 
 
 def _as_vec3(value, name: str) -> np.ndarray:
-    arr = np.asarray(value, dtype=float)
+    """``value`` as a float64 (3,) array; anything else (strings, NaN, two components) is one InputError."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        arr = np.empty(0)
     if arr.shape != (3,) or not np.all(np.isfinite(arr)):
         raise InputError(f"{name} must be three finite numbers [m], got {value!r}")
     return arr

@@ -23,6 +23,9 @@ from mincam_sim.model.geometry import Pose
 DEFAULT_DETECTOR_SIZE_M = paper.DETECTOR_SIZE_M  # [m] 0.1 mm: the paper's 48x48-pixel region of interest
 DEFAULT_D_F_M = paper.D_F_M  # [m] mask-to-detector distance
 PAPER_SPACING_M = paper.SPACING_M  # [m] distance between neighbouring mixels in the paper's prototype
+# [m] farthest a mixel may sit from its mincam's centre (the mean detector position, the origin of its scene):
+# float32 ray origins there are exact to 10 m x 2^-24 = 0.6 um, 0.6 % of the default detector
+MAX_MINCAM_RADIUS_M = 10.0
 
 
 def _real(where: str, value, unit: str = "metres") -> float:
@@ -166,6 +169,16 @@ class Mincam:
         if len(set(names)) != len(names):
             raise InputError(f"mixel names must be unique, got {names}")
         object.__setattr__(self, "mixels", mixels)
+        centres = np.array([m.pose.position_m for m in mixels], dtype=np.float64)
+        radius_m = np.linalg.norm(centres - centres.mean(axis=0), axis=1)
+        if radius_m.max() > MAX_MINCAM_RADIUS_M:
+            far = mixels[int(np.argmax(radius_m))]
+            raise InputError(
+                f"mixel {far.name!r} sits {radius_m.max():.4g} m from its mincam's centre (the mean detector "
+                f"position), more than {MAX_MINCAM_RADIUS_M:g} m: the scene is traced in float32 around that centre, "
+                f"where positions {radius_m.max():.3g} m out are only exact to "
+                f"{radius_m.max() * 2.0**-24 * 1e6:.3g} um; "
+                "make each group of nearby mixels a mincam of its own")
         if not self.allow_overlap:
             for i, j in _overlap_candidates(mixels):
                 a, b = mixels[i], mixels[j]

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mincam_sim.errors import InputError, is_finite_real
 from mincam_sim.estimation.estimators import noise_threshold
 from mincam_sim.model.sensor import SensorModel
 
@@ -75,10 +76,18 @@ def read_out(
     background_in = np.asarray(background_irradiance_w_m2, dtype=np.float64)
     for name, values in (("frame_irradiance_w_m2", frames_in), ("background_irradiance_w_m2", background_in)):
         if not np.all(np.isfinite(values)):
-            raise ValueError(f"read_out: {name} has NaN/inf values; a read-out needs finite irradiances")
+            raise InputError(f"read_out: {name} has NaN/inf values; a read-out needs finite irradiances")
+    if background_in.ndim != 1 or frames_in.shape[-1:] != background_in.shape:
+        raise InputError(f"read_out: background_irradiance_w_m2 must hold one value per mixel, the last axis of "
+                         f"frame_irradiance_w_m2 {frames_in.shape}; got shape {background_in.shape}")
+    if (not is_finite_real(n_background_frames) or int(n_background_frames) != n_background_frames
+            or n_background_frames < 2):
+        raise InputError(f"read_out: n_background_frames must be an integer >= 2 (the threshold needs a spread), "
+                         f"got {n_background_frames!r}")
+    n_background_frames = int(n_background_frames)
     peak = float(max(np.max(frames_in, initial=0.0), np.max(background_in, initial=0.0)))
     if not peak > 0:
-        raise ValueError("read_out: every irradiance is 0 (or there are none), so there is no exposure to set; "
+        raise InputError("read_out: every irradiance is 0 (or there are none), so there is no exposure to set; "
                          "the mixels see nothing lit")
     exposed = sensor.auto_exposed(peak, exposure_fill)
     shape = (n_background_frames, *np.shape(background_irradiance_w_m2))

@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from mincam_sim import paper
-from mincam_sim.errors import InputError
+from mincam_sim.errors import InputError, is_finite_real
 
 PLANCK_J_S = 6.62607015e-34  # [J s] exact (SI 2019)
 SPEED_OF_LIGHT_M_S = 299_792_458.0  # [m/s] exact
@@ -45,13 +45,17 @@ DEFAULT_PIXEL_PITCH_M = paper.PIXEL_PITCH_M  # [m] 48 x 2.2 um = 0.106 mm, consi
 MeasureMethod = Literal["aggregate", "per_pixel"]
 
 
+MAX_PIXELS_AVERAGED = 1 << 24  # a 4096 x 4096 region of interest: more pixels than any sensor averages into one
+POISSON_MEAN_CAP_E = 1e18  # [e-] numpy's Poisson sampler refuses means near 9.2e18; far above every full well
+
+
 def _check_positive_finite(name: str, value: float, hint: str) -> None:
-    if not np.isfinite(value) or value <= 0:
+    if not is_finite_real(value) or value <= 0:
         raise InputError(f"SensorModel.{name} must be a finite number > 0, got {value!r}; {hint}")
 
 
 def _check_non_negative_finite(name: str, value: float, hint: str) -> None:
-    if not np.isfinite(value) or value < 0:
+    if not is_finite_real(value) or value < 0:
         raise InputError(f"SensorModel.{name} must be a finite number >= 0, got {value!r}; {hint}")
 
 
@@ -103,7 +107,7 @@ class SensorModel:
 
     def __post_init__(self) -> None:
         _check_positive_finite("exposure_s", self.exposure_s, "use an exposure time in seconds, e.g. 10e-3")
-        if not np.isfinite(self.quantum_efficiency) or not 0 < self.quantum_efficiency <= 1:
+        if not is_finite_real(self.quantum_efficiency) or not 0 < self.quantum_efficiency <= 1:
             raise InputError(
                 f"SensorModel.quantum_efficiency must be in (0, 1], got {self.quantum_efficiency!r}; "
                 "give a fraction (0.6), not a percentage"
@@ -124,10 +128,13 @@ class SensorModel:
             )
         if isinstance(self.pixels_averaged, bool) or not isinstance(self.pixels_averaged, int | np.integer):
             raise InputError(f"SensorModel.pixels_averaged must be an integer, got {self.pixels_averaged!r}")
-        if self.pixels_averaged < 1:
+        if not 1 <= self.pixels_averaged <= MAX_PIXELS_AVERAGED:
             raise InputError(
-                f"SensorModel.pixels_averaged must be >= 1, got {self.pixels_averaged}; 1 is a single pixel"
+                f"SensorModel.pixels_averaged must be from 1 (a single pixel) to {MAX_PIXELS_AVERAGED} (4096 x 4096), "
+                f"got {self.pixels_averaged}"
             )
+        object.__setattr__(self, "bit_depth", int(self.bit_depth))  # numpy's int8(12) made 2**12 overflow to 0
+        object.__setattr__(self, "pixels_averaged", int(self.pixels_averaged))
         _check_positive_finite("detector_area_m2", self.detector_area_m2, "give the area in m^2, e.g. 1e-8")
 
     @classmethod
@@ -255,7 +262,8 @@ class SensorModel:
 
     def _measure_per_pixel(self, mean_electrons: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         n = self.pixels_averaged
-        lam = np.broadcast_to(mean_electrons[..., np.newaxis], (*mean_electrons.shape, n))
+        lam = np.broadcast_to(np.minimum(mean_electrons, POISSON_MEAN_CAP_E)[..., np.newaxis],
+                              (*mean_electrons.shape, n))
         electrons = np.minimum(rng.poisson(lam).astype(np.float64), self.full_well_e)
         electrons += rng.normal(0.0, self.read_noise_e, size=lam.shape) if self.read_noise_e > 0 else 0.0
         digital = np.clip(np.rint(self._to_dn(electrons)), 0.0, self.max_dn)
@@ -271,7 +279,9 @@ class SensorModel:
 
     def _measure_aggregate(self, mean_electrons: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         n = self.pixels_averaged
-        electrons_sum = np.minimum(rng.poisson(n * mean_electrons).astype(np.float64), n * self.full_well_e)
+        # a mean beyond the cap saturates either way; numpy refuses one near 9.2e18 ("lam value too large")
+        electrons_sum = np.minimum(rng.poisson(np.minimum(n * mean_electrons, POISSON_MEAN_CAP_E)).astype(np.float64),
+                                   n * self.full_well_e)
         if self.read_noise_e > 0:
             electrons_sum += rng.normal(0.0, self.read_noise_e * np.sqrt(n), size=mean_electrons.shape)
         digital_sum = self._to_dn(electrons_sum)
@@ -299,12 +309,12 @@ class SensorModel:
         Useful when a simulation's irradiance scale is arbitrary: pick the brightest expected irradiance and a
         fill fraction below 1 to leave headroom for shot noise before saturation.
         """
-        if not np.isfinite(irradiance_peak_w_m2) or irradiance_peak_w_m2 <= 0:
+        if not is_finite_real(irradiance_peak_w_m2) or irradiance_peak_w_m2 <= 0:
             raise InputError(
                 f"irradiance_peak_w_m2 must be a finite number > 0, got {irradiance_peak_w_m2!r}; "
                 "pass the brightest irradiance the mixel should record"
             )
-        if not np.isfinite(fill) or not 0 < fill <= 1:
+        if not is_finite_real(fill) or not 0 < fill <= 1:
             raise InputError(f"fill must be in (0, 1], got {fill!r}; e.g. 0.8 fills 80 % of the full well")
         electrons_per_second = (
             irradiance_peak_w_m2 * self.pixel_area_m2 / self.photon_energy_j * self.quantum_efficiency

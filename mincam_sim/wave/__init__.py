@@ -51,7 +51,14 @@ from __future__ import annotations
 
 from mincam_sim.wave.geometric import geometric_response, open_fraction
 from mincam_sim.wave.propagation import axis_wavelength
-from mincam_sim.wave.response import MAX_CELLS_2D, OPTICS, WaveInfo, angular_response
+from mincam_sim.wave.response import (
+    MAX_CELLS_2D,
+    MIN_FRESNEL_NUMBER,
+    OPTICS,
+    WaveInfo,
+    angular_response,
+    fresnel_number,
+)
 from mincam_sim.wave.sampling import (
     BAND_MARGIN,
     DOMAIN_FACTOR,
@@ -85,6 +92,7 @@ __all__ = [
     "DEFAULT_WAVELENGTHS_M",
     "DOMAIN_FACTOR",
     "MAX_CELLS_2D",
+    "MIN_FRESNEL_NUMBER",
     "OPTICS",
     "QE_RANGE_M",
     "ResponseTable",
@@ -100,6 +108,7 @@ __all__ = [
     "axis_wavelength",
     "choose_sampling",
     "dot_pitch_m",
+    "fresnel_number",
     "geometric_response",
     "open_fraction",
     "quick_check",

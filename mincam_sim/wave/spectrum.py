@@ -78,7 +78,8 @@ def spectral_weights(
         Distinct wavelengths [m], in any order.
     qe : callable or None
         Quantum efficiency [electrons per photon] at an array of wavelengths [m] (default :func:`silicon_qe`,
-        which refuses wavelengths outside ``QE_RANGE_M``); ``None`` weighs the bands by their width only.
+        which refuses wavelengths outside ``QE_RANGE_M``); ``None`` weighs the bands by their width only. It must
+        return one finite value >= 0 per wavelength (or one for all); only the ratios matter.
 
     Returns
     -------
@@ -92,6 +93,9 @@ def spectral_weights(
     cover, or where it is 0, is refused whether it comes alone or with others).
     """
     lam = _check_wavelengths(wavelengths_m)
+    if qe is not None and not callable(qe):
+        raise InputError(f"qe must be a quantum-efficiency curve (a function of wavelength [m]) or None (band widths "
+                         f"only), got {qe!r}")
     bad = _outside_qe_range(lam) if qe is silicon_qe else ""
     if bad:
         raise InputError(f"wavelengths_m {bad} m lie outside the silicon QE model's range [{QE_RANGE_M[0]:g}, "
@@ -104,13 +108,28 @@ def spectral_weights(
     else:
         edges = np.concatenate(([s[0]], 0.5 * (s[1:] + s[:-1]), [s[-1]]))
         width = np.diff(edges)
-    w_sorted = width * (np.ones_like(s) if qe is None else np.asarray(qe(s), dtype=np.float64))
+    w_sorted = width * (np.ones_like(s) if qe is None else _qe_values(qe, s))
     w = np.empty_like(w_sorted)
     w[order] = w_sorted
     if not np.all(np.isfinite(w)) or w.sum() <= 0:
         raise InputError(f"spectral_weights: the QE curve gives no weight to wavelengths_m "
                          f"{list(map(float, lam))} m: give wavelengths where it is positive, or pass qe=None")
     return w / w.sum()
+
+
+def _qe_values(qe: Callable[[np.ndarray], np.ndarray], wavelengths_m: np.ndarray) -> np.ndarray:
+    """``qe(wavelengths_m)`` as one non-negative efficiency per wavelength (a scalar is broadcast; only the ratios
+    matter, so a curve in percent weighs the same); anything else is refused (InputError) rather than weighting a
+    band negatively."""
+    try:
+        values = np.broadcast_to(np.asarray(qe(wavelengths_m), dtype=np.float64), wavelengths_m.shape)
+    except (TypeError, ValueError):
+        values = None
+    if values is None or not np.all(np.isfinite(values)) or np.any(values < 0):
+        raise InputError(f"qe must return one quantum efficiency >= 0 [electrons per photon] for each of the "
+                         f"wavelengths_m {list(map(float, wavelengths_m))} m; it gave "
+                         f"{values.tolist() if values is not None else 'a value of another shape or type'}")
+    return values
 
 
 def _outside_qe_range(wavelength_m: float | np.ndarray) -> str:

@@ -12,7 +12,14 @@ from mincam_sim.errors import InputError, is_finite_real
 from mincam_sim.model.optics import Mixel
 from mincam_sim.wave.geometric import geometric_response, open_fraction
 from mincam_sim.wave.propagation import _response_1d
-from mincam_sim.wave.response import WaveInfo, _axis_setup, _check_solver_sizes, _uniform_value, angular_response
+from mincam_sim.wave.response import (
+    WaveInfo,
+    _axis_setup,
+    _check_solver_sizes,
+    _uniform_value,
+    angular_response,
+    check_fresnel_number,
+)
 from mincam_sim.wave.sampling import dot_pitch_m, separable_axis
 from mincam_sim.wave.spectrum import DEFAULT_WAVELENGTHS_M, _check_wavelengths, silicon_qe, spectral_weights
 
@@ -114,6 +121,7 @@ def response_table(
                          f"GiB): lower n_tan to at most {most} (or leave it out: 513 for one-axis masks, 33 for 2D)")
     _check_solver_sizes(max_cells, workers)
     lam = _check_wavelengths(wavelengths_m)
+    check_fresnel_number(mixel, lam)
     hx, hy = mixel.half_fov_tan()
     tx = np.linspace(-hx, hx, n_tan)
     ty = np.linspace(-hy, hy, n_tan)

@@ -3,24 +3,39 @@
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from mincam_sim.errors import InputError, is_finite_real
 from mincam_sim.masks import Mask
 from mincam_sim.masks import profiles as prof
 from mincam_sim.model.optics import Mixel
 from mincam_sim.wave.geometric import geometric_response
-from mincam_sim.wave.response import angular_response
+from mincam_sim.wave.response import angular_response, fresnel_number
 from mincam_sim.wave.sampling import dot_pitch_m
-from mincam_sim.wave.spectrum import DEFAULT_WAVELENGTHS_M, _check_wavelengths
+from mincam_sim.wave.spectrum import DEFAULT_WAVELENGTHS_M, _check_wavelengths, silicon_qe
 
 VALIDITY_TOLERANCE = 0.01  # geometric optics is flagged when it is off by more than this (relative)
 
 
 def talbot_parameter(period_m: float, d_f_m: float, wavelength_m: float = DEFAULT_WAVELENGTHS_M[0]) -> float:
     """``u = lambda d_f / p^2``: the phase ``pi u`` that the first diffraction order of a period-``p`` grating
-    gains against the zeroth over ``d_f`` (paraxial); geometric optics needs u << 0.1."""
+    gains against the zeroth over ``d_f`` (paraxial); geometric optics needs u << 0.1.
+
+    Parameters
+    ----------
+    period_m, d_f_m, wavelength_m : float
+        Period [m], mask-to-detector distance [m] and wavelength [m], each finite and > 0.
+
+    Returns
+    -------
+    float
+        ``u`` (dimensionless).
+    """
+    for name, value in (("period_m", period_m), ("d_f_m", d_f_m), ("wavelength_m", wavelength_m)):
+        if not is_finite_real(value) or value <= 0:
+            raise InputError(f"talbot_parameter: {name} must be a finite number > 0 [m], got {value!r}")
     return wavelength_m * d_f_m / period_m**2
 
 
@@ -29,13 +44,33 @@ def rim_onset_deg(mixel: Mixel, wavelength_m: float = DEFAULT_WAVELENGTHS_M[0],
     """Smallest incidence angle [deg] along x at which the open aperture's wave response differs from the ray
     model by more than ``tolerance`` (relative): the rim's Fresnel ringing, seen where the rim nears the
     detector's view. Beyond it, every mask of this aperture is off by about as much."""
+    _check_tolerance(tolerance)
+    wavelength_m = _checked_wavelength(wavelength_m)
+    if not is_finite_real(n) or int(n) != n or n < 2:
+        raise InputError(f"rim_onset_deg: n must be an integer >= 2 directions, got {n!r}")
     open_mixel = Mixel(_open_like(mixel.mask), mixel.d_f_m, mixel.detector_size_m)
-    t = np.linspace(0.0, open_mixel.half_fov_tan()[0], n)
+    t = np.linspace(0.0, open_mixel.half_fov_tan()[0], int(n))
     pts = np.column_stack([t, 0 * t])
     r = angular_response(open_mixel, pts, (wavelength_m,), qe=None)  # one wavelength: no spectral weighting
     g = geometric_response(open_mixel, pts)
     bad = np.nonzero(np.abs(r - g) > tolerance * np.maximum(g, 1e-12))[0]
     return float(np.degrees(np.arctan(t[bad[0]]))) if len(bad) else float(np.degrees(np.arctan(t[-1])))
+
+
+def _checked_wavelength(wavelength_m: float) -> float:
+    """One wavelength [m] as a float, refused (InputError naming ``wavelength_m``) unless it is a positive number
+    in metres."""
+    if not is_finite_real(wavelength_m) or not 0 < wavelength_m <= 1e-4:
+        raise InputError(f"wavelength_m must be a positive wavelength in metres (550e-9 for 550 nm), got "
+                         f"{wavelength_m!r}")
+    return float(wavelength_m)
+
+
+def _check_tolerance(tolerance: float) -> None:
+    """Refuse (InputError) a relative tolerance that is not a number in (0, 1)."""
+    if not is_finite_real(tolerance) or not 0 < tolerance < 1:
+        raise InputError(f"tolerance must be a relative difference in (0, 1), like {VALIDITY_TOLERANCE} (1 %), got "
+                         f"{tolerance!r}")
 
 
 def _open_like(mask: Mask) -> Mask:
@@ -51,6 +86,7 @@ def validity(
     tolerance: float = VALIDITY_TOLERANCE,
     warn: bool = True,
     max_cells: int | None = 2048,
+    qe: Callable[[np.ndarray], np.ndarray] | None = silicon_qe,
 ) -> dict:
     """How far the ray model is from the wave response for this mixel, and why.
 
@@ -59,7 +95,36 @@ def validity(
     each axis inside the fully open cone (where the aperture's rim does not cut the detector's view), and
     :func:`rim_onset_deg`, the angle beyond which the rim's Fresnel ringing exceeds ``tolerance``. Warns
     (``UserWarning``) when the central difference exceeds ``tolerance``.
+
+    Parameters
+    ----------
+    mixel : Mixel
+        The mixel (mask, ``d_f_m``, detector size).
+    wavelengths_m : sequence of float
+        Wavelengths [m], weighted by :func:`~mincam_sim.wave.spectral_weights` with ``qe``; ``u`` and the rim
+        are reported at the shortest.
+    n_tan : int
+        Directions per axis inside the fully open cone (at least 2).
+    tolerance : float
+        Relative difference (a fraction in (0, 1)) above which geometric optics is flagged.
+    warn : bool
+        Warn when the central difference exceeds ``tolerance``.
+    max_cells : int, optional
+        Cap on the solver's grid cells per axis.
+    qe : callable or None
+        Quantum efficiency [electrons per photon] at an array of wavelengths [m] for the spectral weights, as in
+        :func:`~mincam_sim.wave.angular_response` (default :func:`~mincam_sim.wave.silicon_qe`, 400-1100 nm);
+        ``None`` weighs the bands by their width only.
+
+    Returns
+    -------
+    dict
+        ``mixel``, ``wavelength_m``, ``period_m`` and ``u`` (sinusoids), ``dot_pitch_m`` and ``u_dot``
+        (prints), ``max_rel_diff_central``, ``central_half_angle_deg``, ``rim_onset_deg`` [deg] and ``ok``.
     """
+    _check_tolerance(tolerance)
+    if not is_finite_real(n_tan) or int(n_tan) != n_tan or n_tan < 2:
+        raise InputError(f"n_tan must be an integer >= 2 directions per axis, got {n_tan!r}")
     mask, z, det = mixel.mask, mixel.d_f_m, mixel.detector_size_m
     lam = float(np.min(_check_wavelengths(wavelengths_m)))
     out: dict = {"mixel": mixel.name, "wavelength_m": lam}
@@ -75,9 +140,9 @@ def validity(
         out["dot_pitch_m"] = pitch
         out["u_dot"] = talbot_parameter(pitch, z, lam)
     inner = (min(mask.width_m, mask.height_m) / 2 - det / 2) / z  # fully open cone
-    t = np.linspace(-0.9 * inner, 0.9 * inner, n_tan)
+    t = np.linspace(-0.9 * inner, 0.9 * inner, int(n_tan))
     pts = np.concatenate([np.column_stack([t, 0 * t]), np.column_stack([0 * t, t])])
-    wave = angular_response(mixel, pts, wavelengths_m, "wave", max_cells=max_cells)
+    wave = angular_response(mixel, pts, wavelengths_m, "wave", qe=qe, max_cells=max_cells)
     geo = geometric_response(mixel, pts)
     scale = max(float(np.max(geo)), 1e-12)
     out["max_rel_diff_central"] = float(np.max(np.abs(wave - geo)) / scale)
@@ -101,6 +166,7 @@ def validity(
 
 
 U_ONE_PERCENT = 0.09  # u at which a sinusoidal intensity mask loses 1 % of its fundamental (measured, README)
+FRESNEL_ONE_PERCENT = 30.0  # aperture Fresnel number below which its fringes move the detector's power ~1 %
 
 
 def quick_check(mixel: Mixel, wavelength_m: float = DEFAULT_WAVELENGTHS_M[0], warn: bool = True) -> list[str]:
@@ -114,13 +180,18 @@ def quick_check(mixel: Mixel, wavelength_m: float = DEFAULT_WAVELENGTHS_M[0], wa
     """
     if mixel.optics == "wave":
         return []
+    lam = _checked_wavelength(wavelength_m)
     reasons = []
+    n_f = fresnel_number(mixel, lam)
+    if n_f < FRESNEL_ONE_PERCENT:
+        reasons.append(f"its aperture's Fresnel number (s/2)^2 / (lambda d_f) = {n_f:.3g} < {FRESNEL_ONE_PERCENT:g} "
+                       "(the aperture's own diffraction fringes reach the detector: about 1 % at 30, 4 % at 9)")
     p = mixel.mask.profile
     while isinstance(p, prof.Affine):
         p = p.inner
     if isinstance(p, prof.Sinusoid) and p.omega_rad_per_m > 0 and p.a1 != 0:
         period = 2 * np.pi / p.omega_rad_per_m
-        u = talbot_parameter(period, mixel.d_f_m, wavelength_m)
+        u = talbot_parameter(period, mixel.d_f_m, lam)
         if u > U_ONE_PERCENT:
             reasons.append(f"its sinusoid's period {period * 1e3:.3g} mm gives u = lambda d_f / p^2 = {u:.2g} > "
                            f"{U_ONE_PERCENT} (more than 1 % contrast lost)")
@@ -128,7 +199,7 @@ def quick_check(mixel: Mixel, wavelength_m: float = DEFAULT_WAVELENGTHS_M[0], wa
     if pitch is None and mixel.mask.profile is None and mixel.mask.interpolation == "nearest":
         pitch = min(mixel.mask.width_m / mixel.mask.shape[1], mixel.mask.height_m / mixel.mask.shape[0])
     if pitch is not None:
-        u = talbot_parameter(pitch, mixel.d_f_m, wavelength_m)
+        u = talbot_parameter(pitch, mixel.d_f_m, lam)
         if u > U_ONE_PERCENT and np.ptp(mixel.mask.transmission) > 0:
             reasons.append(f"its printed dots {pitch * 1e6:.3g} um apart give u = {u:.2g} > {U_ONE_PERCENT} "
                            "(printed films measured 2-8 % rms off at 600-2400 dpi)")
