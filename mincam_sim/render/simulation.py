@@ -78,6 +78,8 @@ from mincam_sim.render.scene.world_input import (
     check_update,
     check_update_keys,
     expand_elements,
+    note_taken,
+    refuse_taken,
 )
 from mincam_sim.render.solvers import Aperture, ResponseMap, Solver, StratifiedChange
 from mincam_sim.scene.display import FrameSource, Screen, as_frame_source
@@ -170,6 +172,8 @@ class Simulation:
         self._loaded.note()
         max_depth, self.max_depth_source = _resolved_depth(max_depth, self._loaded.max_depth)
         self.scene_origin_m = self.mincam.centre_m
+        moves = bool(np.any(self.scene_origin_m != 0)) or self.unit_m != 1.0  # the given objects, in place
+        refuse_taken(elements, moves)  # a shape object another Simulation took into its own coordinates
         self.scene_mincam = self.mincam.translated(-self.scene_origin_m)
         try:
             self.mincam_scene = MincamScene.world(self.scene_mincam, elements, max_depth, camera)
@@ -190,9 +194,10 @@ class Simulation:
         self.mincam_scene.update({key: _shift(key, scene_params[key] if key.startswith(CAMERA_KEY) else in_metres(
             key, scene_params[key], self.unit_m, shape_ids), -self.scene_origin_m)
             for key in self._shifted})
+        note_taken(elements, moves)
         skip = self._own | {CAMERA_KEY}
         require_triangles(self.scene, skip)
-        check_far_from_origin(self.scene, self.scene_origin_m, skip, self.unit_m)
+        check_far_from_origin(self.scene, self.scene_origin_m, skip, self.unit_m, self.scene_mincam)
         warn_if_implausible_size(self.scene, self.scene_mincam, skip, self.unit_m)
         warn_if_inside(self.scene, self.scene_mincam, skip)
         self._restore: dict[str, object] = {}  # what the last run set, to put back with the next update

@@ -212,7 +212,12 @@ def test_a_loaded_scene_is_a_world_and_shapes_without_an_id_are_static(tmp_path)
     scene = mi.load_file(str(_write(tmp_path, card_id=None, unit_m=1.0, sensor=False)), optimize=False)
     sim = ms.Simulation(CAM, world=scene)
     assert "card.to_world" not in sim.params and "scene_shape1.to_world" in sim.params
-    assert sim.movable() == ["lamp"] == ms.Simulation(CAM, world=scene).movable()  # static, also when reused
+    again = mi.load_file(str(tmp_path / "box.xml"), optimize=False)
+    assert sim.movable() == ["lamp"] == ms.Simulation(CAM, world=again).movable()  # static, also when loaded again
+    # the same loaded scene again: its shapes lie in the first simulation's coordinates (their params read the
+    # lamp 0.5 m low, and the next rebuild of either scene placed it there)
+    with pytest.raises(InputError, match="element 'lamp' is a Mitsuba object that an earlier Simulation took"):
+        ms.Simulation(CAM, world=scene)
     assert sim.max_depth_source == "the integrator of the loaded scene 'scene'"
     p, s, _ = _measure(sim, seed=5)
     assert_close_mc(p, _oracle(0.0), s, what="a card without an id, static")

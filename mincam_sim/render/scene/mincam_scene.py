@@ -49,6 +49,20 @@ REFERENCE_MAX_DEPTH = 3  # detector ray -> mask pass-through (one bounce) -> scr
 RESERVED_KEYS = {SENSOR_KEY, CAMERA_KEY, BODIES_KEY, "integrator", "type"}
 
 
+def _unshared(value):
+    """``value`` (an element: a Mitsuba dict, nested) with its Dr.Jit arrays wrapped anew: Mitsuba's
+    ``load_dict`` takes a tensor out of the dict it loads (a ``textured_plane``'s bitmap ``data`` is left empty,
+    shape ``()``), so a second scene built from the same dict (a second ``Simulation`` in the same world) failed
+    with "Bitmap raw tensor has dimension 0". The arrays' data is shared, not copied."""
+    import drjit as dr
+
+    if isinstance(value, Mapping):
+        return {key: _unshared(item) for key, item in value.items()}
+    if dr.is_array_v(value):
+        return type(value)(value)
+    return value
+
+
 class MincamScene:
     """A mincam in a display or world scene.
 
@@ -97,7 +111,7 @@ class MincamScene:
     def _content(self, frame: SceneFrame | None = None) -> dict:
         if self.screen is not None:
             return {SCREEN_KEY: screen_shape(self.screen, self._frame, frame or WORLD)}
-        return dict(self.elements)
+        return {name: _unshared(value) for name, value in self.elements.items()}
 
     @property
     def fast_scene(self):

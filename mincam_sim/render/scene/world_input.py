@@ -45,6 +45,47 @@ class LoadedScenes:
                           WorldWarning, stacklevel=4)
 
 
+# Mitsuba shapes given as objects that a Simulation took into its scene, by id(): their state as it left them
+# (class, id, bounding box [m]) and whether it moved them. A Simulation moves such an object in place into its own
+# coordinates (metres, around its mincam); a second Simulation given the same object reads it there, misplaced,
+# and moving it again misplaces it in the first. The state tells the object apart from a new one that Python
+# placed at a freed object's address.
+_TAKEN: dict[int, tuple[tuple, bool]] = {}
+
+
+def _taken_state(value) -> tuple | None:
+    """What marks a Mitsuba shape as a Simulation left it (None for anything else: dicts are loaded anew)."""
+    mi = backend.mitsuba()
+    if not isinstance(value, mi.Shape):
+        return None
+    box = value.bbox()
+    return (value.class_name(), value.id(), tuple(np.array(box.min, dtype=float).ravel()),
+            tuple(np.array(box.max, dtype=float).ravel()))
+
+
+def refuse_taken(elements: Mapping, moves: bool) -> None:
+    """One :class:`~mincam_sim.errors.InputError` for an element that is a Mitsuba shape object an earlier
+    :class:`~mincam_sim.render.simulation.Simulation` took (:func:`note_taken`), where it or this one ``moves``
+    its shapes (scene coordinates other than the world's, or file units other than metres)."""
+    for name, value in elements.items():
+        state, moved = _TAKEN.get(id(value), (None, False))
+        if state is not None and (moved or moves) and state == _taken_state(value):
+            raise InputError(
+                f"element {name!r} is a Mitsuba object that an earlier Simulation took into its scene, where it "
+                "lies in that simulation's own coordinates (metres, around its mincam): this one would read it "
+                "misplaced, or move it under the other; give each Simulation objects of its own (call "
+                "ms.mesh_object again, load the scene again) or pass dicts, which every Simulation loads anew")
+
+
+def note_taken(elements: Mapping, moved: bool) -> None:
+    """Remember the Mitsuba shape objects among ``elements`` as a Simulation leaves them, and whether it
+    ``moved`` them (:func:`refuse_taken`)."""
+    for value in elements.values():
+        state = _taken_state(value)
+        if state is not None:
+            _TAKEN[id(value)] = (state, moved)
+
+
 def expand_elements(elements) -> tuple[dict, LoadedScenes]:
     """``elements`` (name -> Mitsuba dict, Mitsuba object, a loaded ``mi.Scene``, a
     :class:`~mincam_sim.render.scene.scene_files.SceneFile` or a

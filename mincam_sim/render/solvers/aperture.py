@@ -59,7 +59,7 @@ class WorldAperturePlan(Plan):
         self.budget, self.replicates = budget, budget.replicates_or(DEFAULT_WORLD_REPLICATES)
         self.as_built = sim.complete_background(self.frames, {})
         self.n_rows, self.columns = len(self.frames), list(sim.mincam.names)
-        self.engulf = EngulfWatch(sim.scene_mincam)  # a moved shape that closes round a mixel, said once
+        self.engulf = EngulfWatch(sim.scene_mincam, sim.known_parts)  # a moved shape closing round a mixel: said once
 
     def estimates(self, pending: np.ndarray) -> Iterator[tuple[int, np.ndarray]]:
         """(frame index, (replicates, n_mixels) estimates) of each pending frame."""

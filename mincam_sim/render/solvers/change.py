@@ -450,7 +450,7 @@ class _Run:
         self.fallbacks: dict[str, str] = {}
         self.sigma_rows: np.ndarray | None = None  # the last frame's replicates whose spread gives sigma (None: all)
         self.per_mixel_replicates = False  # replicates allocated per mixel: a column of them per mixel
-        self.engulf = EngulfWatch(sim.scene_mincam)  # a moved shape that closes round a mixel, said once a run
+        self.engulf = EngulfWatch(sim.scene_mincam, sim.known_parts)  # a shape closing round a mixel: said once
 
     def watch(self, scene, shapes: Mapping, names, where: str) -> None:
         """Check the shapes ``names`` (of ``shapes``, by id, as ``scene`` has them now) for one that closes round
@@ -776,6 +776,10 @@ class _StratifiedRun(_Run):
             frame_v = self.bg.mean(0) + mean
             frame_e = np.hypot(self.bg.std(0, ddof=1) / np.sqrt(self.bg.shape[0]), err)
         changes = np.full(len(r.mincam), bool(changed))
+        if guide is not None and r.mincam_scene.max_depth <= 2:
+            # direct light only: a mixel whose view holds none of the change regions (the movers, their shadows and
+            # mirror images) has dP = 0 exactly, not a rare path that no ray met
+            changes &= ~(regions.is_empty() if isinstance(regions, ApertureRegions) else regions.distinct == 0)
         return diff, frame_v, frame_e, changes, info
 
     def _freeze_key(self) -> tuple | None:
