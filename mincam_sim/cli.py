@@ -29,15 +29,16 @@ from mincam_sim.masks import PrintedFilm, export_print_png, generate_library, sa
 from mincam_sim.storage.store import lock_out_dir
 
 try:  # typer >= 0.2x vendors click
-    from typer._click.exceptions import ClickException
+    from typer._click.exceptions import BadParameter, ClickException
 except ImportError:  # pragma: no cover - older typer on the real click
-    from click.exceptions import ClickException
+    from click.exceptions import BadParameter, ClickException
 
 ENV_DEBUG = "MINCAM_DEBUG"
 _PACKAGE_DIR = Path(__file__).resolve().parent
 _BACKEND_FILE = _PACKAGE_DIR / "render" / "backend.py"
 
-_state: dict[str, Any] = {"verbose": False, "quiet": False, "debug": False, "variant": None, "invoked": False}
+_state: dict[str, Any] = {"verbose": False, "quiet": False, "debug": False, "variant": None, "invoked": False,
+                          "command": None}
 
 
 # ------------------------------------------------------------------------------------------- error handling
@@ -131,6 +132,35 @@ class _CarriedBug(Exception):
         self.error = error
 
 
+def _is_path_parameter(param: Any) -> bool:
+    """True if the command-line parameter ``param`` takes a file or folder path."""
+    descriptor = getattr(param, "type_descriptor", None)
+    if descriptor is not None:
+        return bool(getattr(descriptor, "is_path", False))
+    return type(getattr(param, "type", None)).__name__ == "Path"  # pragma: no cover - older typer on click
+
+
+def _refuse_empty_paths(command: Any) -> None:
+    """Make every path option and argument of ``command`` (and of its subcommands) refuse an empty value: the
+    command line's own parsing would take ``--out ""`` for ``.``, the working directory. The refusal is one
+    usage error naming the parameter (exit code 2)."""
+    for sub in getattr(command, "commands", {}).values():
+        _refuse_empty_paths(sub)
+    for param in getattr(command, "params", ()):
+        if not _is_path_parameter(param) or getattr(param, "_refuses_empty", False):
+            continue
+        original = param.process_value
+
+        def process_value(ctx: Any, value: Any, _original: Any = original, _param: Any = param) -> Any:
+            if isinstance(value, str) and not value.strip():
+                raise BadParameter(f"{value!r} is {'an empty' if not value else 'a blank'} path; give a file or "
+                                   "folder name (the working directory is '.')", ctx=ctx, param=_param)
+            return _original(ctx, value)
+
+        param.process_value = process_value
+        param._refuses_empty = True
+
+
 class _MincamGroup(TyperGroup):
     """Top-level command group: turns user errors into one line on stderr and exit code 2, in one place."""
 
@@ -143,6 +173,8 @@ class _MincamGroup(TyperGroup):
             if interrupts.arrived() and not isinstance(err, KeyboardInterrupt | SystemExit) and not _state["debug"]:
                 # a Ctrl-C that landed in an import can come out as another error (a module left half-imported)
                 raise KeyboardInterrupt from None
+            if isinstance(err, KeyboardInterrupt):  # a folder made for a run stopped before it wrote anything
+                _remove_created_if_empty()
             if isinstance(err, KeyboardInterrupt | SystemExit) or _state["debug"] or not _is_user_error(err):
                 if isinstance(err, EOFError):  # a reader that let a file's end through: a bug, with its traceback
                     raise _CarriedBug(err) from None
@@ -153,8 +185,9 @@ class _MincamGroup(TyperGroup):
     def main(self, args: Any = None, prog_name: Any = None, complete_var: Any = None,
              standalone_mode: bool = True, **extra: Any) -> Any:
         _created.clear()
+        _refuse_empty_paths(self)
         _state.update(verbose=False, quiet=False, debug=os.environ.get(ENV_DEBUG, "") not in ("", "0"),
-                      variant=None, invoked=False)
+                      variant=None, invoked=False, command=None)
         install_warning_format()
         interrupts.reset()
         recording = signal.getsignal(signal.SIGINT) is signal.default_int_handler
@@ -186,6 +219,8 @@ class _MincamGroup(TyperGroup):
             raise bug  # outside the handler: its traceback and its own cause as they were
         if code == 130 and not _state["invoked"]:  # Ctrl-C before a command began (:func:`_marked_started`)
             typer.echo(INTERRUPTED_WHILE_STARTING, err=True)
+        elif code == 130 and _state.get("command") in RESTARTING_COMMANDS:
+            typer.echo(INTERRUPTED_RESTARTS, err=True)
         elif code == 130:  # Ctrl-C (typer turns KeyboardInterrupt into exit code 130)
             typer.echo("error: interrupted; results written so far are kept, and the same command resumes", err=True)
         if standalone_mode:
@@ -479,38 +514,55 @@ def render(
 _RUN_BUDGET_KEYS = ("spp", "samples_per_texel", "target_rel_stderr", "replicates", "seed")
 
 
-def _without_run_budget_warnings(read, *args: Any) -> Any:
-    """``read(*args)`` (a display config's reader) without its warnings about ``[run]`` budget keys: they judge
-    the keys by the file's ``[run] solver``, which ``export-maps`` does not use (:func:`_export_budget` warns by
-    the solver it does use). Every other warning is shown as it came."""
+def _without_solver_warnings(read, *args: Any) -> Any:
+    """``read(*args)`` (a display config's reader) without its warnings about the ``[run]`` budget keys and the
+    ``[run.dot_product]`` options: they judge the keys by a solver, and ``export-maps`` says itself which of them
+    the solver it exports reads (:func:`_export_budget`). Every other warning is shown as it came."""
     import warnings
 
     from mincam_sim.errors import IgnoredSettingWarning
 
-    budget_keys = tuple(f"[run] {key}" for key in _RUN_BUDGET_KEYS)
+    solver_keys = (*(f"[run] {key}" for key in _RUN_BUDGET_KEYS), "[run.dot_product] ")
     with warnings.catch_warnings(record=True) as held:
         result = read(*args)
     for w in held:
-        if not (issubclass(w.category, IgnoredSettingWarning) and str(w.message).startswith(budget_keys)):
+        if not (issubclass(w.category, IgnoredSettingWarning) and str(w.message).startswith(solver_keys)):
             warnings.showwarning(w.message, w.category, w.filename, w.lineno)
     return result
+
+
+def _as_exported(raw: dict, ideal: bool) -> dict:
+    """The display document ``raw`` with ``[run] solver`` set to the solver ``export-maps`` uses
+    (``"dot_product"`` with ``--ideal``, else ``"response_map"``), so that the file is checked as the export
+    reads it: a key that only the file's own solver reads is neither refused nor taken for used. ``raw`` itself
+    is left as it is (its ``[run] solver`` is still checked, by :func:`_export_budget`)."""
+    run = raw.get("run", {})
+    if not isinstance(run, dict):  # not a table: the reader names it
+        return raw
+    return {**raw, "run": {**run, "solver": "dot_product" if ideal else "response_map"}}
 
 
 def _export_budget(raw: dict, solver: Any) -> Any:
     """The :class:`~mincam_sim.budget.Budget` that ``export-maps`` traces with: the file's ``[run]`` keys that
     ``solver`` (the export's, whatever the file's ``[run] solver``) reads, checked as the file's reader checks
     them; one warning naming the keys the file wrote that the export ignores, as the file writes them
-    (``[run] spp``), not as the Python API names them (``Budget.spp``)."""
-    from mincam_sim.configuration.config import RENDER_SCHEMA, RunSection, make_budget
+    (``[run] spp``), not as the Python API names them (``Budget.spp``), and one naming the ``[run.dot_product]``
+    options when the export traces response maps (``--ideal`` uses them, whatever the file's solver)."""
+    from mincam_sim.configuration.config import RENDER_SCHEMA, DotProductTable, RunSection, make_budget
     from mincam_sim.configuration.schema import warn_ignored
 
-    given = RENDER_SCHEMA.tables(raw)["run"]
+    tables = RENDER_SCHEMA.tables(raw)
+    given = tables["run"]
     run = RENDER_SCHEMA.read("run", given)
     reads = solver.budget_fields("display")
     why = ("--ideal exports the idealised dot-product model: deterministic quadrature (no samples)"
            if not reads else 'export-maps traces response maps at samples_per_texel (spp is for the "aperture" '
                              'and "reference" solvers of render)')
     warn_ignored("run", given, [key for key in _RUN_BUDGET_KEYS if key not in reads], why, RunSection)
+    if reads:  # response maps: the idealised model's options are for --ideal
+        options = tables["run.dot_product"]
+        warn_ignored("run.dot_product", options, list(options), "they are the options of the idealised model, "
+                     "which export-maps writes with --ideal; without it, it traces response maps", DotProductTable)
     return make_budget(solver, "display", run.spp, run.samples_per_texel, run.target_rel_stderr, run.replicates,
                        run.seed)
 
@@ -543,7 +595,7 @@ def export_maps_command(
     if psf_grid is not None and min(psf_grid) < 1:
         raise ConfigError(f"--psf-grid needs two positive integers NX NY, got {psf_grid[0]} {psf_grid[1]}")
     with _warnings_once_valid():
-        cfg = _without_run_budget_warnings(load_config, config)
+        cfg = _without_solver_warnings(load_config, _as_exported(raw, ideal), Path(config).parent)
         solver = (display_solver("dot_product", RENDER_SCHEMA.tables(raw)["run.dot_product"]) if ideal
                   else ResponseMap())
         budget = _export_budget(raw, solver)
@@ -555,6 +607,12 @@ def export_maps_command(
     with lock_out_dir(out_dir, "export folder"):  # one export at a time in a folder
         sidecar = sim.export_maps(out_dir, budget, solver=solver, psf_grid=psf_grid, show_progress=_show_progress(),
                                   say=lambda msg: _say(f"mincam-sim: {msg}"))
+    if not ideal:  # the count traced, where it is not the one asked (as render says it)
+        from mincam_sim.configuration.config import traced_samples
+
+        _, rounding = traced_samples(cfg.run)
+        if rounding:
+            _say(f"mincam-sim: {rounding}")
     typer.echo(f"# {len(cfg.mincam)} response maps ({'dot_product' if ideal else 'response_map'}) of "
                f"{cfg.screen.shape[0]} x {cfg.screen.shape[1]} texels written to {out_dir} (sidecar {sidecar.name})")
 
@@ -859,6 +917,7 @@ def _reproduce_config(config: Path | None, quick: bool, names: Collection[str] |
         if not text.startswith("[command line]"):
             raise
         flag = re.sub(r"Setup\.(\w+)", lambda m: "--" + m.group(1).replace("_", "-"), text)
+        flag = re.sub(r"^\[command line\] (\w+)", lambda m: "--" + m.group(1).replace("_", "-"), flag)
         raise ConfigError(flag.replace("[command line]: ", "")) from None
     from mincam_sim.experiments.input_checks import check_reproduce
 
@@ -899,7 +958,8 @@ def reproduce(
     check_out_dir(out_dir)
     _announce_variant()
     with lock_out_dir(out_dir):
-        results = run(names, setup, out_dir, show_progress=_show_progress(), params=params, overwrite=overwrite)
+        results = run(names, setup, out_dir, show_progress=_show_progress(), params=params, overwrite=overwrite,
+                      say=lambda msg: _say(f"mincam-sim: {msg}"))
     _print_table(results)
     _print_reused(results, out_dir)
     typer.echo(f"# results.json and plots in {out_dir}")
@@ -1180,6 +1240,11 @@ def figures(
 
 
 INTERRUPTED_WHILE_STARTING = "error: interrupted while starting; nothing was run"
+#: The commands that keep nothing of an interrupted run to resume from (each file they write appears whole or
+#: not at all): a Ctrl-C says that the same command starts again, not that it resumes.
+RESTARTING_COMMANDS = frozenset({"export_maps_command", "masks_generate", "masks_export", "figures", "demo"})
+INTERRUPTED_RESTARTS = ("error: interrupted; no file is left half-written, and the same command starts again from "
+                        "the beginning")
 
 
 def _marked_started(callback: Any) -> Any:
@@ -1190,6 +1255,7 @@ def _marked_started(callback: Any) -> Any:
     @functools.wraps(callback)
     def started(*args: Any, **kwargs: Any) -> Any:
         _state["invoked"] = True
+        _state["command"] = callback.__name__
         return callback(*args, **kwargs)
 
     return started

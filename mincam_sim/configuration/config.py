@@ -94,6 +94,11 @@ _VARIANTS = ("", "cuda_ad_mono", "llvm_ad_mono", "scalar_rgb")
 
 MAX_MASK_RESOLUTION = 8192  # texels per side (masks.MAX_TEXELS = 8192^2)
 MAX_SCREEN_TEXELS = 4096 * 4096  # Screen's own limit
+#: The largest length [m] of a mincam's own parts (spacing_m, d_f_m, detector_size_m, mask_size_m): a larger one is
+#: a unit mistake, and squares of lengths near 1e300 overflow a float
+MAX_MINCAM_LENGTH_M = 100.0
+#: The largest radiance [W m^-2 sr^-1] a generated frame may hold: frames are 32-bit floats
+MAX_RADIANCE_W_M2_SR = float(np.finfo(np.float32).max)
 
 
 # ------------------------------------------------------------------------------------------------ solvers
@@ -239,9 +244,9 @@ def _mask_size(section: str, key: str, value: Any) -> tuple[float, float | None]
         if len(value) != 2:
             raise ConfigError(f"{section} mask_size_m must be one side or [width, height] in metres, got "
                               f"{describe(value)}")
-        return (_number(section, "mask_size_m[0]", value[0], positive=True),
-                _number(section, "mask_size_m[1]", value[1], positive=True))
-    return _number(section, "mask_size_m", value, positive=True), None
+        return (_number(section, "mask_size_m[0]", value[0], positive=True, maximum=MAX_MINCAM_LENGTH_M),
+                _number(section, "mask_size_m[1]", value[1], positive=True, maximum=MAX_MINCAM_LENGTH_M))
+    return _number(section, "mask_size_m", value, positive=True, maximum=MAX_MINCAM_LENGTH_M), None
 
 
 def _any(section: str, key: str, value: Any) -> Any:
@@ -301,12 +306,13 @@ class MincamSection:
     layout: str = setting("pair", '"pair" (x | 1-x), "cross" (x, 1-x, y, 1-y around a centre), "custom" '
                           "([[mixel]] below)", Choice(_LAYOUTS))
     spacing_m: float = setting(PAPER_SPACING_M, "distance between neighbouring mixels (paper: 3.3 cm)",
-                               Number(minimum=0.0))
-    d_f_m: float = setting(DEFAULT_D_F_M, "mask-to-detector distance", Number(positive=True))
+                               Number(minimum=0.0, maximum=MAX_MINCAM_LENGTH_M))
+    d_f_m: float = setting(DEFAULT_D_F_M, "mask-to-detector distance",
+                           Number(positive=True, maximum=MAX_MINCAM_LENGTH_M))
     detector_size_m: float = setting(DEFAULT_DETECTOR_SIZE_M, "side of the square detector (paper: 48x48 pixels "
-                                     "~ 0.1 mm)", Number(positive=True))
+                                     "~ 0.1 mm)", Number(positive=True, maximum=MAX_MINCAM_LENGTH_M))
     mask_size_m: float = setting(masks_mod.DEFAULT_MASK_SIZE_M, "side of the square mask (aperture)",
-                                 Number(positive=True))
+                                 Number(positive=True, maximum=MAX_MINCAM_LENGTH_M))
     mask_resolution: int = setting(masks_mod.DEFAULT_RESOLUTION, "texels per side of generated masks",
                                    Integer(maximum=MAX_MASK_RESOLUTION))
     mask_encoding: str = setting("linear", 'how file: PNG values map to transmission: "linear" (value/255 is the '
@@ -347,10 +353,11 @@ class MixelTable:
                                "height]; nothing is stretched)", _mask_size, example=masks_mod.DEFAULT_MASK_SIZE_M)
     mask_encoding: str | None = setting(None, "optional: overrides [mincam] mask_encoding for this mixel's file: PNG",
                                         Choice(_ENCODINGS), example="srgb")
-    d_f_m: float | None = setting(None, "optional: overrides [mincam] d_f_m for this mixel", Number(positive=True),
-                                  example=DEFAULT_D_F_M)
+    d_f_m: float | None = setting(None, "optional: overrides [mincam] d_f_m for this mixel",
+                                  Number(positive=True, maximum=MAX_MINCAM_LENGTH_M), example=DEFAULT_D_F_M)
     detector_size_m: float | None = setting(None, "optional: overrides [mincam] detector_size_m for this mixel",
-                                            Number(positive=True), example=DEFAULT_DETECTOR_SIZE_M)
+                                            Number(positive=True, maximum=MAX_MINCAM_LENGTH_M),
+                                            example=DEFAULT_DETECTOR_SIZE_M)
     position_m: tuple[float, float, float] = setting((0.0, 0.0, 0.0), "centre of the mask, mincam coordinates",
                                                      Vector(3))
     forward: tuple[float, float, float] = setting((0.0, 0.0, -1.0), "viewing direction", Vector(3))
@@ -386,8 +393,10 @@ class FramesSection:
     nx: int = setting(9, "grid_sweep: positions along x", Integer(maximum=MAX_FRAMES))
     ny: int = setting(9, "grid_sweep: positions along y", Integer(maximum=MAX_FRAMES))
     square_m: float = setting(0.03, "side of the white square", Number(positive=True))
-    radiance_w_m2_sr: float = setting(1.0, "radiance of the white square (black elsewhere)", Number(positive=True))
-    background_w_m2_sr: float = setting(0.0, "radiance of the rest of the screen", Number(minimum=0.0))
+    radiance_w_m2_sr: float = setting(1.0, "radiance of the white square (black elsewhere)",
+                                      Number(positive=True, maximum=MAX_RADIANCE_W_M2_SR))
+    background_w_m2_sr: float = setting(0.0, "radiance of the rest of the screen",
+                                        Number(minimum=0.0, maximum=MAX_RADIANCE_W_M2_SR))
     path: str = setting("", "npy: path of the frame stack (relative to this file)", Text())
 
 
@@ -611,9 +620,38 @@ def _build_mincam(m: MincamSection, mixel_tables: list, base: Path) -> Mincam:
     return Mincam(mixels, allow_overlap=mincam.allow_overlap)
 
 
+def mixel_file_stem(name: str) -> str:
+    """The part of a file name that a mixel's name gives (``response_<stem>.exr``, ``maps/<stem>.npy``): characters
+    other than letters, digits, ``-`` and ``_`` become ``_``, as the writers of those files make it."""
+    return "".join(c if c.isalnum() or c in "-_" else "_" for c in name)
+
+
+def check_file_names(names: list[str], where: str = "[[mixel]]") -> None:
+    """Refuse mixel ``names`` that would be written to the same files (``"a/b"`` and ``"a_b"``; ``"X"`` and ``"x"``
+    on a disk that ignores case): one mixel's response map would silently replace the other's.
+
+    Raises
+    ------
+    ConfigError
+        Naming both tables and the file name they share.
+    """
+    seen: dict[str, int] = {}
+    for i, name in enumerate(names):
+        stem = mixel_file_stem(name)
+        j = seen.setdefault(stem.casefold(), i)
+        if j != i:
+            raise ConfigError(f"{where} #{j + 1} name {names[j]!r} and #{i + 1} name {name!r} would write the same "
+                              f"files (response_{stem}.exr, maps/{stem}.npy): file names keep letters, digits, - and "
+                              "_ (the others become _) and a disk may ignore case; give names that differ in those")
+
+
 def _custom_mincam(m: MincamSection, mixel_tables: list, base: Path) -> Mincam:
     if not mixel_tables:
         raise ConfigError("[mincam] layout = \"custom\" needs at least one [[mixel]] table")
+    named = [t.get("name") if isinstance(t, dict) else 0 for t in mixel_tables]  # 0: not a table, named below
+    names = [f"m{i}" if name is None else name for i, name in enumerate(named)]
+    if all(isinstance(n, str) for n in names) and len(set(names)) == len(names):  # else the checks below say
+        check_file_names(names)
     mixels = []
     for i, given in enumerate(mixel_tables):
         where = f"[[mixel]] #{i + 1}"

@@ -10,25 +10,40 @@ from typing import Any, get_args
 from mincam_sim.errors import ConfigError
 from mincam_sim.experiments.setup import Setup
 
+#: The brightest table light a set-up may have [W m^-2 sr^-1]
+_MAX_RADIANCE_W_M2_SR = 1e30
+
 
 def check_reproduce(setup: Setup, params: dict[str, Any]) -> None:
     """Refuse, as one :class:`~mincam_sim.errors.ConfigError` line naming the section and key, the values of a
     reproduce file that the experiments would only refuse deep inside (after minutes, as a bare ``ValueError``):
     the set-up's mincam and screen, the tracking toys, the speed experiment's sampling of its mask."""
+    from mincam_sim.configuration.config import MAX_MINCAM_LENGTH_M
     from mincam_sim.model.optics import cross_layout
 
+    for key, option in (("spacing_m", " (--spacing-m)"), ("d_f_m", ""), ("detector_size_m", ""), ("mask_size_m", "")):
+        value = getattr(setup, key)
+        if value > MAX_MINCAM_LENGTH_M:  # a unit mistake, and the layout's arithmetic would overflow
+            raise ConfigError(f"[setup] {key}{option} = {value:g} m: a mincam's lengths are at most "
+                              f"{MAX_MINCAM_LENGTH_M:g} m; give it in metres (the default: {getattr(Setup(), key):g} "
+                              "m)")
     try:
         cross_layout(setup.spacing_m, 8, setup.mask_size_m, d_f_m=setup.d_f_m, detector_size_m=setup.detector_size_m)
     except ValueError as err:
         raise ConfigError(f"[setup] detector_size_m = {setup.detector_size_m:g}, mask_size_m = "
-                          f"{setup.mask_size_m:g}: {err}") from None
+                          f"{setup.mask_size_m:g}, d_f_m = {setup.d_f_m:g}, spacing_m = {setup.spacing_m:g}: "
+                          f"{err}") from None
     try:
         setup.screen()
     except ValueError as err:
         raise ConfigError(f"[setup] screen_resolution = {list(setup.screen_resolution)}: {err}") from None
-    if not (setup.table_light_radiance_w_m2_sr > 0 and setup.table_light_radiance_w_m2_sr < 1e30):
+    if not setup.table_light_radiance_w_m2_sr > 0:
         raise ConfigError(f"[setup] table_light_radiance_w_m2_sr = {setup.table_light_radiance_w_m2_sr:g}: give the "
                           "table's light a radiance > 0 (an unlit table shows the mixels nothing to measure)")
+    if not setup.table_light_radiance_w_m2_sr < _MAX_RADIANCE_W_M2_SR:
+        raise ConfigError(f"[setup] table_light_radiance_w_m2_sr = {setup.table_light_radiance_w_m2_sr:g}: give the "
+                          f"table's light a radiance below {_MAX_RADIANCE_W_M2_SR:g} W m^-2 sr^-1 (its light, "
+                          "squared in the estimates, must stay a finite float)")
     tabletop = [name for name in ("intrusion", "tracking") if name in params]
     if tabletop:
         _check_tabletop(setup, {name: params[name] for name in tabletop})

@@ -65,13 +65,48 @@ def target_names() -> tuple[str, ...]:
 
 
 def study_target(ref: dict) -> StudyExperiment:
-    """The study target ``ref["name"]`` (``ref["config"]``: the render config file of ``render``)."""
+    """The study target ``ref["name"]`` (``ref["config"]``: the render config file of ``render``); a problem with
+    that file is one ConfigError that names it (``[study] config = 'sweep.toml': unknown section [wrld] ...``)."""
     name = ref.get("name")
     if name in STUDY_ONLY:
-        return STUDY_ONLY[name](ref)
+        try:
+            target = STUDY_ONLY[name](ref)
+        except ConfigError as err:
+            config = ref.get("config")
+            if not config or str(err).startswith("[study] config"):
+                raise
+            raise ConfigError(f"[study] config = {str(config)!r}: {err}") from None
+        return _with_render_budget(target) if name == "render" else target
     if name in REGISTRY:
         return _with_reproduce_checks(REGISTRY[name])
     raise ConfigError(f"[study] experiment = {name!r} is not one of {', '.join(map(repr, target_names()))}")
+
+
+def _with_render_budget(target: StudyExperiment) -> StudyExperiment:
+    """The ``render`` target ``target`` whose points are also refused, before any runs, where ``mincam-sim render``
+    would refuse the point's config: estimated to take longer than its default limit
+    (:data:`~mincam_sim.runs.jobs.DEFAULT_TIME_LIMIT_S`, 4 h), or holding more than the memory free now. A study's
+    own time estimate counts a typical point, not this one's samples."""
+    from mincam_sim.experiments.study_targets import _render_config
+    from mincam_sim.runs.jobs import DEFAULT_TIME_LIMIT_S, _duration, check_memory, estimate_bytes, estimate_seconds
+
+    config = target.ref["config"]
+    first = target.check
+
+    def check(params: dict, quick: bool) -> None:
+        if first is not None:
+            first(params, quick)
+        cfg = _render_config(config, params, 0)
+        seconds, what = estimate_seconds(cfg)
+        if seconds > DEFAULT_TIME_LIMIT_S:
+            key = "[run] samples_per_texel" if cfg.run.budget.samples_per_texel is not None else "[run] spp"
+            raise ConfigError(f"its render would take about {_duration(seconds)} ({what}), over the "
+                              f"{_duration(DEFAULT_TIME_LIMIT_S)} that `mincam-sim render` allows: lower {key} "
+                              "(or the frames) for this point")
+        n_bytes, held = estimate_bytes(cfg)
+        check_memory(n_bytes, held, "fewer frames, fewer mixels or a lower [screen] resolution")
+
+    return dataclasses.replace(target, check=check)
 
 
 def _with_reproduce_checks(experiment) -> StudyExperiment:
@@ -112,7 +147,8 @@ def load_reproduce_config(source: str | Path | dict | None, quick: bool = False,
 
 
 def reproduce(names, setup: Setup, out_dir: str | Path, show_progress: bool = False,
-              params: dict[str, Any] | None = None, overwrite: bool = False) -> dict:
+              params: dict[str, Any] | None = None, overwrite: bool = False,
+              say: Callable[[str], None] | None = None) -> dict:
     """Run experiments by name; write ``results.json`` (atomically, after each experiment) and plots.
 
     An out dir belongs to one set-up: the set-up, the library versions and the backend are recorded in
@@ -120,7 +156,8 @@ def reproduce(names, setup: Setup, out_dir: str | Path, show_progress: bool = Fa
     ``results.json`` with the same parameters (so a killed ``reproduce all`` resumes with the next experiment)
     and runs the others; a different record is refused, naming what changed. ``overwrite`` drops the old
     results first and recomputes everything. So ``results.json`` never holds numbers of two set-ups under one
-    ``meta``.
+    ``meta``. Each entry lists the files its experiment wrote in ``out_dir`` (``files``): an experiment
+    whose files are no longer all there is run again, and ``say`` (default: a line on stderr) names them.
 
     Returns the results as written: one entry per experiment (:meth:`ExperimentResult.as_dict` plus its
     ``params`` and their ``params_key``) and ``meta`` (``meta["reused"]``: the experiments of ``names`` that
@@ -149,12 +186,19 @@ def reproduce(names, setup: Setup, out_dir: str | Path, show_progress: bool = Fa
         params_key = _params_key(exp, p)
         old = results.get(name)
         if isinstance(old, dict) and old.get("params_key") == params_key:
-            reused.append(name)
-            continue
+            lost = _lost_files(out_dir, old.get("files"))
+            if not lost:
+                reused.append(name)
+                continue
+            (say or _stderr_say)(f"{out_dir} lacks {', '.join(lost[:4])}{' ...' if len(lost) > 4 else ''} of "
+                                 f"experiment {name}: running it again")
+        before = _listing(out_dir)
         t = time.perf_counter()
         result: ExperimentResult = exp.run(setup, p, out_dir, show_progress=show_progress)
         result.seconds = time.perf_counter() - t
-        results[name] = {**result.as_dict(), "params": _jsonable(p), "params_key": params_key}
+        after = _listing(out_dir)
+        files = sorted(path for path, stamp in after.items() if before.get(path) != stamp)
+        results[name] = {**result.as_dict(), "params": _jsonable(p), "params_key": params_key, "files": files}
         results["meta"] = _meta(setup, reused)
         atomic_write_text(results_path, json.dumps(results, indent=1, default=float))
     if reused:
@@ -164,6 +208,38 @@ def reproduce(names, setup: Setup, out_dir: str | Path, show_progress: bool = Fa
 
 
 IDENTITY_NAME = "reproduce_identity.json"
+#: Files of a reproduce folder that belong to no one experiment (not listed in an entry's ``files``).
+_SHARED_FILES = frozenset({"results.json", IDENTITY_NAME, ".mincam.lock"})
+
+
+def _stderr_say(message: str) -> None:
+    import sys
+
+    print(f"mincam-sim: {message}", file=sys.stderr)
+
+
+def _listing(folder: Path) -> dict[str, tuple[int, int]]:
+    """The files in ``folder`` (the experiments write their plots and data there, not in folders below, which
+    are not looked into: an output folder may be a large one of the user's) but the shared ones, by name: (size
+    [bytes], modification time [ns])."""
+    listing = {}
+    for path in folder.iterdir():
+        if path.name in _SHARED_FILES:
+            continue
+        try:
+            info = path.stat()
+        except OSError:  # removed meanwhile: not a file of the folder
+            continue
+        if path.is_file():
+            listing[path.name] = (info.st_size, info.st_mtime_ns)
+    return listing
+
+
+def _lost_files(folder: Path, files: Any) -> list[str]:
+    """The files an entry lists (``files``; an entry of an older run lists none) that ``folder`` lacks."""
+    if not isinstance(files, list):
+        return []
+    return [f for f in files if isinstance(f, str) and not (folder / f).is_file()]
 
 
 def _meta(setup: Setup, reused: list[str]) -> dict:

@@ -14,8 +14,10 @@ destination's suffix and moves it into place when the block succeeds.
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
+import re
 import secrets
 from collections.abc import Iterable, Iterator
 from pathlib import Path
@@ -26,6 +28,8 @@ import numpy as np
 from mincam_sim.errors import StoreError
 
 TMP_MARK = ".tmp-"
+#: What numpy says, without an errno, when the disk takes only part of an array (``ndarray.tofile``, ``np.save``)
+_SHORT_WRITE = re.compile(r"\d+ requested and \d+ written")
 
 
 def _tmp_name(path: Path) -> Path:
@@ -106,6 +110,9 @@ def _naming(err: OSError, path: Path) -> OSError:
     temporary file; either way the user is told which output could not be written.
     """
     named = err.filename
+    if err.errno is None and _SHORT_WRITE.fullmatch(str(err)):  # numpy's tofile: a write the disk cut short
+        return OSError(errno.ENOSPC, f"{os.strerror(errno.ENOSPC)} (only part of the file could be written: "
+                       f"{' '.join(str(err).split())})", str(path))
     if named is not None and TMP_MARK not in Path(str(named)).name:
         return err
     strerror = err.strerror or str(err) or type(err).__name__

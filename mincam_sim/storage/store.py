@@ -357,6 +357,8 @@ class ResultStore:
             self.values = np.lib.format.open_memmap(self.directory / "values.npy", mode="r+")
             self.stderr = np.lib.format.open_memmap(self.directory / "stderr.npy", mode="r+")
             self.done = np.lib.format.open_memmap(self.directory / "done.npy", mode="r+")
+            if self.resumed:
+                self._reopen_damaged_rows()
         except BaseException:
             self.close()
             raise
@@ -384,6 +386,23 @@ class ResultStore:
         info = {"format": STORE_FORMAT, "version": STORE_VERSION, "key": self.key, "n_frames": self.shape[0],
                 "columns": self.columns, "identity": self.identity}
         atomic_write_json(self.directory / "run.json", info, indent=1, sort_keys=True)
+
+    def _reopen_damaged_rows(self) -> None:
+        """Mark pending again the rows marked done whose numbers no computation writes (a value that is not a finite
+        number [W/m^2], a standard error that is NaN, infinite or negative): the store was changed on disk since.
+        They are computed again, with one :class:`StoreWarning` naming them, instead of being taken for results."""
+        with np.errstate(invalid="ignore"):
+            damaged = np.asarray(self.done) & ~(np.isfinite(self.values) & np.isfinite(self.stderr)
+                                                & (np.asarray(self.stderr) >= 0)).all(axis=1)
+        if not damaged.any():
+            return
+        rows = np.flatnonzero(damaged)
+        self.done[rows] = False
+        self.done.flush()
+        shown = ", ".join(str(int(i)) for i in rows[:5]) + (" ..." if rows.size > 5 else "")
+        warnings.warn(f"{self.directory}: {rows.size} frame(s) marked done hold numbers no run writes (NaN, infinite "
+                      f"or a negative standard error; frames {shown}): the store was changed on disk; they are "
+                      "computed again", StoreWarning, stacklevel=3)
 
     def _check_open(self) -> None:
         if self._lock is not None and self._lock.superseded:
@@ -607,6 +626,10 @@ class CacheWarning(UserWarning):
     """A cache file was torn or did not match its key; it is ignored and recomputed."""
 
 
+class StoreWarning(UserWarning):
+    """Rows of a resumed run's store hold numbers no run writes (changed on disk); they are computed again."""
+
+
 _KEY_RE = re.compile(r"^[A-Za-z0-9_-]{8,128}$")
 _RESERVED = ("__key__", "__digest__", "__meta__")
 
@@ -723,6 +746,7 @@ __all__ = [
     "DirLock",
     "ResultStore",
     "StoreSink",
+    "StoreWarning",
     "check_identity",
     "clear_store",
     "default_cache_dir",

@@ -276,7 +276,13 @@ def _verified(spec: StudySpec, ds, records: Path, say: Callable[[str], None]) ->
         except Exception as err:  # noqa: BLE001 - unreadable chunks: every point of that variable is redone
             say(f"study {spec.name}: variable {v} cannot be read ({type(err).__name__}); its points are recomputed")
             stored[v] = np.full(tuple(len(x) for x in spec.dims.values()), np.inf)  # matches no record
-    complete = np.zeros(tuple(len(v) for v in spec.dims.values()), dtype=bool)
+    shape = tuple(len(v) for v in spec.dims.values())
+    try:
+        done = np.asarray(ds["done"].values, dtype=bool)
+    except Exception as err:  # noqa: BLE001 - unreadable chunks: every point is redone (and its mark written again)
+        say(f"study {spec.name}: variable done cannot be read ({type(err).__name__}); its points are recomputed")
+        done = np.zeros(shape, dtype=bool)
+    complete = np.zeros(shape, dtype=bool)
     damaged: list[str] = []
     for index, params in zip(spec.indices, spec.points, strict=True):
         path = _record_path(records, index)
@@ -289,6 +295,8 @@ def _verified(spec: StudySpec, ds, records: Path, say: Callable[[str], None]) ->
         except (OSError, ValueError, KeyError, TypeError):
             ok_record, values = False, {}
         bad = [] if ok_record else ["its completion record"]
+        if ok_record and not done[index]:  # written before the record: a lost or changed chunk of the store
+            bad.append("done")
         for v in names if ok_record else []:
             want = values.get(v)
             want = np.nan if want is None else float(want)
