@@ -12,11 +12,14 @@ These names load the renderer on first use (``import mincam_sim`` itself stays p
 from mincam_sim.budget import Budget
 from mincam_sim.changes import Changes, RunInfo
 from mincam_sim.errors import ConfigError, InputError, MincamError
+from mincam_sim.llvm_path import configure_libllvm
 from mincam_sim.masks import Mask
 from mincam_sim.measurements import Measurements
 from mincam_sim.model.geometry import Pose, look_at
 from mincam_sim.model.optics import Mincam, Mixel, cross_layout, layout, pair_layout, single
 from mincam_sim.scene.display import Screen, grid_sweep, line_sweep, white_square
+
+configure_libllvm()  # before the user imports drjit: it picks its libLLVM then (the system's may be too old)
 
 _LAZY = {
     "Simulation": "mincam_sim.render.simulation",

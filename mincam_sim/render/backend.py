@@ -6,54 +6,27 @@ Order of preference: ``cuda_ad_mono`` when a CUDA device works, else ``llvm_ad_m
 
 Dr.Jit's LLVM backend loads a system ``libLLVM`` at run time and needs version >= 16 (Debian 12's LLVM 15
 loads, then aborts the process while compiling). The ``karellen-llvm-core`` wheel, a dependency of this
-package on Linux x86_64, ships ``libLLVM.so.23.1`` inside the environment; :func:`configure_libllvm` points
-``DRJIT_LIBLLVM_PATH`` at it before Dr.Jit is imported, unless the user already set that variable.
+package on Linux x86_64, ships ``libLLVM.so.23.1`` inside the environment;
+:func:`mincam_sim.llvm_path.configure_libllvm` points ``DRJIT_LIBLLVM_PATH`` at it before Dr.Jit is imported
+(``import mincam_sim`` does), unless the user already set that variable.
 """
 
 from __future__ import annotations
 
-import importlib.metadata
 import os
-import sys
 import warnings
 from functools import cache
-from pathlib import Path
 from types import ModuleType
 
 from mincam_sim import interrupts
 from mincam_sim.errors import BackendUnavailableError
+from mincam_sim.llvm_path import bundled_libllvm, configure_libllvm
 
 ENV_VARIANT = "MINCAM_VARIANT"
 SUPPORTED_VARIANTS = ("cuda_ad_mono", "llvm_ad_mono", "scalar_rgb")
 JIT_VARIANTS = ("cuda_ad_mono", "llvm_ad_mono")
 
 _requested: str | None = None
-
-
-def bundled_libllvm() -> Path | None:
-    """Path of the libLLVM shipped by the ``karellen-llvm-core`` wheel, or None if it is not installed."""
-    try:
-        files = importlib.metadata.files("karellen-llvm-core") or []
-    except importlib.metadata.PackageNotFoundError:
-        return None
-    for f in files:
-        if f.name.startswith("libLLVM.so."):
-            path = Path(f.locate()).resolve()
-            if path.exists():
-                return path
-    return None
-
-
-def configure_libllvm() -> str | None:
-    """Set ``DRJIT_LIBLLVM_PATH`` to the bundled libLLVM if the user did not set it; return the path used."""
-    if "drjit" in sys.modules and "DRJIT_LIBLLVM_PATH" not in os.environ:
-        # Too late to steer Dr.Jit: it has already looked for libLLVM.
-        return None
-    if "DRJIT_LIBLLVM_PATH" not in os.environ:
-        lib = bundled_libllvm()
-        if lib is not None:
-            os.environ["DRJIT_LIBLLVM_PATH"] = str(lib)
-    return os.environ.get("DRJIT_LIBLLVM_PATH")
 
 
 def request_variant(variant: str | None) -> None:

@@ -39,7 +39,7 @@ UPPER = tuple(FLOOR_OF.values())
 #: The subpackages of the pure core (numpy, no renderer), and the modules at the package's top.
 CORE_PACKAGES = ("model", "masks", "scene", "estimation", "oracles", "storage", "wave")
 TOP_MODULES = ("__init__", "errors", "paper", "budget", "changes", "measurements", "frames", "progress", "interrupts",
-               "cli")
+               "llvm_path", "cli")
 
 
 def _module_name(path: Path) -> str:

@@ -439,3 +439,14 @@ def test_an_element_named_like_the_mincams_bodies_is_refused():
     world, _ = _simple_world()
     with pytest.raises((InputError, ValueError), match="reserved"):
         ms.Simulation(world.mincam, world={sd.BODIES_KEY: {"type": "rectangle"}})
+
+
+def test_importing_drjit_after_mincam_sim_works():
+    """The order the error above asks for: ``import mincam_sim`` then ``drjit`` and ``mitsuba``. The libLLVM was
+    pointed at only when mincam_sim first rendered, after drjit had picked the system's, so this order got the
+    error 'import mincam_sim before mitsuba / drjit'; the package now points it at import."""
+    code = ("import mincam_sim\nimport drjit\nimport mitsuba\nfrom mincam_sim.render import check\n"
+            "raise SystemExit(check.main([]))")
+    env = {k: v for k, v in os.environ.items() if k != "DRJIT_LIBLLVM_PATH"}
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
+    assert done.returncode == 0, done.stderr[-600:]
