@@ -43,7 +43,7 @@ VERSIONED_LIBRARIES = ("mincam_sim", "mitsuba", "drjit", "numpy")
 #: The method's own version, part of every stored result's identity: raise it with any change to the code that
 #: changes the numbers for the same inputs (a fixed bias, a new sampling), so that no store made before is reused.
 #: The package version alone does not move between releases.
-METHOD_VERSION = "2026-12-05b"  # b: the ground-truth camera's change in its change window (64 + 8 spp)
+METHOD_VERSION = "2026-12-07"  # raster masks cut along their lines in DotProduct; ResponseMap target search floor
 
 
 def array_digest(array: np.ndarray) -> str:

@@ -20,18 +20,19 @@ never has other mixels' bodies in the way (ignored, as ``meta`` says). A measure
 in W/m^2 averaged over the detector, as from every solver, with the quadrature's error estimate as its error.
 
 Quadrature: texels whose image lies inside the aperture are integrated over their image (a quadrilateral: a
-central projection keeps lines straight) with ``nodes x nodes`` Gauss-Legendre points, a raster mask's image
-split into parts about one mask texel wide (its interpolation kinks or jumps at every texel); texels cut by the
-aperture's edge (or the mask plane) are clipped exactly and integrated on a fan of triangles. The detector is
+central projection keeps lines straight) with ``nodes x nodes`` Gauss-Legendre points; texels cut by the
+aperture's edge (or the mask plane) are clipped exactly and integrated on a fan of triangles. A raster mask's
+interpolation kinks (bilinear: at the lines through its texels' centres) or jumps (nearest: at its texels'
+edges), so each image that such a line crosses is cut along them into pieces on which the mask is bilinear or
+constant, each integrated on its fan (:func:`raster_lines`): the bare model of a raster mask is then exact to
+rounding (the tests check it against closed-form overlaps of every image with every mask texel). The detector is
 split into ``detector_cells x detector_cells`` squares of ``nodes x nodes`` Gauss-Legendre points (the pinhole's
 measurement has a kink wherever a texel's edge crosses the field's edge: a single high-order rule converges
 slowly there, a composite one faster). Neither rule is exact for every mask and frame, so every measurement
 carries an *error estimate* in its ``stderr_w_m2`` (deterministic, not a Monte Carlo standard error): the larger
 of ``|P - P'|`` for two other detector rules (half and one fewer points per cell) plus twice ``|P_c' - P_c|`` at
 the detector's centre for the texels' images split twice as finely (without ``detector_blur`` the finer rule is
-the value). An estimate, not a bound: on random set-ups the blurred values' estimate was below the error in 1 of
-37 (a raster mask), the raster masks' texel part alone in 18 of 100 (worst 17x; their relative error at most
-0.3 %, median 7e-5), where a texel image holds kinks or jumps of the mask at random (``docs/ideal_model.md``).
+the value). An estimate, not a bound (``docs/ideal_model.md`` says how it held on random set-ups).
 """
 
 from __future__ import annotations
@@ -62,8 +63,8 @@ MAX_DETECTOR_CELLS = 32
 # error is D / (2^p - 1) <= D)
 TEXEL_CHECK_FACTOR = 2.0
 ROUNDING_REL = 1e-12  # float64 sums over ~1e5 texels and points: well above their rounding, far below any rule's
-MAX_TEXEL_SPLIT = 16  # parts per axis of a texel's image (a raster mask's texels resolved)
-MAX_POINTS_PER_PINHOLE = 1 << 24  # quadrature points over all texels from one pinhole (~1 s)
+MAX_PIECES_PER_CHUNK = 1 << 14  # pieces of a raster mask's texel images integrated at a time (memory)
+BIG_M = 1e30  # [m] a strip's open side: beyond any mask
 
 
 def aperture_view_factor_pi(mixel: Mixel) -> float:
@@ -90,7 +91,7 @@ class DotProduct(Solver):
     detector_blur : bool
         Average the pinhole over the detector's area (the blur of a finite detector).
     nodes : int
-        Gauss-Legendre points per axis of each texel's image on the mask plane (or of each of its parts, for a
+        Gauss-Legendre points per axis of each texel's image on the mask plane (or of each of its pieces, for a
         raster mask) and, with ``detector_blur``, of each detector cell.
     detector_cells : int
         With ``detector_blur``: squares per axis the detector is split into (``(detector_cells * nodes)^2``
@@ -269,8 +270,8 @@ def _pinhole_weights(mixel: Mixel, screen: Screen, pinhole: np.ndarray, rot: np.
                      scale: float | None, nodes: int, refine: int = 1) -> np.ndarray:
     """Weights [sr] of every texel seen from one pinhole (a point on the detector plane, ``offset`` from the mask's
     axis): the integral over the texel's image on the mask plane of ``T * scale`` (bare) or ``T cos^4 / d_f^2``,
-    each image's parameter square split into ``refine x split`` parts per axis of ``nodes x nodes`` points
-    (:func:`texel_split`: a raster mask's texels are resolved)."""
+    each image (a raster mask's: each of its pieces, :func:`_piece_integrals`) integrated with its parameter
+    square split into ``refine x refine`` parts of ``nodes x nodes`` points."""
     rows, cols = screen.shape
     right, up, normal = (np.asarray(a, dtype=np.float64) for a in screen.pose.axes())
     centre = np.asarray(screen.pose.position_m, dtype=np.float64)
@@ -305,29 +306,94 @@ def _pinhole_weights(mixel: Mixel, screen: Screen, pinhole: np.ndarray, rot: np.
     beyond = (cz > d_f).all(axis=-1)
     inside = beyond & (np.abs(cx) <= hw).all(axis=-1) & (np.abs(cy) <= hh).all(axis=-1)
     away = ((cx > hw).all(axis=-1) | (cx < -hw).all(axis=-1) | (cy > hh).all(axis=-1) | (cy < -hh).all(axis=-1))
-    split = refine * texel_split(mixel.mask, cx[beyond & ~away], cy[beyond & ~away], nodes)
     out = np.zeros((rows, cols))
-    out[inside] = _quads(cx[inside], cy[inside], integrand, nodes, split)
     cut = ~inside & ~(beyond & away) & (cz > d_f).any(axis=-1)
+    if mixel.mask.profile is None:  # a raster: every image cut along the mask's kinks or jumps, exactly
+        lines = raster_lines(mixel.mask)
+        if inside.any():
+            quads = np.stack([cx[inside], cy[inside]], axis=-1)
+            out[inside] = _piece_integrals(quads, np.full(len(quads), 4), lines, integrand, nodes, refine)
+        if cut.any():
+            polys, count = _cut_images(np.argwhere(cut), xe, ye, to_mask, (right, up, centre, pinhole, rot, d_f),
+                                       (hw, hh))
+            out[cut] = _piece_integrals(polys, count, lines, integrand, nodes, refine)
+        return out
+    out[inside] = _quads(cx[inside], cy[inside], integrand, nodes, refine)
     if cut.any():
-        out[cut] = _clipped(np.argwhere(cut), xe, ye, to_mask, (right, up, centre, pinhole, rot, d_f), (hw, hh),
-                            integrand, nodes, split)
+        polys, count = _cut_images(np.argwhere(cut), xe, ye, to_mask, (right, up, centre, pinhole, rot, d_f),
+                                   (hw, hh))
+        out[cut] = _fan_integrals(polys, count, integrand, nodes, refine)
     return out
 
 
-def texel_split(mask, cx: np.ndarray, cy: np.ndarray, nodes: int) -> int:
-    """Parts per axis of each texel's image: 1 for a mask given by a profile (smooth, or its edges said where it is
-    made); for a raster, enough that a part spans about one mask texel (its interpolation has a kink or a jump at
-    every texel), at most ``MAX_TEXEL_SPLIT`` and ``MAX_POINTS_PER_PINHOLE`` points in all. ``cx``, ``cy``: the
-    images' corners on the mask plane [m], (n, 4)."""
-    if mask.profile is not None or len(cx) == 0:
-        return 1
+def raster_lines(mask) -> tuple[np.ndarray, np.ndarray]:
+    """The lines of a raster mask's plane [m] (x = const, y = const) where its transmission kinks or jumps, as
+    ``transmission_at`` reads it: ``nearest``, the texels' edges; ``bilinear``, the lines through the texels'
+    centres (linear between them, constant beyond the outer ones up to the aperture's edge)."""
     rows, cols = mask.shape
-    pitch = min(mask.width_m / cols, mask.height_m / rows)
-    extent = max(float(np.minimum(np.ptp(cx, axis=-1), mask.width_m).max()),
-                 float(np.minimum(np.ptp(cy, axis=-1), mask.height_m).max()))
-    by_points = int(np.sqrt(MAX_POINTS_PER_PINHOLE / (len(cx) * nodes * nodes)))
-    return int(np.clip(np.ceil(extent / pitch), 1, max(1, min(MAX_TEXEL_SPLIT, by_points))))
+    if mask.interpolation == "nearest":
+        u, v = np.arange(1, cols) / cols, np.arange(1, rows) / rows
+    else:
+        u, v = (np.arange(cols) + 0.5) / cols, (np.arange(rows) + 0.5) / rows
+    return (u - 0.5) * mask.width_m, np.sort((0.5 - v) * mask.height_m)
+
+
+def _piece_integrals(polys: np.ndarray, count: np.ndarray, lines: tuple[np.ndarray, np.ndarray], integrand,
+                     nodes: int, refine: int = 1) -> np.ndarray:
+    """Integrals of ``integrand`` over convex polygons (``polys`` (n, v, 2) [m], the first ``count`` vertices
+    valid), each cut along the grid ``lines`` (x, y) into pieces on which a raster mask is smooth (constant or
+    bilinear), every piece integrated on its fan of triangles (:func:`_fan_integrals`); about
+    ``MAX_PIECES_PER_CHUNK`` pieces at a time (a coarse screen's texel image can hold hundreds of mask texels)."""
+    valid = np.arange(polys.shape[1])[None, :] < count[:, None]
+    pieces = np.ones(len(polys), dtype=np.int64)
+    for axis in (0, 1):  # the pieces a polygon's bounding box promises: (lines crossing in x + 1)(in y + 1)
+        coord = polys[..., axis]
+        lo = np.searchsorted(lines[axis], np.where(valid, coord, np.inf).min(axis=1), side="right")
+        hi = np.searchsorted(lines[axis], np.where(valid, coord, -np.inf).max(axis=1), side="left")
+        pieces *= np.maximum(hi - lo, 0) + 1
+    out = np.zeros(len(polys))
+    whole = pieces == 1  # inside one smooth part of the mask: integrated as it is, a quadrilateral on its own map
+    quads = whole & (count == 4)
+    if quads.any():
+        out[quads] = _quads(polys[quads, :4, 0], polys[quads, :4, 1], integrand, nodes, refine)
+    if (whole & ~quads).any():
+        out[whole & ~quads] = _fan_integrals(polys[whole & ~quads], count[whole & ~quads], integrand, nodes, refine)
+    cut = np.flatnonzero(~whole)
+    bounds = np.searchsorted(np.cumsum(pieces[cut]), np.arange(MAX_PIECES_PER_CHUNK, int(pieces[cut].sum()),
+                                                               MAX_PIECES_PER_CHUNK), side="right")
+    for lo, hi in zip([0, *bounds.tolist()], [*bounds.tolist(), len(cut)], strict=True):
+        if hi <= lo:
+            continue
+        chunk, n, owner = polys[cut[lo:hi]], count[cut[lo:hi]], np.arange(hi - lo)
+        for axis in (0, 1):
+            chunk, n, kept = _cut_along(chunk, n, lines[axis], axis)
+            owner = owner[kept]
+        out[cut[lo:hi]] = np.bincount(owner, weights=_fan_integrals(chunk, n, integrand, nodes, refine),
+                                      minlength=hi - lo)
+    return out
+
+
+def _cut_along(polys: np.ndarray, count: np.ndarray, lines: np.ndarray, axis: int):
+    """Each convex polygon cut by the lines ``coordinate[axis] = lines`` (sorted) it crosses into its strips
+    between them; returns the pieces (padded), their vertex counts and the index of the polygon each came from."""
+    valid = np.arange(polys.shape[1])[None, :] < count[:, None]
+    coord = polys[..., axis]
+    lo = np.where(valid, coord, np.inf).min(axis=1)
+    hi = np.where(valid, coord, -np.inf).max(axis=1)
+    first = np.searchsorted(lines, lo, side="right")  # the lines strictly inside (lo, hi) cut the polygon
+    strips = np.maximum(np.searchsorted(lines, hi, side="left") - first, 0) + 1
+    owner = np.repeat(np.arange(len(polys)), strips)
+    k = np.arange(len(owner)) - np.repeat(np.cumsum(strips) - strips, strips)  # the strip's index in its polygon
+    line = first[owner] + k
+    far = BIG_M
+    lower = np.where(k > 0, lines[np.clip(line - 1, 0, max(len(lines) - 1, 0))] if len(lines) else 0.0, -far)
+    upper = np.where(k < strips[owner] - 1, lines[np.clip(line, 0, max(len(lines) - 1, 0))] if len(lines) else 0.0,
+                     far)
+    normal = np.zeros(2)
+    normal[axis] = 1.0
+    pieces, n = _clip_halfplanes(polys[owner], count[owner], normal, -lower)
+    pieces, n = _clip_halfplanes(pieces, n, -normal, upper)
+    return pieces, n, owner
 
 
 def _quads(cx: np.ndarray, cy: np.ndarray, integrand, nodes: int, split: int = 1) -> np.ndarray:
@@ -345,12 +411,11 @@ def _quads(cx: np.ndarray, cy: np.ndarray, integrand, nodes: int, split: int = 1
     return (integrand(px, py) * jac) @ ww
 
 
-def _clipped(texels: np.ndarray, xe: np.ndarray, ye: np.ndarray, to_mask, frame, half: tuple[float, float],
-             integrand, nodes: int, split: int = 1) -> np.ndarray:
-    """Integrals over the images of texels cut by the mask plane or the aperture's edge: each texel clipped to the
-    part beyond the mask plane (on the screen), projected, clipped to the aperture, split into a fan of triangles
-    integrated by a collapsed ``nodes x nodes`` Gauss-Legendre rule on each of ``split x split`` parts of its
-    square (all texels at once)."""
+def _cut_images(texels: np.ndarray, xe: np.ndarray, ye: np.ndarray, to_mask, frame,
+                half: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """The images of texels cut by the mask plane or the aperture's edge: each texel clipped to the part beyond
+    the mask plane (on the screen), projected, clipped to the aperture; (polygons (n, v, 2) [m] on the mask
+    plane, padded; their vertex counts)."""
     right, up, centre, pinhole, rot, d_f = frame
     hw, hh = half
     axis = rot[:, 2]
@@ -365,30 +430,37 @@ def _clipped(texels: np.ndarray, xe: np.ndarray, ye: np.ndarray, to_mask, frame,
     for normal, offset in ((np.array([1.0, 0.0]), hw), (np.array([-1.0, 0.0]), hw), (np.array([0.0, 1.0]), hh),
                            (np.array([0.0, -1.0]), hh)):
         img, count = _clip_halfplanes(img, count, normal, offset)
+    return img, count
+
+
+def _fan_integrals(img: np.ndarray, count: np.ndarray, integrand, nodes: int, split: int = 1) -> np.ndarray:
+    """Integrals of ``integrand`` over convex polygons (``img`` (n, v, 2) [m], the first ``count`` vertices valid),
+    each split into a fan of triangles integrated by a collapsed ``nodes x nodes`` Gauss-Legendre rule on each of
+    ``split x split`` parts of its square (all polygons at once)."""
     if img.shape[1] < 3:
-        return np.zeros(len(texels))
+        return np.zeros(len(img))
     u, wu = _composite01(nodes, split)
     su, sv = (g.ravel() for g in np.meshgrid(u, u, indexing="ij"))
     sw = np.outer(wu, wu).ravel() * su  # collapsed square -> triangle: Jacobian s
-    p0 = img[:, :1]  # fan (0, k, k + 1), k = 1 .. count - 2
-    p1, p2 = img[:, 1:-1], img[:, 2:]
-    live = np.arange(1, img.shape[1] - 1)[None, :] <= count[:, None] - 2
-    area2 = np.abs((p1[..., 0] - p0[..., 0]) * (p2[..., 1] - p0[..., 1])
-                   - (p1[..., 1] - p0[..., 1]) * (p2[..., 0] - p0[..., 0])) * live
-    tx = p0[..., 0, None] + su * (p1[..., 0, None] - p0[..., 0, None]) + su * sv * (p2[..., 0, None] - p1[..., 0, None])
-    ty = p0[..., 1, None] + su * (p1[..., 1, None] - p0[..., 1, None]) + su * sv * (p2[..., 1, None] - p1[..., 1, None])
-    values = integrand(tx, ty) * area2[..., None] * sw
-    return values.sum(axis=(1, 2))
+    # the fan's live triangles (0, k, k + 1), k = 1 .. count - 2, of every polygon: none of the padding's
+    poly, k = np.nonzero(np.arange(1, img.shape[1] - 1)[None, :] <= count[:, None] - 2)
+    p0, p1, p2 = img[poly, 0], img[poly, k + 1], img[poly, k + 2]
+    area2 = np.abs((p1[:, 0] - p0[:, 0]) * (p2[:, 1] - p0[:, 1]) - (p1[:, 1] - p0[:, 1]) * (p2[:, 0] - p0[:, 0]))
+    tx = p0[:, 0, None] + su * (p1[:, 0, None] - p0[:, 0, None]) + su * sv * (p2[:, 0, None] - p1[:, 0, None])
+    ty = p0[:, 1, None] + su * (p1[:, 1, None] - p0[:, 1, None]) + su * sv * (p2[:, 1, None] - p1[:, 1, None])
+    return np.bincount(poly, weights=(integrand(tx, ty) @ sw) * area2, minlength=len(img))
 
 
-def _clip_halfplanes(polys: np.ndarray, count: np.ndarray, normal: np.ndarray, offset: float):
+def _clip_halfplanes(polys: np.ndarray, count: np.ndarray, normal: np.ndarray, offset):
     """Sutherland-Hodgman for many convex polygons at once: the part of each polygon (``polys`` (n, v, 2), the first
-    ``count`` vertices valid) where ``normal . p + offset >= 0``; returns the clipped polygons, padded, and counts."""
+    ``count`` vertices valid) where ``normal . p + offset >= 0`` (``offset`` one number, or one per polygon);
+    returns the clipped polygons, padded, and counts."""
     n, v = polys.shape[:2]
     idx = np.arange(v)[None, :]
     valid = idx < count[:, None]
     nxt = np.where(idx + 1 < count[:, None], idx + 1, 0)
     q = np.take_along_axis(polys, nxt[..., None], axis=1)
+    offset = np.reshape(offset, (-1, 1)) if np.ndim(offset) else offset  # one per polygon, or one for all
     side_p, side_q = polys @ normal + offset, q @ normal + offset
     keep = valid & (side_p >= 0)
     cross = valid & ((side_p >= 0) != (side_q >= 0))
