@@ -156,7 +156,9 @@ def open_aperture_view_factor_irradiance(
     opaque boxes (each given by its 8 world corners [m]) between the mask and the screen.
 
     Each box must lie entirely beyond the mask plane and in front of the screen (its shadow on the screen plane
-    is then the convex hull of its projected corners). The mask's transmission is ignored (open aperture).
+    is then the convex hull of its projected corners). Each shadow's view factor is subtracted on its own, so
+    the boxes' shadows must not overlap as seen from any detector point (overlapping shadows are counted
+    twice): give one box per direction. The mask's transmission is ignored (open aperture).
     """
     right, up, normal = screen.pose.axes()
     center = np.asarray(screen.pose.position_m)

@@ -53,3 +53,21 @@ def test_the_same_lamp_near_the_origin_reads_the_quadrature_without_a_word():
     assert told == []
     m = sim.measure([{}], ms.Aperture(), ms.Budget(spp=1 << 18, replicates=16, seed=3))
     assert_close_mc(m.irradiance_w_m2[0, 0], oracle, m.stderr_w_m2[0, 0], what="lamp 1 mm beyond the mask")
+
+
+def test_a_lamp_mm_across_before_one_mixel_is_not_a_unit_mistake():
+    """A 2 mm lamp 1 mm beyond one 2 mm mask: the scene (2.8 mm across) was compared with the 1 cm device a
+    single mixel is taken to sit in and warned as 'less than the mincam (0.01 m)', a unit mistake it is not;
+    the small-scene check now takes the rig's own size (its mask). A scene smaller than the mask is still said."""
+    def size_warnings(lamp_m: float) -> list[str]:
+        mixel = Mixel(masks.ramp("x"), pose=Pose((0.0, 0.0, 0.0), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)), name="m")
+        lamp = Pose((0.0, 0.0, -(mixel.d_f_m + 1e-3)), (0.0, 0.0, 1.0), (0.0, 1.0, 0.0))
+        with warnings.catch_warnings(record=True) as said:
+            warnings.simplefilter("always")
+            ms.Simulation(Mincam((mixel,)), world={"chip": sd.area_light(lamp_m, lamp_m, lamp.matrix(), RADIANCE)},
+                          max_depth=2)
+        return [str(w.message) for w in said if "less than the mincam" in str(w.message)]
+
+    assert size_warnings(0.002) == []
+    told = size_warnings(0.0005)
+    assert len(told) == 1 and "less than the mincam (0.002 m)" in told[0], told

@@ -115,13 +115,13 @@ def _within_m(grid_m: float, unit_m: float) -> float:
     return float(2.0 ** (np.floor(np.log2(grid_m / unit_m / np.spacing(np.float32(1.0)))) + 1)) * unit_m
 
 
-def rig_size_m(mincam: Mincam) -> float:
-    """The rig's size [m]: the spread of its mixels' positions, its largest mask or detector, or
-    :data:`MIN_RIG_M`, whichever is largest."""
+def rig_size_m(mincam: Mincam, least_m: float = MIN_RIG_M) -> float:
+    """The rig's size [m]: the spread of its mixels' positions, its largest mask or detector, or ``least_m``
+    (:data:`MIN_RIG_M`: the device a single mixel sits in), whichever is largest."""
     positions = np.array([m.pose.position_m for m in mincam])
     spread = float(np.linalg.norm(np.ptp(positions, axis=0)))
     parts = [max(m.mask.width_m, m.mask.height_m, m.detector_size_m) for m in mincam]
-    return max(spread, max(parts), MIN_RIG_M)
+    return max(spread, max(parts), least_m)
 
 
 def user_extent_m(scene, skip: set[str]) -> float | None:
@@ -146,8 +146,10 @@ def warn_if_implausible_size(scene, mincam: Mincam, skip: set[str], unit_m: floa
         warnings.warn(f"the scene spans {extent:.4g} m, {extent / rig:.3g} times the mincam ({rig:.3g} m), read in "
                       f"{units}: a file modelled in cm or mm needs unit_m = 0.01 or 0.001 (a scene this large on "
                       "purpose needs nothing)", WorldWarning, stacklevel=4)
-    elif extent < SCENE_TOO_SMALL * rig:
-        warnings.warn(f"the scene spans {extent:.4g} m, less than the mincam ({rig:.3g} m): read in {units}; check "
+    elif extent < SCENE_TOO_SMALL * (own := rig_size_m(mincam, least_m=0.0)):
+        # the rig's own size, without the device a single mixel is taken to sit in: a 2.8 mm lamp before one
+        # 2 mm mask is a scene, not a unit mistake
+        warnings.warn(f"the scene spans {extent:.4g} m, less than the mincam ({own:.3g} m): read in {units}; check "
                       "unit_m (files are in metres unless unit_m says otherwise)", WorldWarning, stacklevel=4)
 
 
