@@ -26,6 +26,7 @@ PAPER_SPACING_M = paper.SPACING_M  # [m] distance between neighbouring mixels in
 # [m] farthest a mixel may sit from its mincam's centre (the mean detector position, the origin of its scene):
 # float32 ray origins there are exact to 10 m x 2^-24 = 0.6 um, 0.6 % of the default detector
 MAX_MINCAM_RADIUS_M = 10.0
+MAX_MIXEL_LENGTH_M = 100.0  # [m] longest d_f and mask side a mixel takes (as the configuration files)
 
 
 def _real(where: str, value, unit: str = "metres") -> float:
@@ -92,6 +93,11 @@ class Mixel:
             raise InputError(
                 f"mixel {self.name!r}: detector_size_m must be a positive size in metres, got {self.detector_size_m!r}"
             )
+        for what, length in (("d_f_m (mask-to-detector distance)", self.d_f_m), ("mask width_m", self.mask.width_m),
+                             ("mask height_m", self.mask.height_m)):
+            if length > MAX_MIXEL_LENGTH_M:  # 1e300 overflowed the body overlap test, far below any use
+                raise InputError(f"mixel {self.name!r}: {what} must be at most {MAX_MIXEL_LENGTH_M:g} metres, got "
+                                 f"{length!r} (metres: 0.002 for 2 mm)")
         if self.optics not in ("geometric", "wave"):
             raise InputError(f"mixel {self.name!r}: optics must be 'geometric' or 'wave', got {self.optics!r}")
         lam = tuple(float(v) for v in np.atleast_1d(np.asarray(self.wavelengths_m, dtype=float)))

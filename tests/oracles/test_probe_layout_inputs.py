@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import mincam_sim as ms
+from mincam_sim import masks
 from mincam_sim.errors import InputError
 from mincam_sim.model.optics import MAX_MINCAM_RADIUS_M
 
@@ -26,3 +27,13 @@ def test_pose_given_as_text_is_one_input_error():
     """``Pose(("a", 0, 0))`` was numpy's ValueError (could not convert string to float)."""
     with pytest.raises(InputError, match="position_m must be three finite numbers"):
         ms.Pose(("a", 0, 0))
+
+
+@pytest.mark.parametrize("build", [lambda: ms.pair_layout(d_f_m=1e300),
+                                   lambda: ms.single(masks.ramp("x", width_m=1e300)),
+                                   lambda: ms.single(masks.ramp("x", height_m=1e300))])
+def test_a_huge_mixel_length_is_one_input_error(build):
+    """d_f or a mask side of 1e300 m overflowed the mixels' body-overlap test (OverflowError 34): one
+    InputError naming the length and the cap (100 m, as in the configuration files)."""
+    with pytest.raises(InputError, match="must be at most 100 metres"):
+        build()
