@@ -7,7 +7,7 @@ Order of preference: ``cuda_ad_mono`` when a CUDA device works, else ``llvm_ad_m
 Dr.Jit's LLVM backend loads a system ``libLLVM`` at run time and needs version >= 16 (Debian 12's LLVM 15
 loads, then aborts the process while compiling). The ``karellen-llvm-core`` wheel, a dependency of this
 package on Linux x86_64, ships ``libLLVM.so.23.1`` inside the environment;
-:func:`mincam_sim.llvm_path.configure_libllvm` points ``DRJIT_LIBLLVM_PATH`` at it before Dr.Jit is imported
+``mincam_sim.llvm_path.configure_libllvm`` points ``DRJIT_LIBLLVM_PATH`` at it before Dr.Jit is imported
 (``import mincam_sim`` does), unless the user already set that variable.
 """
 

@@ -105,7 +105,7 @@ SIGMA_DOF_FLOOR = 7.0  # the ray solvers' 8 replicates: |z| > 4.5 in ~0.3 % of r
 
 class DofWatch:
     """The fewest degrees of freedom of the standard errors a map plan measured, per mixel, and the values
-    below :data:`SIGMA_DOF_FLOOR` (rows found done in a resumed run were watched when they were measured)."""
+    below ``SIGMA_DOF_FLOOR`` (rows found done in a resumed run were watched when they were measured)."""
 
     def __init__(self, n_mixels: int) -> None:
         self.least = np.full(n_mixels, np.inf)
@@ -126,8 +126,8 @@ class DofWatch:
         return least if np.isfinite(least) else None
 
     def warn(self, names: list[str], replicates: int) -> None:
-        """One :class:`UncertainSigmaWarning` if any value's standard error has fewer than
-        :data:`SIGMA_DOF_FLOOR` degrees of freedom: which mixels, how many values, what to do."""
+        """One ``UncertainSigmaWarning`` if any value's standard error has fewer than
+        ``SIGMA_DOF_FLOOR`` degrees of freedom: which mixels, how many values, what to do."""
         if not self.few.any():
             return
         from scipy import stats
