@@ -250,7 +250,7 @@ def maps_to_target(sim, frames, target_rel_stderr: float, seed: int = 0,
 
     floor = min(max_samples_per_texel, view_floor_samples_per_texel(sim.mincam, sim.screen))
     first = MapSampling.of(max(FIRST_SAMPLES_PER_TEXEL, replicates), replicates).samples_per_texel
-    if floor > first:  # round up to the next replicates x k^2 (MapSampling.of rounds down), within the cap
+    if floor > first:  # onto the search's steps (replicates x k^2, k the strata the floor asks for), within the cap
         first = stratum_steps(replicates, max_samples_per_texel)(floor, first)
     n, trail = pilot_to_target(measure, first, target_rel_stderr, max_samples_per_texel, significance=0.0,
                                rounds=None, measured_exponent=SEARCH_EXPONENT, growth=SEARCH_GROWTH, unseen_growth=1,
