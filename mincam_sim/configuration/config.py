@@ -58,6 +58,7 @@ from mincam_sim.model.optics import (
     Mincam,
     Mixel,
     cross_layout,
+    mixel_file_stem,
     pair_layout,
 )
 from mincam_sim.render.solvers import (
@@ -618,12 +619,6 @@ def _build_mincam(m: MincamSection, mixel_tables: list, base: Path) -> Mincam:
         return _custom_mincam(m, mixel_tables, base)
     mixels = tuple(mx.with_optics(m.optics, m.wavelengths_m) for mx in mincam)
     return Mincam(mixels, allow_overlap=mincam.allow_overlap)
-
-
-def mixel_file_stem(name: str) -> str:
-    """The part of a file name that a mixel's name gives (``response_<stem>.exr``, ``maps/<stem>.npy``): characters
-    other than letters, digits, ``-`` and ``_`` become ``_``, as the writers of those files make it."""
-    return "".join(c if c.isalnum() or c in "-_" else "_" for c in name)
 
 
 def check_file_names(names: list[str], where: str = "[[mixel]]") -> None:

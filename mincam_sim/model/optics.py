@@ -37,6 +37,26 @@ def _real(where: str, value, unit: str = "metres") -> float:
     return float(value)
 
 
+def mixel_file_stem(name: str) -> str:
+    """The part of a file name that a mixel's name gives (``response_<stem>.exr``, ``maps/<stem>.npy``): characters
+    other than letters, digits, ``-`` and ``_`` become ``_``."""
+    return "".join(c if c.isalnum() or c in "-_" else "_" for c in name)
+
+
+def check_mixel_file_names(names) -> None:
+    """One ``InputError`` where two mixel ``names`` would be written to the same files
+    (``"a/b"`` and ``"a_b"``; ``"X"`` and ``"x"`` on a disk that ignores case): one mixel's file would silently
+    replace the other's. Measuring in memory takes any unique names; writing them needs this."""
+    seen: dict[str, str] = {}
+    for name in names:
+        stem = mixel_file_stem(name)
+        other = seen.setdefault(stem.casefold(), name)
+        if other != name:
+            raise InputError(f"mixels {other!r} and {name!r} would be written to the same files (response_{stem}.exr, "
+                             f"maps/{stem}.npy): file names keep letters, digits, - and _ (the others become _) and "
+                             "a disk may ignore case; give names that differ in those")
+
+
 @dataclass(frozen=True, eq=False)
 class Mixel:
     """One masked photodetector.

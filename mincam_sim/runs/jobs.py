@@ -39,6 +39,7 @@ from mincam_sim.configuration.config import RenderConfig, solver_name, traced_sa
 from mincam_sim.configuration.world_config import CameraSpec, WorldConfig, is_gltf
 from mincam_sim.errors import ConfigError
 from mincam_sim.measurements import Measurements
+from mincam_sim.model.optics import mixel_file_stem
 from mincam_sim.render import backend
 from mincam_sim.render.scene import scene_dicts as sd
 from mincam_sim.render.scene.gltf_files import GltfFile
@@ -150,10 +151,7 @@ def maps_outputs(out: Path, mixel_names) -> list[Path]:
     """The response maps' outputs of a display run in ``out``: one OpenEXR per mixel, named as
     ``ResponseMaps.save_exr`` names it (``response_<mixel>.exr``, characters other than letters, digits, ``-`` and
     ``_`` replaced by ``_``), and ``response_maps.png``."""
-    def safe(name: str) -> str:
-        return "".join(c if c.isalnum() or c in "-_" else "_" for c in name)
-
-    return [*(out / "response_maps" / f"response_{safe(name)}.exr" for name in mixel_names),
+    return [*(out / "response_maps" / f"response_{mixel_file_stem(name)}.exr" for name in mixel_names),
             out / "response_maps.png"]
 
 

@@ -31,7 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mincam_sim.render.kernels.map_tracing import ResponseMaps, _safe
+from mincam_sim.model.optics import check_mixel_file_names, mixel_file_stem
+from mincam_sim.render.kernels.map_tracing import ResponseMaps
 from mincam_sim.render.scene.mincam_scene import geometry_meta
 from mincam_sim.scene.display import Screen
 from mincam_sim.storage.atomic import atomic_path, atomic_write_json, remove_files
@@ -100,11 +101,12 @@ def export_maps(maps: ResponseMaps, mincam, screen: Screen, out_dir: str | Path,
     Every file is written atomically; the files of an earlier export in the folder that this one does not write
     are removed (module docstring), so the folder never mixes two exports.
     """
+    check_mixel_file_names(maps.mixel_names)
     out = Path(out_dir)
     (out / "maps").mkdir(parents=True, exist_ok=True)
     files = {}
     for name in maps.mixel_names:
-        stem = _safe(name)
+        stem = mixel_file_stem(name)
         files[name] = {"map": f"maps/{stem}.npy", "stderr": f"maps/{stem}_stderr.npy"}
     writes = {rel for entry in files.values() for rel in entry.values()} | {FORWARD_MATRIX}
     if psf_grid is not None:
@@ -175,12 +177,12 @@ def earlier_export_files(out_dir: str | Path) -> set[str]:
 
 def _is_export_name(rel: str) -> bool:
     """True for a name this module writes: ``forward_matrix.npy``, ``psfs.npy``, ``maps/<stem>.npy`` with a stem
-    as :func:`~mincam_sim.render.kernels.map_tracing._safe` makes it (letters, digits, ``-``, ``_``)."""
+    as ``mincam_sim.model.optics.mixel_file_stem`` makes it (letters, digits, ``-``, ``_``)."""
     if rel in (FORWARD_MATRIX, PSFS):
         return True
     folder, _, name = rel.partition("/")
     stem = name.removesuffix(".npy")
-    return folder == "maps" and name.endswith(".npy") and bool(stem) and _safe(stem) == stem
+    return folder == "maps" and name.endswith(".npy") and bool(stem) and mixel_file_stem(stem) == stem
 
 
 def _read_json(path: Path) -> object:

@@ -40,7 +40,7 @@ import numpy as np
 
 from mincam_sim.errors import InputError
 from mincam_sim.measurements import Measurements
-from mincam_sim.model.optics import Mincam
+from mincam_sim.model.optics import Mincam, check_mixel_file_names, mixel_file_stem
 from mincam_sim.progress import progress
 from mincam_sim.render import backend
 from mincam_sim.render.kernels import tracing
@@ -130,11 +130,12 @@ class ResponseMaps:
 
     def save_exr(self, directory: str | Path) -> list[Path]:
         """One OpenEXR per mixel (channels W and sigma), the picture of what the mixel sees."""
+        check_mixel_file_names(self.mixel_names)
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         paths = []
         for k, name in enumerate(self.mixel_names):
-            path = directory / f"response_{_safe(name)}.exr"
+            path = directory / f"response_{mixel_file_stem(name)}.exr"
             img = np.stack([self.weights_sr[k], np.sqrt(self.variance_sr2[k])], axis=-1)
             with atomic_path(path) as tmp:
                 write_exr(tmp, img, channels=("W", "sigma"), metadata={"units": "sr", "mixel": name, **self.meta})
@@ -176,10 +177,6 @@ def check_radiance(stack: np.ndarray, indices: np.ndarray) -> None:
         i = int(indices[np.argmax(bad)])
         raise InputError(f"frame {i} contains NaN, infinite, negative or too large (> {FLOAT32_MAX:.3g}, a 32-bit "
                          "float's largest) radiance; frames must be finite and >= 0 W m^-2 sr^-1")
-
-
-def _safe(name: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_" else "_" for c in name)
 
 
 @dataclass(frozen=True)

@@ -170,3 +170,22 @@ def test_per_run_tails_follow_the_reported_degrees_of_freedom(replicates, sample
         seen = int(np.sum(z > edge))
         low, high = stats.poisson.cdf(seen, expected), stats.poisson.sf(seen - 1, expected)
         assert min(low, high) >= 1e-3, f"|z| > {edge}: {seen} of 300, t expects {expected:.2f}"
+
+
+def test_mixel_names_that_share_a_file_are_measured_but_not_written(tmp_path):
+    """From Python, mixels 'a_b' and 'a/b' (or 'X' and 'x') measure in memory; their maps written as files would
+    be one response_a_b.exr and one maps/a_b.npy, one mixel's silently replacing the other's (the files' own
+    check only covered [[mixel]] tables): writing them is one InputError naming both, and nothing is written."""
+    from mincam_sim.errors import InputError
+
+    screen = ms.Screen(resolution=(16, 9))
+    for names in (("a_b", "a/b"), ("X", "x")):
+        cam = ms.Mincam(tuple(ms.Mixel(masks.constant(1.0), pose=ms.Pose((0.01 * k, 0.0, 0.0), (0.0, 0.0, -1.0)),
+                                       name=n) for k, n in enumerate(names)))
+        sim = ms.Simulation(cam, screen=screen)
+        m = sim.measure([np.ones(screen.shape)], ms.ResponseMap(), ms.Budget(samples_per_texel=16))
+        assert m.irradiance_w_m2.shape == (1, 2)
+        for write in (lambda: m.maps.save_exr(tmp_path / "exr"), lambda: sim.export_maps(tmp_path / "maps")):
+            with pytest.raises(InputError, match=f"mixels {names[0]!r} and {names[1]!r} would be written"):
+                write()
+        assert not (tmp_path / "exr").exists() and not any((tmp_path / "maps").glob("maps/*.npy"))
