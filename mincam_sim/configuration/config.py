@@ -54,11 +54,12 @@ from mincam_sim.model.geometry import Pose
 from mincam_sim.model.optics import (
     DEFAULT_D_F_M,
     DEFAULT_DETECTOR_SIZE_M,
+    FILE_NAME_RULE,
     PAPER_SPACING_M,
     Mincam,
     Mixel,
     cross_layout,
-    mixel_file_stem,
+    file_name_clash,
     pair_layout,
 )
 from mincam_sim.render.solvers import (
@@ -630,14 +631,12 @@ def check_file_names(names: list[str], where: str = "[[mixel]]") -> None:
     ConfigError
         Naming both tables and the file name they share.
     """
-    seen: dict[str, int] = {}
-    for i, name in enumerate(names):
-        stem = mixel_file_stem(name)
-        j = seen.setdefault(stem.casefold(), i)
-        if j != i:
-            raise ConfigError(f"{where} #{j + 1} name {names[j]!r} and #{i + 1} name {name!r} would write the same "
-                              f"files (response_{stem}.exr, maps/{stem}.npy): file names keep letters, digits, - and "
-                              "_ (the others become _) and a disk may ignore case; give names that differ in those")
+    clash = file_name_clash(names)
+    if clash is not None:
+        j, i, stem = clash
+        raise ConfigError(f"{where} #{j + 1} name {names[j]!r} and #{i + 1} name {names[i]!r} would write the same "
+                          f"files (response_{stem}.exr, maps/{stem}.npy): {FILE_NAME_RULE}; give names that differ "
+                          "in those")
 
 
 def _custom_mincam(m: MincamSection, mixel_tables: list, base: Path) -> Mincam:

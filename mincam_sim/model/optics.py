@@ -43,18 +43,31 @@ def mixel_file_stem(name: str) -> str:
     return "".join(c if c.isalnum() or c in "-_" else "_" for c in name)
 
 
-def check_mixel_file_names(names) -> None:
-    """One ``InputError`` where two mixel ``names`` would be written to the same files
-    (``"a/b"`` and ``"a_b"``; ``"X"`` and ``"x"`` on a disk that ignores case): one mixel's file would silently
-    replace the other's. Measuring in memory takes any unique names; writing them needs this."""
-    seen: dict[str, str] = {}
-    for name in names:
+def file_name_clash(names) -> tuple[int, int, str] | None:
+    """The first two of mixel ``names`` that would be written to the same files (``"a/b"`` and ``"a_b"``;
+    ``"X"`` and ``"x"`` on a disk that ignores case), as (earlier index, later index, their file stem), or None."""
+    seen: dict[str, int] = {}
+    for i, name in enumerate(names):
         stem = mixel_file_stem(name)
-        other = seen.setdefault(stem.casefold(), name)
-        if other != name:
-            raise InputError(f"mixels {other!r} and {name!r} would be written to the same files (response_{stem}.exr, "
-                             f"maps/{stem}.npy): file names keep letters, digits, - and _ (the others become _) and "
-                             "a disk may ignore case; give names that differ in those")
+        j = seen.setdefault(stem.casefold(), i)
+        if j != i:
+            return j, i, stem
+    return None
+
+
+FILE_NAME_RULE = "file names keep letters, digits, - and _ (the others become _) and a disk may ignore case"
+
+
+def check_mixel_file_names(names) -> None:
+    """One ``InputError`` where two mixel ``names`` would be written to the same files (:func:`file_name_clash`):
+    one mixel's file would silently replace the other's. Measuring in memory takes any unique names; writing
+    them needs this."""
+    names = list(names)
+    clash = file_name_clash(names)
+    if clash is not None:
+        j, i, stem = clash
+        raise InputError(f"mixels {names[j]!r} and {names[i]!r} would be written to the same files "
+                         f"(response_{stem}.exr, maps/{stem}.npy): {FILE_NAME_RULE}; give names that differ in those")
 
 
 @dataclass(frozen=True, eq=False)

@@ -384,11 +384,10 @@ def _cut_along(polys: np.ndarray, count: np.ndarray, lines: np.ndarray, axis: in
     strips = np.maximum(np.searchsorted(lines, hi, side="left") - first, 0) + 1
     owner = np.repeat(np.arange(len(polys)), strips)
     k = np.arange(len(owner)) - np.repeat(np.cumsum(strips) - strips, strips)  # the strip's index in its polygon
-    line = first[owner] + k
-    far = BIG_M
-    lower = np.where(k > 0, lines[np.clip(line - 1, 0, max(len(lines) - 1, 0))] if len(lines) else 0.0, -far)
-    upper = np.where(k < strips[owner] - 1, lines[np.clip(line, 0, max(len(lines) - 1, 0))] if len(lines) else 0.0,
-                     far)
+    # strip k lies between edges[first + k] and edges[first + k + 1]: the outer ones are lines beyond the polygon
+    # (or +-BIG_M), which cut nothing
+    edges = np.concatenate([[-BIG_M], lines, [BIG_M]])
+    lower, upper = edges[first[owner] + k], edges[first[owner] + k + 1]
     normal = np.zeros(2)
     normal[axis] = 1.0
     pieces, n = _clip_halfplanes(polys[owner], count[owner], normal, -lower)

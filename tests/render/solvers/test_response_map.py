@@ -185,7 +185,8 @@ def test_mixel_names_that_share_a_file_are_measured_but_not_written(tmp_path):
         sim = ms.Simulation(cam, screen=screen)
         m = sim.measure([np.ones(screen.shape)], ms.ResponseMap(), ms.Budget(samples_per_texel=16))
         assert m.irradiance_w_m2.shape == (1, 2)
-        for write in (lambda: m.maps.save_exr(tmp_path / "exr"), lambda: sim.export_maps(tmp_path / "maps")):
+        for write in (lambda m=m: m.maps.save_exr(tmp_path / "exr"),
+                      lambda sim=sim: sim.export_maps(tmp_path / "maps")):
             with pytest.raises(InputError, match=f"mixels {names[0]!r} and {names[1]!r} would be written"):
                 write()
         assert not (tmp_path / "exr").exists() and not any((tmp_path / "maps").glob("maps/*.npy"))
